@@ -1,0 +1,35 @@
+# swarmd developer targets. `make demo` and `make test` are the README's two commands.
+PY ?= python3
+PIP ?= $(PY) -m pip
+STAMP := .make-stamps
+
+.PHONY: setup system-deps test lint demo bench clean
+
+$(STAMP)/system: scripts/system-deps.sh
+	bash scripts/system-deps.sh
+	mkdir -p $(STAMP) && touch $@
+
+$(STAMP)/python: pyproject.toml
+	$(PIP) install -q -e '.[dev]'
+	mkdir -p $(STAMP) && touch $@
+
+setup: $(STAMP)/system $(STAMP)/python
+
+system-deps: $(STAMP)/system
+
+lint: $(STAMP)/python
+	$(PY) -m ruff check .
+	$(PY) -m mypy
+
+test: setup
+	$(PY) -m pytest -q
+
+demo: setup
+	$(PY) -m swarmd.cli sim configs/paper.yaml --virtual --duration 20 --seed 1 \
+	  --fault crash:2@5 --events out/demo-events.jsonl
+
+bench: setup
+	$(PY) bench/run.py
+
+clean:
+	rm -rf $(STAMP) out .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,56 @@
+"""`swarmd` command line (typer). DESIGN.md section 3 fixes the commands.
+
+Each command lives in `swarmd/commands/<name>.py` with a `register(app)` function; this
+file only assembles them, so owners of different commands never edit the same code.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import typer
+
+app = typer.Typer(
+    name="swarmd",
+    help=(
+        "Failure handling for robot swarms. Robots heartbeat to their neighbours; a "
+        "neighbour that misses heartbeats warns the standby robot; a standby warned by "
+        "enough distinct neighbours takes the failed robot's function over."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+# Order here is the order in `swarmd --help`.
+COMMAND_MODULES = (
+    "start",
+    "sim",
+    "check",
+    "import_launch",
+    "monitor",
+    "xbee",
+    "keygen",
+)
+
+
+def _register_all() -> None:
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"swarmd.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"swarmd.commands.{name}":
+                continue  # command not built yet in this tree
+            raise
+        module.register(app)
+
+
+_register_all()
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

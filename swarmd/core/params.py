@@ -1,0 +1,132 @@
+"""Timing and quorum parameters of the protocol, one frozen dataclass with presets.
+
+Every field carries its unit and the rule it comes from (memberlist's config.go is the
+model, see STYLE.md). Two presets: `udp()` for loopback / Wi-Fi multicast, where frames
+are cheap and latency is milliseconds, and `radio()` for XBee / SiK radios, where the
+air is shared at 250 kbps and a frame costs milliseconds of airtime.
+
+The detection bound follows from the fields: a watcher fires at most `t_max` after the
+last heartbeat it heard (paper Fig. 7), so a crash is suspected within `t_max` and taken
+over within about `t_max + warn_interval + claim_hold` when nothing is lost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+
+class ParamsError(ValueError):
+    """Parameters that cannot work together (misuse of the API, not peer garbage)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Params:
+    heartbeat_interval: float
+    """s. Period of an ACTIVE robot's HEARTBEAT (the paper's health signal)."""
+
+    standby_heartbeat_interval: float
+    """s. Period of a STANDBY robot's HEARTBEAT; lower rate, it only proves the standby is
+    alive so watchers know whether anyone is left to take over (DESIGN rule 6, 8)."""
+
+    t_max: float
+    """s. Silence after which a watcher suspects a neighbour (paper Fig. 7 T_max).
+    Must be >= 2 * heartbeat_interval so one lost frame never raises a suspicion."""
+
+    warn_interval: float
+    """s. While a suspicion lasts, the watcher repeats WARN at this period (Fig. 7 keeps
+    warning until the substitute answers); repetition beats loss."""
+
+    vote_window: float
+    """s. A standby counts warnings from distinct witnesses seen within this window
+    (Fig. 9 time window). >= 2 * warn_interval so two watchers' warnings overlap."""
+
+    quorum: int
+    """Distinct witnesses needed to claim (paper: two; DESIGN rule 3)."""
+
+    claim_hold: float
+    """s. Time spent in CLAIMING (the paper's wait state) listening for a lower-id
+    claimant or a refutation before taking over. A few channel latencies."""
+
+    startup_grace: float
+    """s. A watched slot never heard from is suspected after this (DESIGN rule 5)."""
+
+    standby_timeout: float
+    """s. A standby not heard for this long is taken for dead (DESIGN rule 6)."""
+
+    alert_after: float
+    """s. A suspicion with no CLAIM heard for this long raises an `alert`
+    (DESIGN rule 8: the paper's "inform a base station")."""
+
+    rejoin_hold: float
+    """s. A robot restarted with a function in its persisted state listens this long
+    before it resumes, so it learns of a takeover made while it was down (rule 2)."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "quorum":
+                if not isinstance(value, int) or value < 1:
+                    raise ParamsError(f"quorum must be an integer >= 1, got {value!r}")
+            elif not isinstance(value, (int, float)) or value <= 0:
+                raise ParamsError(f"{f.name} must be a positive number of seconds, got {value!r}")
+        if self.t_max < 2 * self.heartbeat_interval:
+            raise ParamsError(
+                f"t_max ({self.t_max} s) is shorter than two heartbeat intervals "
+                f"(2 x {self.heartbeat_interval} s): a single lost heartbeat would raise a "
+                "suspicion"
+            )
+        if self.vote_window < 2 * self.warn_interval:
+            raise ParamsError(
+                f"vote_window ({self.vote_window} s) must be >= 2 x warn_interval "
+                f"({self.warn_interval} s) so warnings of two watchers can meet in it"
+            )
+        if self.standby_timeout < 2 * self.standby_heartbeat_interval:
+            raise ParamsError(
+                f"standby_timeout ({self.standby_timeout} s) must be >= 2 x "
+                f"standby_heartbeat_interval ({self.standby_heartbeat_interval} s)"
+            )
+
+    def with_overrides(self, **overrides: Any) -> Params:
+        """A copy with some fields changed, validated again."""
+        return replace(self, **overrides)
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def udp() -> Params:
+    """Loopback / Wi-Fi multicast: frames cost nothing, delivery takes milliseconds."""
+    return Params(
+        heartbeat_interval=0.1,  # 10 Hz: detection in half a second at ~22 B a frame
+        standby_heartbeat_interval=0.5,  # standbys only prove liveness
+        t_max=0.5,  # five missed heartbeats: a false suspicion needs 5 losses in a row
+        warn_interval=0.1,  # one warning per heartbeat period
+        vote_window=1.0,  # two watchers' warnings meet in it even at 20% loss
+        quorum=2,  # the paper
+        claim_hold=0.2,  # 2 heartbeat periods: a live suspect refutes, a rival claims
+        startup_grace=2.0,  # processes of one swarm start within a second or two
+        standby_timeout=2.0,  # four standby heartbeats
+        alert_after=2.0,  # no claim within 4 x t_max: nobody is coming
+        rejoin_hold=0.7,  # > t_max + heartbeat: a holder's heartbeat is heard by then
+    )
+
+
+def radio() -> Params:
+    """XBee / SiK radios at 250 kbps: heartbeats are rationed (see `swarmd check`)."""
+    return Params(
+        heartbeat_interval=0.5,  # 2 Hz keeps a 30-robot swarm under 30% airtime on 802.15.4
+        standby_heartbeat_interval=2.0,
+        t_max=2.0,  # four missed heartbeats
+        warn_interval=0.5,
+        vote_window=4.0,
+        quorum=2,
+        claim_hold=1.0,  # two heartbeat periods plus radio latency
+        startup_grace=10.0,  # radios join a network in seconds
+        standby_timeout=8.0,
+        alert_after=8.0,
+        rejoin_hold=3.0,
+    )
+
+
+PRESETS = {"udp": udp, "radio": radio}

@@ -1,0 +1,121 @@
+"""The swarm plan as the core sees it: functions, robots, who watches which slot.
+
+DESIGN rule 1: functions, not robot ids, are the unit. The config names, per robot, its
+neighbours (robot ids, as the paper's launch file does) and the robots it may substitute;
+here that is turned into relations between function *slots*:
+
+- `watches[f]`: the slots whose holders the holder of `f` watches;
+- `covers[f]`: the robots that may substitute `f` (standbys listing it in `subs`, plus
+  the robot whose home slot it is, so a robot that was replaced and came back covers
+  its own slot again).
+
+Whoever holds `f` at any time inherits `watches[f]`, and the holders of the slots that
+watch `f` follow the new holder: nothing is re-configured after a takeover.
+
+The plan is built by the config layer (pydantic stays there, STYLE.md point 5).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+
+class PlanError(ValueError):
+    """A plan that is not self-consistent (misuse of the API)."""
+
+
+@dataclass(frozen=True, slots=True)
+class RobotPlan:
+    robot_id: int
+    function: str | None
+    """The slot this robot executes at start (ACTIVE), or None (STANDBY)."""
+    subs: tuple[str, ...] = ()
+    """Slots this robot may take over (the paper's `subs`, as functions)."""
+
+
+@dataclass(frozen=True, slots=True)
+class SwarmPlan:
+    swarm_id: int
+    functions: tuple[str, ...]
+    """Slot names in wire order: slot index on the wire is position + 1."""
+    robots: Mapping[int, RobotPlan]
+    watches: Mapping[str, tuple[str, ...]]
+    """function -> the functions whose holders its holder watches (neighbourhoods)."""
+    _watchers: dict[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
+    _covers: dict[str, tuple[int, ...]] = field(init=False, repr=False, compare=False)
+    _index: dict[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.swarm_id <= 0xFFFF:
+            raise PlanError(f"swarm id {self.swarm_id} does not fit 16 bits")
+        if len(set(self.functions)) != len(self.functions):
+            raise PlanError("duplicate function names")
+        if not 1 <= len(self.functions) <= 255:
+            raise PlanError("a swarm has 1 to 255 functions (one byte on the wire)")
+        index = {name: i + 1 for i, name in enumerate(self.functions)}
+        holders: dict[str, int] = {}
+        for rid, robot in self.robots.items():
+            if rid != robot.robot_id or not 1 <= rid <= 0xFFFF:
+                raise PlanError(f"robot id {rid} is not a 16-bit id matching its entry")
+            if robot.function is not None:
+                if robot.function not in index:
+                    raise PlanError(f"robot {rid} holds unknown function {robot.function!r}")
+                if robot.function in holders:
+                    raise PlanError(
+                        f"function {robot.function} held by robots {holders[robot.function]} "
+                        f"and {rid}"
+                    )
+                holders[robot.function] = rid
+            for f in robot.subs:
+                if f not in index:
+                    raise PlanError(f"robot {rid} substitutes unknown function {f!r}")
+        for f, watched in self.watches.items():
+            if f not in index or any(w not in index for w in watched):
+                raise PlanError(f"watches names an unknown function: {f} -> {watched}")
+        watchers: dict[str, list[str]] = {f: [] for f in self.functions}
+        for f, watched in self.watches.items():
+            for w in watched:
+                if w != f and f not in watchers[w]:
+                    watchers[w].append(f)
+        covers: dict[str, list[int]] = {f: [] for f in self.functions}
+        for rid in sorted(self.robots):
+            robot = self.robots[rid]
+            for f in (*robot.subs, *((robot.function,) if robot.function else ())):
+                if rid not in covers[f]:
+                    covers[f].append(rid)
+        object.__setattr__(self, "_index", index)
+        object.__setattr__(self, "_watchers", {f: tuple(v) for f, v in watchers.items()})
+        object.__setattr__(self, "_covers", {f: tuple(sorted(v)) for f, v in covers.items()})
+
+    # -- queries -------------------------------------------------------------------------
+    def slot(self, function: str) -> int:
+        """Wire index (1..255) of a function."""
+        return self._index[function]
+
+    def function_at(self, slot: int) -> str | None:
+        """Function name of a wire index, or None if out of range."""
+        if 1 <= slot <= len(self.functions):
+            return self.functions[slot - 1]
+        return None
+
+    def watched_by(self, function: str) -> tuple[str, ...]:
+        """Slots whose holders watch `function` (its witnesses, DESIGN rule 3)."""
+        return self._watchers[function]
+
+    def watched(self, function: str) -> tuple[str, ...]:
+        """Slots the holder of `function` watches."""
+        return tuple(w for w in self.watches.get(function, ()) if w != function)
+
+    def covered_by(self, function: str) -> tuple[int, ...]:
+        """Robots allowed to take `function` over, lowest id first."""
+        return self._covers[function]
+
+    def initial_holder(self, function: str) -> int | None:
+        for rid, robot in self.robots.items():
+            if robot.function == function:
+                return rid
+        return None
+
+    def standbys(self) -> tuple[int, ...]:
+        return tuple(sorted(r for r, p in self.robots.items() if p.function is None))

@@ -1,0 +1,1 @@
+"""Channels the daemon broadcasts on: UDP multicast, XBee (digi-xbee), serial radios."""

@@ -1,0 +1,43 @@
+"""The transport interface every channel implements (issue 3, point 2).
+
+A transport moves opaque frames (bytes from `swarmd.core.wire`) to every robot in range.
+It never interprets them. The runtime owns exactly one transport:
+
+    transport = UdpTransport(cfg)
+    await transport.start(on_frame, on_event)   # on_frame(bytes) called on the loop thread
+    transport.send(frame)                       # broadcast; never blocks the loop
+    await transport.close()
+
+Rules:
+- `on_frame` and `on_event` are always called on the event loop thread (a transport
+  that reads in another thread hands over with `loop.call_soon_threadsafe`).
+- `send` is synchronous and non-blocking: it queues or writes at once. A frame that
+  cannot go out (queue full, radio down, oversize) is counted and reported through
+  `on_event`, never raised into the runtime (bad I/O never takes the daemon down).
+- `max_payload` is the largest frame the channel carries (bytes).
+- `on_event(name, fields)` reports channel conditions for the event log and monitor,
+  e.g. ("transport_down", {"reason": ...}), ("transport_up", {}).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
+
+FrameCallback = Callable[[bytes], None]
+EventCallback = Callable[[str, Mapping[str, Any]], None]
+
+
+class TransportError(RuntimeError):
+    """A transport could not be set up (bad config, no such device). Clear message."""
+
+
+class Transport(Protocol):
+    @property
+    def max_payload(self) -> int: ...
+
+    async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None: ...
+
+    def send(self, frame: bytes) -> None: ...
+
+    async def close(self) -> None: ...
