@@ -1,0 +1,2 @@
+"""Simulation: the virtual-time swarm simulator, the multi-process real-time swarm,
+MuJoCo quadrotors, rendering and reports."""
