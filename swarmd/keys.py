@@ -1,0 +1,153 @@
+"""Swarm keys: generate, load with a permission check, and combine for rotation.
+
+A swarm key is 32 random bytes shared by every robot of a swarm; frames carry an
+HMAC-SHA256 tag made with it (DESIGN section 2, `swarmd.core.wire`; MAVLink 2 signing
+uses the same size).
+
+File format: either exactly 32 raw bytes (what `generate_key` writes) or 64 hex digits,
+optionally surrounded by whitespace (handy when the key travels through a text-only
+channel such as a configuration-management variable). The two cannot be confused: a
+raw key is 32 bytes long, a hex key at least 64.
+
+Permissions: a key file that the group or others may read or write is refused, with the
+reason and the ``chmod`` that fixes it. Anyone who can read the key can forge frames and
+take over any function of the swarm; anyone who can write it can cut the robot off.
+
+Rotation: the core signs with ``keys[0]`` and accepts a frame tagged with any key in the
+list (`swarmd.core.wire.decode`). `load_keys` builds that list: the signing key first,
+then the extra keys accepted during a rotation window. The three-step procedure is in
+docs/operations.md ("Rotating the swarm key").
+"""
+
+from __future__ import annotations
+
+import binascii
+import os
+import secrets
+import stat
+from collections.abc import Sequence
+from pathlib import Path
+
+KEY_LEN = 32
+_MAX_FILE = 4096  # a key file is 32 or ~65 bytes; anything big is the wrong file
+
+
+class KeyFileError(ValueError):
+    """A key file that cannot be used; the message says why and how to fix it."""
+
+
+def generate_key(path: Path | str, *, force: bool = False, hex_format: bool = False) -> bytes:
+    """Write a new random key to `path` with mode 0600 and return it.
+
+    The file is written to a temporary name created 0600 in the same directory and
+    renamed into place, so no reader ever sees a partial key or a moment of wider
+    permissions. An existing file is kept unless `force` (overwriting a swarm key cuts
+    this robot off from the swarm until every robot has the new one).
+    """
+    path = Path(path)
+    if path.exists() and not force:
+        raise KeyFileError(f"{path} already exists; pass --force to replace it")
+    key = secrets.token_bytes(KEY_LEN)
+    data = (key.hex() + "\n").encode() if hex_format else key
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    try:
+        os.fchmod(fd, 0o600)  # the umask can only remove bits, but be explicit
+        os.write(fd, data)
+        os.fsync(fd)
+    except BaseException:
+        os.close(fd)
+        tmp.unlink(missing_ok=True)
+        raise
+    os.close(fd)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return key
+
+
+def load_key(path: Path | str) -> bytes:
+    """Read a key file, refusing one that is not private to its owner.
+
+    Raises `KeyFileError` with a message naming the file, the problem and the fix.
+    """
+    path = Path(path)
+    try:
+        # Check the permissions of the file actually opened (fstat), not of a path
+        # that could be swapped between the check and the read.
+        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY)
+    except FileNotFoundError:
+        raise KeyFileError(
+            f"key file {path} does not exist (make one: swarmd keygen {path})"
+        ) from None
+    except PermissionError:
+        raise KeyFileError(
+            f"key file {path} is not readable by this user (uid {os.getuid()}); it must be "
+            f"owned by the user the daemon runs as: chown swarmd {path}"
+        ) from None
+    except OSError as exc:
+        raise KeyFileError(f"key file {path}: {exc.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise KeyFileError(f"key file {path} is not a regular file")
+        loose = stat.S_IMODE(st.st_mode) & 0o077
+        if loose:
+            who = []
+            if loose & 0o070:
+                who.append("its group")
+            if loose & 0o007:
+                who.append("other users")
+            raise KeyFileError(
+                f"key file {path} has mode {stat.S_IMODE(st.st_mode):04o}: "
+                f"{' and '.join(who)} can access it, and anyone who can read the swarm "
+                f"key can forge frames and take over functions; fix it with: "
+                f"chmod 600 {path}"
+            )
+        data = os.read(fd, _MAX_FILE + 1)
+    finally:
+        os.close(fd)
+    return parse_key(data, str(path))
+
+
+def parse_key(data: bytes, origin: str = "key") -> bytes:
+    """A key from file content: 32 raw bytes, or 64 hex digits with optional whitespace."""
+    if len(data) == KEY_LEN:
+        return data
+    if len(data) > _MAX_FILE:
+        raise KeyFileError(f"{origin} is {len(data)}+ bytes: not a swarm key file")
+    text = data.strip()
+    if len(text) == 2 * KEY_LEN:
+        try:
+            return binascii.unhexlify(text)
+        except (binascii.Error, ValueError):
+            pass
+    raise KeyFileError(
+        f"{origin} holds {len(data)} bytes; a swarm key is exactly {KEY_LEN} raw bytes or "
+        f"{2 * KEY_LEN} hex digits (make one with: swarmd keygen FILE)"
+    )
+
+
+def load_keys(signing: Path | str | None, extra: Sequence[Path | str] = ()) -> list[bytes]:
+    """The key list the core takes: the signing key first, then keys also accepted.
+
+    No signing key and no extra keys means an unsigned swarm (empty list). Extra keys
+    without a signing key are refused: the robot would accept signed frames but send
+    unsigned ones, which every keyed robot drops. A duplicate key is listed once.
+    """
+    if signing is None:
+        if extra:
+            raise KeyFileError(
+                "accepted keys are configured but no signing key: set the signing key "
+                "too (during a rotation it is the old or the new key, see "
+                "docs/operations.md)"
+            )
+        return []
+    keys = [load_key(signing)]
+    for path in extra:
+        key = load_key(path)
+        if key not in keys:
+            keys.append(key)
+    return keys
