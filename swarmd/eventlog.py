@@ -1,0 +1,58 @@
+"""The event log file (DESIGN section 3): JSON Lines appended, flushed line by line.
+
+Tests and users parse it while the daemon runs (`tail -f`, the simulator's merger), so
+every record is written whole and flushed at once. `reopen()` serves SIGHUP: after
+logrotate moved the file, or after the configured path changed.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+from typing import IO, Any
+
+log = logging.getLogger(__name__)
+
+
+class EventLog:
+    """Append JSON Lines records to a file. Write errors are counted, never raised."""
+
+    def __init__(self, path: Path | str) -> None:
+        self.path = Path(path)
+        self.errors = 0
+        self._fh: IO[str] | None = None
+        self._open()
+
+    def _open(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        # Line buffering is not enough for a record split by a full buffer: flush by hand.
+        self._fh = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 - kept open
+
+    def write(self, record: Mapping[str, Any]) -> None:
+        """Append one record and flush it."""
+        if self._fh is None:
+            return
+        try:
+            self._fh.write(json.dumps(record, separators=(",", ":"), default=str) + "\n")
+            self._fh.flush()
+        except (OSError, ValueError) as exc:
+            self.errors += 1
+            log.error("event log write failed", extra={"path": str(self.path),
+                                                       "error": str(exc)})
+
+    def reopen(self, path: Path | str | None = None) -> None:
+        """Close and open again (same or new path): logrotate and SIGHUP."""
+        self.close()
+        if path is not None:
+            self.path = Path(path)
+        self._open()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            try:
+                self._fh.close()
+            except OSError as exc:
+                log.error("event log close failed", extra={"error": str(exc)})
+            self._fh = None

@@ -1,0 +1,176 @@
+"""Persisted state of one robot: the epochs it knows, what it held, its sequence reservation.
+
+Why it exists (DESIGN rule 2, issue 3 point 4): a robot that crashes while executing a
+function and reboots must not resume that function if a standby took it over meanwhile.
+So the daemon writes, on every role / function / epoch change, what it knows; on restart
+it hands that to the core as `Restored(known, held)` and the node listens for
+`rejoin_hold` before resuming.
+
+The sequence number high-water mark closes a second hole: frames carry a per-sender seq
+seeded from the wall clock (`swarmd.core.wire.seq_seed`) and receivers drop anything not
+above the last seen. A robot whose clock went backwards across a reboot would be ignored
+until its clock caught up. So the daemon persists `seq_reserved`, a value above every seq
+it may have sent, and starts at `max(seq_seed(now), seq_reserved)`.
+
+File format (JSON, one object)::
+
+    {"version": 1, "robot": 2, "swarm": 1543,
+     "known": {"f1": [1, 0], "f2": [6, 1]},   # function -> [holder, epoch]
+     "held": ["f2", 1] | null,                # what this robot executed
+     "seq_reserved": 123456789}
+
+Writes are atomic: a temporary file in the same directory, fsync, os.replace, fsync of the
+directory. A reader therefore sees the old file or the new one, never half of one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from swarmd.core.node import Restored
+
+FORMAT_VERSION = 1
+
+SEQ_RESERVE = 1_000_000
+"""How far ahead of the current seq a reservation reaches. At 10 Hz heartbeats this is a
+rewrite of the file about once a day, and covers any burst of frames in between."""
+
+
+class StateError(Exception):
+    """The state file exists but cannot be used. The message says which file and why."""
+
+
+@dataclass(frozen=True, slots=True)
+class PersistedState:
+    """What one robot persists; see the module docstring."""
+
+    robot: int
+    swarm: int
+    known: Mapping[str, tuple[int, int]] = field(default_factory=dict)
+    held: tuple[str, int] | None = None
+    seq_reserved: int = 0
+
+    def restored(self) -> Restored:
+        """The core's view of it (`Node(..., restored=...)`)."""
+        return Restored(known=dict(self.known), held=self.held)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "version": FORMAT_VERSION,
+            "robot": self.robot,
+            "swarm": self.swarm,
+            "known": {f: [h, e] for f, (h, e) in sorted(self.known.items())},
+            "held": list(self.held) if self.held is not None else None,
+            "seq_reserved": self.seq_reserved,
+        }
+
+
+def state_path(state_dir: Path, swarm_id: int, robot_id: int) -> Path:
+    """One file per (swarm, robot), so several daemons may share a state directory."""
+    return Path(state_dir) / f"swarm{swarm_id}-robot{robot_id}.json"
+
+
+def _int(value: Any, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{what} must be a non-negative integer, got {value!r}")
+    return value
+
+
+def parse(data: Any, *, robot: int, swarm: int) -> PersistedState:
+    """Validate a decoded JSON object. Raises ValueError saying what is wrong."""
+    if not isinstance(data, dict):
+        raise ValueError("top level is not a JSON object")
+    if data.get("version") != FORMAT_VERSION:
+        raise ValueError(f"version {data.get('version')!r}, expected {FORMAT_VERSION}")
+    if data.get("robot") != robot or data.get("swarm") != swarm:
+        raise ValueError(
+            f"file is for robot {data.get('robot')!r} of swarm {data.get('swarm')!r}, "
+            f"this daemon is robot {robot} of swarm {swarm}"
+        )
+    known_raw = data.get("known", {})
+    if not isinstance(known_raw, dict):
+        raise ValueError("'known' is not an object")
+    known: dict[str, tuple[int, int]] = {}
+    for f, pair in known_raw.items():
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise ValueError(f"known[{f!r}] is not [holder, epoch]")
+        known[f] = (_int(pair[0], f"known[{f!r}] holder"), _int(pair[1], f"known[{f!r}] epoch"))
+    held_raw = data.get("held")
+    held: tuple[str, int] | None = None
+    if held_raw is not None:
+        if (not isinstance(held_raw, list) or len(held_raw) != 2
+                or not isinstance(held_raw[0], str)):
+            raise ValueError("'held' is not [function, epoch] or null")
+        held = (held_raw[0], _int(held_raw[1], "held epoch"))
+    seq = _int(data.get("seq_reserved", 0), "seq_reserved")
+    return PersistedState(robot=robot, swarm=swarm, known=known, held=held, seq_reserved=seq)
+
+
+def load(path: Path, *, robot: int, swarm: int) -> PersistedState | None:
+    """Read the state file. None when there is none (first start); StateError when it is
+    unreadable or corrupt (the caller logs it, sets the file aside and starts fresh)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise StateError(f"{path}: cannot read state file: {exc}") from exc
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise StateError(f"{path}: state file is not valid JSON ({exc})") from exc
+    try:
+        return parse(data, robot=robot, swarm=swarm)
+    except ValueError as exc:
+        raise StateError(f"{path}: state file is invalid: {exc}") from exc
+
+
+def set_aside(path: Path) -> Path | None:
+    """Rename a corrupt state file to `<name>.corrupt-<unix time>` so that it can be
+    inspected; returns the new path (None if it could not be moved)."""
+    target = Path(f"{path}.corrupt-{int(time.time())}")
+    try:
+        os.replace(path, target)
+    except OSError:
+        return None
+    return target
+
+
+def save(path: Path, state: PersistedState) -> None:
+    """Write atomically (temp file + fsync + os.replace + directory fsync). Raises OSError;
+    the runtime counts and logs it and keeps running."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = json.dumps(state.to_json(), separators=(",", ":")) + "\n"
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(payload)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    # The rename itself must survive a power cut: fsync the directory entry.
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+def initial_seq(now_seq: int, persisted: PersistedState | None) -> int:
+    """First sequence number: above the wall-clock seed and above every seq this robot
+    may have used before (a reservation survives a clock that went backwards)."""
+    reserved = persisted.seq_reserved if persisted is not None else 0
+    return max(now_seq, reserved)

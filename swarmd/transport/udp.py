@@ -1,0 +1,174 @@
+"""UDP multicast transport (issue 3, point 2): the channel for `sim`, tests and Wi-Fi swarms.
+
+One socket per daemon, bound to the group address so that it receives only this group's
+datagrams, with SO_REUSEADDR and SO_REUSEPORT so that many daemons on one host share the
+port (every one gets a copy of every multicast datagram). Sending goes to the group with
+IP_MULTICAST_IF, TTL and loopback taken from the config; the defaults (interface
+127.0.0.1, TTL 1, loopback on) keep every frame on this host (DESIGN section 4: nothing
+the project starts by default may send to another address).
+
+The transport never interprets frames; a daemon hears its own frames back (loopback) and
+the core drops them by sender id.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import logging
+import socket
+from collections.abc import Mapping
+from typing import Any
+
+from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_GROUP = "239.255.77.7"
+DEFAULT_PORT = 47007
+DEFAULT_INTERFACE = "127.0.0.1"
+
+# IPv4 minimum MTU on Ethernet (1500) minus IP (20) and UDP (8) headers: a frame this size
+# is never fragmented on any real link. swarmd frames are ~23 bytes, far below.
+MAX_PAYLOAD = 1472
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, owner: UdpTransport) -> None:
+        self._owner = owner
+
+    def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
+        self._owner._received(data)
+
+    def error_received(self, exc: Exception) -> None:
+        self._owner._error("receive", exc)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if exc is not None:
+            self._owner._error("connection_lost", exc)
+
+
+class UdpTransport:
+    """Broadcast frames to an IPv4 multicast group. See the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        group: str = DEFAULT_GROUP,
+        port: int = DEFAULT_PORT,
+        interface: str = DEFAULT_INTERFACE,
+        ttl: int = 1,
+        loopback: bool = True,
+    ) -> None:
+        try:
+            addr = ipaddress.IPv4Address(group)
+        except ValueError:
+            raise TransportError(f"udp group {group!r} is not an IPv4 address") from None
+        if not addr.is_multicast:
+            raise TransportError(f"udp group {group} is not a multicast address (224.0.0.0/4)")
+        try:
+            ipaddress.IPv4Address(interface)
+        except ValueError:
+            raise TransportError(
+                f"udp interface {interface!r} must be the IPv4 address of the interface "
+                "to send on (default 127.0.0.1)"
+            ) from None
+        if not 0 < port < 65536:
+            raise TransportError(f"udp port {port} is out of range 1..65535")
+        if not 0 <= ttl <= 255:
+            raise TransportError(f"udp ttl {ttl} is out of range 0..255")
+        self.group = group
+        self.port = port
+        self.interface = interface
+        self.ttl = ttl
+        self.loopback = loopback
+        self.counters: dict[str, int] = {"sent": 0, "received": 0, "send_errors": 0,
+                                         "receive_errors": 0}
+        self._transport: asyncio.DatagramTransport | None = None
+        self._on_frame: FrameCallback | None = None
+        self._on_event: EventCallback | None = None
+
+    @classmethod
+    def from_config(cls, cfg: Any) -> UdpTransport:
+        """Build from the robot file's `transport: {kind: udp, ...}` model."""
+        return cls(group=cfg.group, port=cfg.port, interface=cfg.interface, ttl=cfg.ttl,
+                   loopback=cfg.loopback)
+
+    @property
+    def max_payload(self) -> int:
+        return MAX_PAYLOAD
+
+    def _socket(self) -> socket.socket:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            # Several daemons on one host (sim, tests) all bind the same group:port.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+            # Binding the group (not INADDR_ANY) filters out other groups on the port.
+            sock.bind((self.group, self.port))
+            iface = socket.inet_aton(self.interface)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                            socket.inet_aton(self.group) + iface)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, iface)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, self.ttl)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, int(self.loopback))
+            sock.setblocking(False)
+        except OSError as exc:
+            sock.close()
+            raise TransportError(
+                f"cannot open udp multicast {self.group}:{self.port} on interface "
+                f"{self.interface}: {exc}"
+            ) from exc
+        return sock
+
+    async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
+        """Open the socket, join the group, deliver datagrams to `on_frame`."""
+        self._on_frame = on_frame
+        self._on_event = on_event
+        loop = asyncio.get_running_loop()
+        sock = self._socket()
+        transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(self), sock=sock)
+        self._transport = transport
+        on_event("transport_up", {"kind": "udp", "group": self.group, "port": self.port,
+                                  "interface": self.interface})
+
+    def send(self, frame: bytes) -> None:
+        """Broadcast one frame to the group; errors are counted and reported, never raised."""
+        if self._transport is None or self._transport.is_closing():
+            self._fail_send("transport not open")
+            return
+        if len(frame) > MAX_PAYLOAD:
+            self._fail_send(f"frame of {len(frame)} bytes exceeds {MAX_PAYLOAD}")
+            return
+        try:
+            self._transport.sendto(frame, (self.group, self.port))
+        except OSError as exc:  # asyncio raises only on a closed transport; be safe
+            self._fail_send(str(exc))
+            return
+        self.counters["sent"] += 1
+
+    def _fail_send(self, reason: str) -> None:
+        self.counters["send_errors"] += 1
+        if self._on_event is not None:
+            self._on_event("send_error", {"reason": reason})
+
+    def _received(self, data: bytes) -> None:
+        self.counters["received"] += 1
+        if self._on_frame is not None:
+            self._on_frame(data)
+
+    def _error(self, where: str, exc: Exception) -> None:
+        # ICMP errors and the like arrive here; they never stop the socket (asyncio keeps
+        # reading), so count them and tell the event log (transport contract).
+        self.counters["receive_errors"] += 1
+        if self._on_event is not None:
+            fields: Mapping[str, Any] = {"where": where, "reason": str(exc)}
+            self._on_event("transport_error", fields)
+
+    async def close(self) -> None:
+        """Leave the group and close the socket."""
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None
+            # Let the loop run the close callbacks (connection_lost) before returning.
+            await asyncio.sleep(0)
