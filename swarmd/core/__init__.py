@@ -7,7 +7,22 @@ from swarmd.core.roles import Health, Role
 from swarmd.core.wire import CodecError, Frame, decode, encode
 
 __all__ = [
-    "Action", "Assign", "Broadcast", "CodecError", "Event", "Frame", "Health", "Params",
-    "ParamsError", "PlanError", "Release", "Role", "RobotPlan", "SwarmPlan", "decode",
-    "encode", "radio", "udp",
+    "Action",
+    "Assign",
+    "Broadcast",
+    "CodecError",
+    "Event",
+    "Frame",
+    "Health",
+    "Params",
+    "ParamsError",
+    "PlanError",
+    "Release",
+    "RobotPlan",
+    "Role",
+    "SwarmPlan",
+    "decode",
+    "encode",
+    "radio",
+    "udp",
 ]

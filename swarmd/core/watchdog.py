@@ -1,0 +1,110 @@
+"""Per-slot watchdog (paper Fig. 7, with DESIGN rules 1, 5 and 8).
+
+One `SlotWatch` per slot the robot's own slot watches. It follows whoever holds the slot
+(rule 1): the node resets it with every heartbeat of the current holder.
+
+    WAITING   never heard the slot's holder; fires after `startup_grace` (rule 5)
+    RUNNING   heard; fires `t_max` after the last heartbeat (Fig. 7 T_max)
+    SUSPECT   fired: warns every `warn_interval` until the holder is heard (refuted)
+              or a CLAIM is heard (Fig. 7: "till it receives a message from the
+              substitute"); raises an alert once after `alert_after` (rule 8)
+    HANDOVER  a CLAIM or LEAVE was heard: silent for `claim_hold + t_max`, waiting for
+              the new holder's heartbeat; if none comes, back to SUSPECT
+
+The class is pure: the node calls `heard`, `claim_heard` and `fire` with `now` and turns
+the returned `Fired` into frames and events.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+from swarmd.core.params import Params
+
+
+class WatchState(Enum):
+    WAITING = "waiting"
+    RUNNING = "running"
+    SUSPECT = "suspect"
+    HANDOVER = "handover"
+
+
+@dataclass(frozen=True, slots=True)
+class Fired:
+    """What a deadline produced: `first` is True on the first warning of an episode,
+    `alert` when the alert time has just passed."""
+
+    first: bool
+    alert: bool
+
+
+class SlotWatch:
+    __slots__ = ("alerted", "deadline", "function", "last_heard", "params", "since", "state")
+
+    def __init__(self, function: str, params: Params, now: float,
+                 last_heard: float | None = None) -> None:
+        self.function = function
+        self.params = params
+        self.since: float | None = None  # start of the current suspicion episode
+        self.alerted = False
+        self.last_heard = last_heard
+        if last_heard is not None and now - last_heard < params.t_max:
+            self.state = WatchState.RUNNING
+            self.deadline = last_heard + params.t_max
+        else:
+            # Rule 5: a slot not heard yet gets a grace time instead of Fig. 7's
+            # endless *waiting* state.
+            self.state = WatchState.WAITING
+            self.deadline = now + params.startup_grace
+
+    @property
+    def suspecting(self) -> bool:
+        return self.state in (WatchState.SUSPECT, WatchState.HANDOVER)
+
+    def heard(self, now: float) -> bool:
+        """The slot's holder heartbeated. Returns True if that ends a suspicion."""
+        was_suspect = self.suspecting
+        self.state = WatchState.RUNNING
+        self.last_heard = now
+        self.deadline = now + self.params.t_max
+        self.since = None
+        self.alerted = False
+        return was_suspect
+
+    def claim_heard(self, now: float) -> None:
+        """A substitute claimed (or the holder left): stop warning (paper, wait state)
+        and give the new holder time to heartbeat."""
+        if self.since is None:
+            self.since = now
+        self.state = WatchState.HANDOVER
+        self.deadline = now + self.params.claim_hold + self.params.t_max
+
+    def fire(self, now: float) -> Fired:
+        """Deadline reached. Call only when `now >= deadline`."""
+        p = self.params
+        first = self.state in (WatchState.WAITING, WatchState.RUNNING)
+        if self.since is None:
+            self.since = now
+        self.state = WatchState.SUSPECT
+        alert = False
+        if not self.alerted and now - self.since >= p.alert_after:
+            self.alerted = alert = True
+        # After the alert nobody is coming soon: keep warning, slower, so a standby
+        # that appears later can still count (rule 8 without flooding the channel).
+        period = p.standby_heartbeat_interval if self.alerted else p.warn_interval
+        self.deadline = now + period
+        return Fired(first=first, alert=alert)
+
+    def mark_alerted(self) -> None:
+        """An alert was raised at once (no live standby): don't raise it again."""
+        self.alerted = True
+
+    def refresh(self, now: float) -> None:
+        """The node itself stalled (paused process): don't blame the neighbours for
+        our own silence (Lifeguard's idea); restart the timer from now."""
+        if self.state is WatchState.RUNNING:
+            self.last_heard = now
+            self.deadline = now + self.params.t_max
+        elif self.state is WatchState.WAITING:
+            self.deadline = max(self.deadline, now + self.params.t_max)
