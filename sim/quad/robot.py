@@ -1,0 +1,346 @@
+"""One simulated robot: a quadrotor's physics, its controller, the function it flies and
+its health, stepped by whoever owns it (a robot process in real time, tests faster).
+
+Modes: PARKED (on the ground at `home`, motors off: a standby waits there) -> TAKEOFF
+(climb above home) -> FLYING (the function) -> LANDING (back to home on `release`) ->
+PARKED. CRASHED is final: the craft hit the ground while flying (for instance after a
+motor failed) and its motors are cut.
+
+Health is what the robot tells its daemon (paper Fig. 4, DESIGN rule 7): FAULTY when a
+motor failed, the craft crashed, or the battery is below 5%; DEGRADED below 20%; else
+OK. The battery holds `battery_s` seconds of hover and drains in proportion to thrust.
+
+Physics runs at 500 Hz, control at 100 Hz, trajectory samples at 20 Hz.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.quad.controller import Command, SE3Controller
+from sim.quad.functions import (
+    FunctionSpec,
+    PatrolFlight,
+    SlotFlight,
+    flight_for,
+    parse_function,
+)
+from sim.quad.model import GRAVITY, PHYSICS_DT, Preset, Vec3, quad_xml, x2
+from swarmd.core.roles import Health
+
+Array = NDArray[np.float64]
+
+CONTROL_EVERY = 5
+"""Physics steps per control update (500 Hz / 100 Hz)."""
+CONTROL_DT = PHYSICS_DT * CONTROL_EVERY
+SAMPLE_DT = 0.05
+"""Trajectory sampling period, s (20 Hz is plenty for plots and a 20 fps video)."""
+TAKEOFF_HEIGHT = 0.5
+"""Climb this far straight up before heading for the function, m: a craft that tilts
+toward a far target right off the ground would scrape it."""
+LAND_SPEED = 0.5
+"""Descent rate when landing, m/s."""
+ARM_HEIGHT = 0.3
+"""Ground contact counts as a crash only after the craft was this high, m."""
+
+
+class Mode(Enum):
+    PARKED = "parked"
+    TAKEOFF = "takeoff"
+    FLYING = "flying"
+    LANDING = "landing"
+    CRASHED = "crashed"
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One trajectory sample: robot time, position, orientation (w, x, y, z), state."""
+
+    t: float
+    pos: Vec3
+    quat: tuple[float, float, float, float]
+    mode: str
+    function: str | None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "t": round(self.t, 4),
+            "p": [round(v, 4) for v in self.pos],
+            "q": [round(v, 5) for v in self.quat],
+            "mode": self.mode,
+            "function": self.function,
+        }
+
+
+class QuadRobot:
+    """One craft. Time `t` is the robot's clock, s; `assign` takes the run's t0 on it."""
+
+    def __init__(
+        self,
+        robot_id: int,
+        home: Vec3 = (0.0, 0.0, 0.0),
+        preset: Preset | None = None,
+        *,
+        battery_s: float = 1200.0,
+        t: float = 0.0,
+        record: bool = True,
+    ) -> None:
+        self.robot_id = robot_id
+        self.home = (float(home[0]), float(home[1]), float(home[2]))
+        self.preset = preset or x2()
+        self.model = mujoco.MjModel.from_xml_string(quad_xml(self.preset, self.home))
+        self.data = mujoco.MjData(self.model)
+        self.controller = SE3Controller(self.preset)
+        self.body = self.model.body("quad").id
+        self.t_start = t
+        self.mode = Mode.PARKED
+        self.function: str | None = None
+        self.flight: SlotFlight | PatrolFlight | None = None
+        self.t0 = 0.0
+        self.battery_s = battery_s
+        self.battery = 1.0
+        """Charge left, fraction of full."""
+        self.failed_motors: set[int] = set()
+        self.crashed_at: float | None = None
+        self.armed = False
+        self._land_from: tuple[float, float] | None = None
+        self.record = record
+        self.samples: list[Sample] = []
+        self._next_sample = t
+        self._steps = 0
+        self._sample()
+
+    # -- state ---------------------------------------------------------------------------
+    @property
+    def t(self) -> float:
+        """Robot clock, s."""
+        return self.t_start + self._steps * PHYSICS_DT
+
+    @property
+    def position(self) -> Vec3:
+        p = self.data.qpos
+        return (float(p[0]), float(p[1]), float(p[2]))
+
+    @property
+    def velocity(self) -> Vec3:
+        v = self.data.qvel
+        return (float(v[0]), float(v[1]), float(v[2]))
+
+    def health(self) -> Health:
+        """What the robot reports to its daemon (DESIGN rule 7)."""
+        if self.failed_motors or self.mode is Mode.CRASHED or self.battery < 0.05:
+            return Health.FAULTY
+        if self.battery < 0.2:
+            return Health.DEGRADED
+        return Health.OK
+
+    # -- commands from the daemon --------------------------------------------------------
+    def assign(
+        self, function: str, spec: FunctionSpec | Mapping[str, Any], t0: float = 0.0
+    ) -> bool:
+        """Fly `function` (its spec; t0 is the run's start on this robot's clock). False
+        if the craft cannot fly (crashed or a motor out): its health already says so."""
+        if isinstance(spec, Mapping):
+            spec = parse_function(function, spec)
+        if self.mode is Mode.CRASHED or self.failed_motors:
+            return False
+        self.function = function
+        self.t0 = t0
+        self.flight = flight_for(spec, self.t - t0)
+        self.controller.reset()
+        if self.mode in (Mode.PARKED, Mode.LANDING) and self.position[2] < (
+            self.home[2] + TAKEOFF_HEIGHT
+        ):
+            self.mode = Mode.TAKEOFF
+            self.armed = False
+        else:
+            self.mode = Mode.FLYING
+        return True
+
+    def release(self, function: str | None = None) -> None:
+        """Stop the function (all of them if None) and land at home."""
+        if function is not None and function != self.function:
+            return
+        self.function = None
+        self.flight = None
+        if self.mode in (Mode.TAKEOFF, Mode.FLYING):
+            self.mode = Mode.LANDING
+            self._land_from = None
+
+    def fail_motor(self, index: int = 0) -> None:
+        """The rotor stops producing thrust (the `motor:R@T` fault): the craft falls."""
+        self.failed_motors.add(index % len(self.preset.rotors))
+        self.model.actuator_gainprm[index % len(self.preset.rotors), 0] = 0.0
+
+    # -- stepping ------------------------------------------------------------------------
+    def step_until(self, t: float) -> None:
+        """Advance physics to robot time `t` (500 Hz physics, 100 Hz control)."""
+        n = math.floor((t - self.t) / PHYSICS_DT + 1e-9)
+        while n > 0:
+            if self._steps % CONTROL_EVERY == 0:
+                self._control()
+            k = min(n, CONTROL_EVERY - self._steps % CONTROL_EVERY)
+            mujoco.mj_step(self.model, self.data, nstep=k)
+            self._steps += k
+            n -= k
+            if self.record and self.t >= self._next_sample - 1e-9:
+                self._sample()
+
+    def _sample(self) -> None:
+        q = self.data.qpos
+        self.samples.append(
+            Sample(
+                self.t,
+                (float(q[0]), float(q[1]), float(q[2])),
+                (float(q[3]), float(q[4]), float(q[5]), float(q[6])),
+                self.mode.value,
+                self.function,
+            )
+        )
+        self._next_sample += SAMPLE_DT
+
+    def _on_ground(self) -> bool:
+        return bool(self.data.ncon > 0)
+
+    def _control(self) -> None:
+        d = self.data
+        pos = self.position
+        z_home = self.home[2]
+        # Battery: drain in proportion to thrust, 1.0 = hover (per control period).
+        thrust = float(np.sum(d.actuator_force))
+        self.battery = max(
+            0.0,
+            self.battery
+            - thrust / (self.preset.mass * GRAVITY) * CONTROL_DT / self.battery_s,
+        )
+        if self.mode in (Mode.TAKEOFF, Mode.FLYING):
+            if pos[2] > z_home + ARM_HEIGHT:
+                self.armed = True
+            if self.armed and self._on_ground():
+                self.mode = Mode.CRASHED
+                self.crashed_at = self.t
+        if self.mode in (Mode.PARKED, Mode.CRASHED):
+            d.ctrl[:] = 0.0
+            return
+        target: Vec3
+        vel: Vec3 = (0.0, 0.0, 0.0)
+        if self.mode is Mode.TAKEOFF:
+            target = (self.home[0], self.home[1], z_home + TAKEOFF_HEIGHT + 0.1)
+            if pos[2] >= z_home + TAKEOFF_HEIGHT:
+                self.mode = Mode.FLYING
+        if self.mode is Mode.FLYING:
+            assert self.flight is not None
+            sp = self.flight.setpoint(self.t - self.t0, pos)
+            target, vel = sp.position, sp.velocity
+        elif self.mode is Mode.LANDING:
+            target, vel = self._landing_setpoint(pos)
+            if target[2] <= z_home and self._on_ground():
+                self.mode = Mode.PARKED
+                self.armed = False
+                d.ctrl[:] = 0.0
+                return
+        rot = d.xmat[self.body].reshape(3, 3)
+        cmd = Command(np.array(target), np.array(vel), np.zeros(3))
+        d.ctrl[:] = self.controller.update(
+            d.qpos[0:3].copy(), d.qvel[0:3].copy(), rot, d.qvel[3:6].copy(), cmd, CONTROL_DT
+        )
+
+    def _landing_setpoint(self, pos: Vec3) -> tuple[Vec3, Vec3]:
+        hx, hy, hz = self.home
+        if self._land_from is None:
+            self._land_from = (self.t, pos[2])
+        if math.hypot(pos[0] - hx, pos[1] - hy) > 0.2 and self._land_from[1] > hz + 0.4:
+            # Go home at the current height first, then descend.
+            self._land_from = (self.t, pos[2])
+            return (hx, hy, pos[2]), (0.0, 0.0, 0.0)
+        t_from, z_from = self._land_from
+        z = max(hz - 0.1, z_from - LAND_SPEED * (self.t - t_from))
+        return (hx, hy, z), (0.0, 0.0, -LAND_SPEED if z > hz - 0.1 else 0.0)
+
+    # -- recording -----------------------------------------------------------------------
+    def write_trajectory(self, path: Path, *, wall0: float | None = None) -> None:
+        """JSON Lines: a header `{"robot", "preset", "home", "wall0"}` (wall0: Unix time
+        of robot time 0, if the clock was a wall clock), then one sample a line."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("w") as f:
+            header = {
+                "robot": self.robot_id,
+                "preset": self.preset.name,
+                "home": list(self.home),
+                "wall0": wall0,
+            }
+            f.write(json.dumps(header) + "\n")
+            for s in self.samples:
+                f.write(json.dumps(s.to_json()) + "\n")
+
+
+@dataclass(frozen=True, slots=True)
+class Trajectory:
+    """A recorded trajectory: times (run seconds), positions (N x 3), quats (N x 4)."""
+
+    robot: int
+    t: Array
+    pos: Array
+    quat: Array
+    modes: tuple[str, ...]
+    functions: tuple[str | None, ...]
+    home: Vec3 = (0.0, 0.0, 0.0)
+
+    def at(self, t: float) -> tuple[Array, Array]:
+        """Position and orientation at run time `t` (held at the ends, linear between)."""
+        i = int(np.searchsorted(self.t, t))
+        if i <= 0:
+            return self.pos[0], self.quat[0]
+        if i >= len(self.t):
+            return self.pos[-1], self.quat[-1]
+        u = (t - self.t[i - 1]) / max(self.t[i] - self.t[i - 1], 1e-9)
+        q = self.quat[i - 1] * (1 - u) + self.quat[i] * u
+        return self.pos[i - 1] * (1 - u) + self.pos[i] * u, q / np.linalg.norm(q)
+
+
+def trajectory_of(robot: QuadRobot, t_shift: float = 0.0) -> Trajectory:
+    """The robot's samples as a Trajectory; run time = robot time + t_shift."""
+    return _trajectory(robot.robot_id, robot.home, [s.to_json() for s in robot.samples], t_shift)
+
+
+def _trajectory(
+    rid: int, home: Vec3, rows: list[dict[str, Any]], t_shift: float
+) -> Trajectory:
+    n = len(rows)
+    t = np.array([r["t"] for r in rows], dtype=np.float64) + t_shift
+    pos = np.array([r["p"] for r in rows], dtype=np.float64).reshape(n, 3)
+    quat = np.array([r["q"] for r in rows], dtype=np.float64).reshape(n, 4)
+    return Trajectory(
+        rid,
+        t,
+        pos,
+        quat,
+        tuple(str(r.get("mode", "")) for r in rows),
+        tuple(r.get("function") for r in rows),
+        home,
+    )
+
+
+def load_trajectory(path: Path, t0: float | None = None) -> Trajectory:
+    """Read `traj-<robot>.jsonl`. With `t0` (the run's start, Unix time) and a header
+    `wall0`, times become run seconds; else they stay on the robot's clock."""
+    with path.open() as f:
+        header = json.loads(f.readline())
+        rows = [json.loads(line) for line in f if line.strip()]
+    shift = 0.0
+    if t0 is not None and header.get("wall0") is not None:
+        shift = float(header["wall0"]) - t0
+    home = header.get("home") or [0.0, 0.0, 0.0]
+    return _trajectory(
+        int(header["robot"]), (float(home[0]), float(home[1]), float(home[2])), rows, shift
+    )
