@@ -1,0 +1,274 @@
+"""The robot file: which robot this daemon is, its swarm, channel and robot link.
+
+    robot: 2
+    swarm: paper.yaml                 # relative to this file
+    transport: {kind: udp}            # udp | serial | xbee
+    link: {kind: none}                # none | socket | exec
+    event_log: null
+    state_dir: /var/lib/swarmd
+    handover_on_stop: true
+    metrics: null                     # {host: 127.0.0.1, port: 9477}
+    key_files: []
+
+Every relative path in a config file is relative to that file, so a robot directory
+can be copied as a whole. See docs/config.md.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+
+from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem
+from swarmd.config.keys import KeyFileError, read_key
+from swarmd.config.source import Source, parse_source, read_source, validate
+from swarmd.config.swarm import RobotEntry, SwarmConfig, load_swarm
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _int_or_hex(value: Any) -> Any:
+    # XBee manuals and XCTU write PAN ids and channels in hex ("0x607", "0C").
+    if isinstance(value, str):
+        text = value.strip().lower()
+        try:
+            return int(text, 16) if text.startswith("0x") else int(text, 0)
+        except ValueError:
+            raise ValueError(f"not a number: {value!r} (write 1543 or \"0x607\")") from None
+    return value
+
+
+HexInt = Annotated[int, BeforeValidator(_int_or_hex)]
+
+
+class UdpTransportConfig(_Model):
+    """UDP multicast. Defaults stay on loopback with TTL 1 (DESIGN.md section 4)."""
+
+    kind: Literal["udp"] = "udp"
+    group: str = "239.255.77.7"
+    port: int = Field(default=47007, ge=1, le=65535)
+    interface: str = "127.0.0.1"
+    """IPv4 address of the interface multicast is sent from (IP_MULTICAST_IF)."""
+    ttl: int = Field(default=1, ge=0, le=255)
+    loopback: bool = True
+    """IP_MULTICAST_LOOP: needed when several robots run on one machine (sim)."""
+
+    @field_validator("group")
+    @classmethod
+    def _multicast(cls, value: str) -> str:
+        try:
+            addr = ipaddress.IPv4Address(value)
+        except ValueError:
+            raise ValueError(f"{value!r} is not an IPv4 address") from None
+        if not addr.is_multicast:
+            raise ValueError(f"{value} is not a multicast group (224.0.0.0/4)")
+        return value
+
+    @field_validator("interface")
+    @classmethod
+    def _ipv4(cls, value: str) -> str:
+        try:
+            ipaddress.IPv4Address(value)
+        except ValueError:
+            raise ValueError(f"{value!r} is not an IPv4 interface address") from None
+        return value
+
+
+class SerialTransportConfig(_Model):
+    """Transparent serial radio (XBee in AP=0, SiK telemetry radios)."""
+
+    kind: Literal["serial"]
+    port: str
+    baud: int = Field(default=57600, gt=0)
+
+
+class XBeeTransportConfig(_Model):
+    """XBee in API mode through digi-xbee (see notes/xbee.md)."""
+
+    kind: Literal["xbee"]
+    port: str
+    baud: int = Field(default=9600, gt=0)
+    protocol: Literal["zigbee", "802.15.4", "digimesh"] = "802.15.4"
+    api_mode: Literal[1, 2] = 1
+    pan_id: HexInt | None = Field(default=None, ge=0, le=0xFFFF)
+    """None leaves the radio's own PAN id."""
+    channel: HexInt | None = Field(default=None, ge=0, le=0xFF)
+    role: Literal["coordinator", "router"] = "router"
+    max_in_flight: int = Field(default=8, ge=1)
+
+
+TransportConfig = Annotated[
+    UdpTransportConfig | SerialTransportConfig | XBeeTransportConfig,
+    Field(discriminator="kind"),
+]
+
+Command = str | list[str]
+
+
+class NoneLinkConfig(_Model):
+    """No robot: always healthy (tests, bench)."""
+
+    kind: Literal["none"] = "none"
+
+
+class SocketLinkConfig(_Model):
+    """The robot connects to a Unix socket and speaks JSON Lines."""
+
+    kind: Literal["socket"]
+    path: str
+    health_timeout: float = Field(default=2.0, gt=0, description="s")
+
+
+class ExecLinkConfig(_Model):
+    """Run commands on assign / release; optionally poll a health command."""
+
+    kind: Literal["exec"]
+    on_assign: Command
+    on_release: Command | None = None
+    health_command: Command | None = None
+
+
+LinkConfig = Annotated[
+    NoneLinkConfig | SocketLinkConfig | ExecLinkConfig, Field(discriminator="kind")
+]
+
+
+class MetricsConfig(_Model):
+    host: str = "127.0.0.1"
+    port: int = Field(default=9477, ge=1, le=65535)
+    allow_remote: bool = False
+    """A metrics endpoint off loopback must be asked for explicitly (DESIGN section 4)."""
+
+
+class RobotFile(_Model):
+    """The robot file's schema, as written."""
+
+    robot: int = Field(ge=1, le=0xFFFF)
+    swarm: str
+    transport: TransportConfig = Field(default_factory=UdpTransportConfig)
+    link: LinkConfig = Field(default_factory=NoneLinkConfig)
+    event_log: str | None = None
+    state_dir: str = "/var/lib/swarmd"
+    handover_on_stop: bool = True
+    metrics: MetricsConfig | None = None
+    key_files: list[str] = Field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """A validated robot file with its swarm loaded and every path resolved."""
+
+    robot: int
+    swarm: SwarmConfig
+    swarm_path: Path
+    transport: UdpTransportConfig | SerialTransportConfig | XBeeTransportConfig
+    link: NoneLinkConfig | SocketLinkConfig | ExecLinkConfig
+    event_log: Path | None
+    state_dir: Path
+    handover_on_stop: bool
+    metrics: MetricsConfig | None
+    key_files: tuple[Path, ...]
+    source: str
+    warnings: tuple[Problem, ...] = ()
+
+    @property
+    def robot_id(self) -> int:
+        return self.robot
+
+    @property
+    def entry(self) -> RobotEntry:
+        """This robot's entry in the swarm file."""
+        return self.swarm.robot(self.robot)
+
+    def keys(self) -> tuple[bytes, ...]:
+        """Keys accepted on receive, the signing key first: the swarm's key_file if it
+        has one, then `key_files` (key rotation: accept old and new for a while)."""
+        out: list[bytes] = []
+        swarm_key = self.swarm.key()
+        if swarm_key is not None:
+            out.append(swarm_key)
+        for path in self.key_files:
+            k = read_key(path)
+            if k not in out:
+                out.append(k)
+        return tuple(out)
+
+
+def load_robot(path: str | Path) -> RobotConfig:
+    """Read and validate a robot file and the swarm file it names.
+
+    Raises ConfigUnreadable (robot file unreadable) or ConfigError (every problem of
+    both files; those of the swarm file name the swarm file)."""
+    return _finish(read_source(path))
+
+
+def parse_robot(text: str, name: str = "<string>", path: Path | None = None) -> RobotConfig:
+    """Like `load_robot` for YAML text; `path` anchors relative paths."""
+    return _finish(parse_source(text, name, path))
+
+
+def _finish(src: Source) -> RobotConfig:
+    f: RobotFile = validate(RobotFile, src)
+    problems: list[Problem] = []
+    swarm_path = src.resolve(f.swarm)
+    swarm: SwarmConfig | None = None
+    try:
+        swarm = load_swarm(swarm_path)
+    except ConfigUnreadable as exc:
+        reason = exc.problems[0].message if exc.problems else "unreadable"
+        problems.append(src.problem(("swarm",), f"swarm file {swarm_path}: {reason}"))
+    except ConfigError as exc:
+        problems.extend(exc.problems)
+    if swarm is not None:
+        if f.robot not in swarm.robot_ids():
+            ids = ", ".join(map(str, swarm.robot_ids()))
+            problems.append(
+                src.problem(("robot",), f"robot {f.robot} is not in swarm file "
+                            f"{swarm.source} (robots: {ids})")
+            )
+        problems.extend(swarm.warnings)
+    key_files = tuple(src.resolve(k) for k in f.key_files)
+    for i, k in enumerate(key_files):
+        try:
+            read_key(k)
+        except KeyFileError as exc:
+            problems.append(src.problem(("key_files", i), str(exc)))
+    if f.metrics is not None and not f.metrics.allow_remote and not _is_loopback(f.metrics.host):
+        problems.append(
+            src.problem(("metrics", "host"), f"{f.metrics.host} is not a loopback address; "
+                        "set `allow_remote: true` to serve metrics off this machine")
+        )
+    link = f.link
+    if isinstance(link, SocketLinkConfig):
+        link = link.model_copy(update={"path": str(src.resolve(link.path))})
+    if swarm is None or any(p.severity == "error" for p in problems):
+        raise ConfigError(problems)
+    return RobotConfig(
+        robot=f.robot,
+        swarm=swarm,
+        swarm_path=swarm_path,
+        transport=f.transport,
+        link=link,
+        event_log=src.resolve(f.event_log) if f.event_log is not None else None,
+        state_dir=src.resolve(f.state_dir),
+        handover_on_stop=f.handover_on_stop,
+        metrics=f.metrics,
+        key_files=key_files,
+        source=src.name,
+        warnings=tuple(p for p in problems if p.severity == "warning"),
+    )
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
