@@ -58,7 +58,7 @@ if TYPE_CHECKING:
 
     from swarmd.core.node import Snapshot
 
-DEFAULT_PORT = 9751
+DEFAULT_PORT = 9477
 """Port of the endpoint when the robot file enables it without naming one."""
 
 EVENT_NAMES = (
