@@ -1,0 +1,217 @@
+"""Channel budget: what a swarm puts on the air, and whether the radio can carry it.
+
+`swarmd check` prints this (issue 5 point 6). The numbers come from the plan and the
+timing parameters, not from measurement:
+
+- frames/s: every ACTIVE robot heartbeats each `heartbeat_interval`, every STANDBY each
+  `standby_heartbeat_interval` (DESIGN section 2). During a failover the watchers of the
+  failed slot also WARN each `warn_interval` and one CLAIM goes out: the peak.
+- bytes/s on the air: frame + the radio's per-frame overhead. For the XBee protocols the
+  overhead is what the firmware reserves of the 127-byte 802.15.4 PSDU for its headers
+  (127 - max payload: 27 B for 802.15.4, 35 B Zigbee MAC/NWK/APS, 54 B DigiMesh) plus
+  6 B of PHY preamble, start delimiter and length.
+- airtime share at 250 kbps (the 2.4 GHz O-QPSK PHY): each transmission occupies
+  (bytes x 32 us) plus the 640 us long inter-frame spacing the MAC must leave after it.
+  CSMA back-off is idle time other senders can use and is not counted. 30% is the
+  usual ceiling for unslotted CSMA before collisions grow fast.
+- broadcast copies: an 802.15.4 broadcast is one transmission. Zigbee routers relay
+  every broadcast with up to 3 transmissions each (passive acknowledgement), and the
+  broadcast transaction table (8 entries, 8 s) limits a network to about one broadcast
+  per second (notes/xbee.md, Digi 90001539): 3 x robots transmissions, worst case.
+  A DigiMesh broadcast goes out MT + 1 = 4 times (MT default 3); with every robot in
+  one hop and NH=1 nobody relays it (more hops add relays: not counted here).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+from swarmd.core.wire import HEADER_LEN, TAG_LEN
+
+AIR_RATE_BPS = 250_000
+BYTE_TIME = 8 / AIR_RATE_BPS  # 32 us
+IFS = 640e-6  # 802.15.4 long inter-frame spacing (40 symbols of 16 us)
+PHY_OVERHEAD = 6  # preamble 4, SFD 1, PHR 1
+PSDU_MAX = 127
+AIRTIME_CEILING = 0.30
+ZIGBEE_BROADCASTS_PER_S = 1.0
+
+MAX_PAYLOAD = {"zigbee": 92, "802.15.4": 100, "digimesh": 73, "serial": 64, "udp": 1472}
+"""Largest payload per medium: XBee 3 broadcast limits (unencrypted); the serial
+transport's default frame limit (one RF packet after COBS framing); a UDP datagram that
+fits a 1500-byte Ethernet MTU."""
+
+HEARTBEAT_BODY = 4  # wire.py: function (1), epoch (2), role|health (1)
+WARN_BODY = 5  # suspect (2), function (1), epoch (2)
+MEDIA = tuple(MAX_PAYLOAD)
+
+
+def frame_overhead(medium: str) -> int:
+    """Bytes a frame costs on the air beyond its payload."""
+    if medium in ("zigbee", "802.15.4", "digimesh"):
+        return PHY_OVERHEAD + PSDU_MAX - MAX_PAYLOAD[medium]
+    if medium == "serial":
+        # COBS + CRC framing (transport/framing.py) carried by a transparent-mode radio,
+        # costed like an 802.15.4 frame.
+        return 7 + PHY_OVERHEAD + PSDU_MAX - MAX_PAYLOAD["802.15.4"]
+    if medium == "udp":
+        return 42  # Ethernet 14 + IPv4 20 + UDP 8
+    raise ValueError(f"unknown medium {medium!r}; one of {', '.join(MEDIA)}")
+
+
+def broadcast_copies(medium: str, robots: int) -> int:
+    """Transmissions one broadcast costs network-wide (see module docstring)."""
+    if medium == "zigbee":
+        return 3 * robots
+    if medium == "digimesh":
+        return 4
+    return 1
+
+
+def airtime(medium: str, payload: int) -> float:
+    """s. Channel time of one transmission of `payload` bytes (no relays)."""
+    return (payload + frame_overhead(medium)) * BYTE_TIME + IFS
+
+
+@dataclass(frozen=True, slots=True)
+class Budget:
+    """The channel budget of one swarm on one medium (steady state and peak)."""
+
+    medium: str
+    signed: bool
+    robots: int
+    active: int
+    standby: int
+    frames_per_s: float
+    """Frames the swarm originates per second in steady state (heartbeats)."""
+    bytes_per_s: float
+    """Bytes per second on the air in steady state, overhead and relays included."""
+    airtime_share: float | None
+    """Fraction of the 250 kbps channel used in steady state (None for UDP)."""
+    peak_frames_per_s: float
+    """Originated frames per second during a failover (heartbeats + WARNs + CLAIM)."""
+    peak_airtime_share: float | None
+    heartbeat_bytes: int
+    max_payload: int
+    heartbeat_fits: bool
+    warnings: tuple[str, ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def lines(self) -> list[str]:
+        """Human-readable summary for `swarmd check`."""
+        out = [
+            f"channel budget on {self.medium} ({'signed' if self.signed else 'unsigned'} "
+            f"frames, {self.active} active + {self.standby} standby robots):",
+            f"  steady state: {self.frames_per_s:.1f} frames/s, "
+            f"{self.bytes_per_s:.0f} B/s on the air"
+            + (f", {self.airtime_share:.1%} airtime at 250 kbps"
+               if self.airtime_share is not None else ""),
+            f"  during a failover: {self.peak_frames_per_s:.1f} frames/s"
+            + (f", {self.peak_airtime_share:.1%} airtime"
+               if self.peak_airtime_share is not None else ""),
+            f"  heartbeat {self.heartbeat_bytes} B, payload limit {self.max_payload} B: "
+            + ("fits" if self.heartbeat_fits else "DOES NOT FIT"),
+        ]
+        out += [f"  WARNING: {w}" for w in self.warnings]
+        return out
+
+
+def heartbeat_size(signed: bool) -> int:
+    return HEADER_LEN + HEARTBEAT_BODY + (TAG_LEN if signed else 0)
+
+
+def warn_size(signed: bool) -> int:
+    return HEADER_LEN + WARN_BODY + (TAG_LEN if signed else 0)
+
+
+def budget_for(
+    active: int,
+    standby: int,
+    max_watchers: int,
+    params: Params,
+    *,
+    medium: str,
+    signed: bool,
+) -> Budget:
+    """The budget from counts alone (what `channel_budget` derives from a plan)."""
+    robots = active + standby
+    overhead = frame_overhead(medium)
+    copies = broadcast_copies(medium, robots)
+    hb = heartbeat_size(signed)
+    warn = warn_size(signed)
+    hb_rate = active / params.heartbeat_interval + standby / params.standby_heartbeat_interval
+    warn_rate = max_watchers / params.warn_interval
+    claim_rate = 1 / params.claim_hold  # at most one CLAIM per hold, counted as a rate
+    peak_rate = hb_rate + warn_rate + claim_rate
+    bytes_per_s = hb_rate * (hb + overhead) * copies
+    airtime_share: float | None = None
+    peak_share: float | None = None
+    if medium != "udp":
+        airtime_share = hb_rate * airtime(medium, hb) * copies
+        peak_share = (
+            hb_rate * airtime(medium, hb) + (warn_rate + claim_rate) * airtime(medium, warn)
+        ) * copies
+    max_payload = MAX_PAYLOAD[medium]
+    fits = max(hb, warn) <= max_payload
+    warnings: list[str] = []
+    if not fits:
+        warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
+    if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
+        needed = robots / ZIGBEE_BROADCASTS_PER_S
+        warnings.append(
+            f"Zigbee carries about {ZIGBEE_BROADCASTS_PER_S:.0f} broadcast per second "
+            f"network-wide (8-entry broadcast table held 8 s, Digi 90001539); this swarm "
+            f"broadcasts {hb_rate:.1f} heartbeats/s. Use 802.15.4 (single-hop MAC "
+            f"broadcast) or DigiMesh, or slow every heartbeat to >= {needed:.0f} s"
+        )
+    if airtime_share is not None and airtime_share > AIRTIME_CEILING:
+        warnings.append(
+            f"heartbeats alone take {airtime_share:.0%} of the channel, above the "
+            f"{AIRTIME_CEILING:.0%} CSMA ceiling: expect collisions and false suspicions"
+        )
+    elif peak_share is not None and peak_share > AIRTIME_CEILING:
+        warnings.append(
+            f"a failover raises airtime to {peak_share:.0%}, above {AIRTIME_CEILING:.0%}"
+        )
+    return Budget(
+        medium=medium, signed=signed, robots=robots, active=active, standby=standby,
+        frames_per_s=hb_rate, bytes_per_s=bytes_per_s, airtime_share=airtime_share,
+        peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
+        max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
+    )
+
+
+def channel_budget(plan: SwarmPlan, params: Params, *, medium: str, signed: bool) -> Budget:
+    """Budget of `plan` on `medium` (zigbee, 802.15.4, digimesh, serial, udp)."""
+    active = sum(1 for r in plan.robots.values() if r.function is not None)
+    standby = len(plan.robots) - active
+    max_watchers = max((len(plan.watched_by(f)) for f in plan.functions), default=0)
+    return budget_for(active, standby, max_watchers, params, medium=medium, signed=signed)
+
+
+def largest_swarm(
+    params: Params,
+    *,
+    medium: str = "802.15.4",
+    signed: bool = True,
+    ceiling: float = AIRTIME_CEILING,
+    standby_share: float = 1 / 3,
+    limit: int = 10_000,
+) -> int:
+    """Largest robot count whose steady-state heartbeats stay below `ceiling` airtime.
+
+    The swarm is shaped like the paper's (4 active, 2 standby: `standby_share` 1/3);
+    each slot has two watchers (a ring, the paper's neighbourhood)."""
+    best = 0
+    for n in range(1, limit + 1):
+        standby = round(n * standby_share)
+        b = budget_for(n - standby, standby, 2, params, medium=medium, signed=signed)
+        if b.airtime_share is None or b.airtime_share >= ceiling:
+            break
+        best = n
+    return best

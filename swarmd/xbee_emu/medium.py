@@ -1,0 +1,298 @@
+"""Software XBee radios on pseudo-terminals sharing one simulated medium (issue 5 pt 4).
+
+Each radio is a pty pair: the emulator keeps the master, the client (digi-xbee, the
+serial transport, minicom) opens the slave through a stable symlink such as
+`/tmp/swarmd-xbee/robot1`. One thread owns every master and a timer heap:
+
+    UART bytes -> FrameParser -> EmulatedRadio.handle -> replies (after ~2 ms) and
+    transmissions -> channel (busy until the frame's airtime has passed) -> receive
+    frames on every other radio with the same protocol, PAN id and channel.
+
+Why the details:
+- AT replies come ~2 ms after the request, never at once: digi-xbee has a lost wake-up
+  race that makes an instant reply wait out its 4 s timeout (notes/xbee.md).
+- The emulator keeps its own slave fd open so the master never sees a hang-up while no
+  client is attached; masters are non-blocking and a full pty buffer drops the frame
+  (a real radio's UART buffer overflows the same way).
+- `unplug(n)` closes the master and removes the symlink: a client reading the slave
+  gets EIO, exactly as when a USB radio is pulled. `replug(n)` makes a new pty at the
+  same symlink; the radio has power-cycled, so unsaved (no WR) settings are gone.
+- The channel is one shared resource per (protocol, PAN, channel): a transmission
+  starts when the previous one ended, so an overloaded swarm queues as on the air.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import functools
+import heapq
+import itertools
+import os
+import random
+import selectors
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from swarmd.budget import airtime
+from swarmd.xbee_emu import api
+from swarmd.xbee_emu.radio import (
+    BROADCAST64,
+    TX_OK,
+    TX_PAYLOAD_TOO_LARGE,
+    EmulatedRadio,
+    Reply,
+    Transmit,
+)
+
+DEFAULT_DIR = "/tmp/swarmd-xbee"
+REPLY_DELAY = 0.002
+
+
+@dataclass
+class _Port:
+    master: int
+    slave: int
+    slave_name: str
+    parser: api.FrameParser
+
+
+@dataclass(order=True)
+class _Timer:
+    at: float
+    order: int
+    action: Callable[[], None] = field(compare=False)
+
+
+class Medium:
+    """N emulated radios on ptys and the air between them. Use as a context manager or
+    call `start()` / `stop()`; `path(n)` is radio n's device (n = 1..N)."""
+
+    def __init__(
+        self,
+        count: int,
+        *,
+        protocol: str = "802.15.4",
+        api_mode: int = 1,
+        directory: str | os.PathLike[str] = DEFAULT_DIR,
+        pan_id: int = 0x0607,
+        channel: int = 0x0C,
+        loss: float = 0.0,
+        delay: float = 0.0,
+        seed: int | None = None,
+        reply_delay: float = REPLY_DELAY,
+    ) -> None:
+        if count < 1:
+            raise ValueError("need at least one radio")
+        self.directory = Path(directory)
+        self.reply_delay = reply_delay
+        self.radios: dict[int, EmulatedRadio] = {
+            n: EmulatedRadio(n, protocol, api_mode=api_mode, pan_id=pan_id, channel=channel,
+                             coordinator=n == 1, loss=loss, delay=delay)
+            for n in range(1, count + 1)
+        }
+        self._rng = random.Random(seed)
+        self._ports: dict[int, _Port] = {}
+        self._timers: list[_Timer] = []
+        self._order = itertools.count()
+        self._busy_until: dict[tuple[str, bytes, bytes], float] = {}
+        self._lock = threading.RLock()
+        self._selector = selectors.DefaultSelector()
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
+        self._selector.register(self._wake_r, selectors.EVENT_READ, 0)
+        self._thread: threading.Thread | None = None
+        self._stopping = False
+        self.delivered = 0
+        self.lost = 0
+        self.uart_overflows = 0
+
+    # -- lifecycle ----------------------------------------------------------------------
+    def start(self) -> Medium:
+        self.directory.mkdir(parents=True, exist_ok=True)
+        with self._lock:
+            for n in self.radios:
+                self._plug(n)
+        self._thread = threading.Thread(target=self._run, name="xbee-medium", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stopping = True
+        self._wake()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        with self._lock:
+            for n in list(self._ports):
+                self._unplug(n)
+        self._selector.close()
+        for fd in (self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    def __enter__(self) -> Medium:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def path(self, n: int) -> str:
+        """The stable device path of radio n (a symlink to its current pty)."""
+        return str(self.directory / f"robot{n}")
+
+    # -- faults -------------------------------------------------------------------------
+    def unplug(self, n: int) -> None:
+        """Pull radio n: its client gets I/O errors, the symlink disappears."""
+        with self._lock:
+            self._unplug(n)
+        self._wake()
+
+    def replug(self, n: int) -> None:
+        """Put radio n back (power-cycled) at the same symlink."""
+        with self._lock:
+            if n in self._ports:
+                return
+            self.radios[n].power_cycle()
+            self._plug(n)
+        self._wake()
+
+    def plugged(self, n: int) -> bool:
+        return n in self._ports
+
+    def set_loss(self, n: int, loss: float) -> None:
+        self.radios[n].loss = loss
+
+    def set_delay(self, n: int, delay: float) -> None:
+        self.radios[n].delay = delay
+
+    # -- ptys ---------------------------------------------------------------------------
+    def _plug(self, n: int) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no line discipline: a UART, not a terminal
+        os.set_blocking(master, False)
+        name = os.ttyname(slave)
+        link = Path(self.path(n))
+        tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        tmp.symlink_to(name)
+        tmp.replace(link)  # atomic: a client never sees a missing or half-made link
+        radio = self.radios[n]
+        self._ports[n] = _Port(master, slave, name, api.FrameParser(radio.current_api_mode))
+        self._selector.register(master, selectors.EVENT_READ, n)
+
+    def _unplug(self, n: int) -> None:
+        port = self._ports.pop(n, None)
+        if port is None:
+            return
+        with contextlib.suppress(KeyError, ValueError):
+            self._selector.unregister(port.master)
+        with contextlib.suppress(FileNotFoundError):
+            link = Path(self.path(n))
+            if link.is_symlink() and os.readlink(link) == port.slave_name:
+                link.unlink()
+        for fd in (port.master, port.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+    def _wake(self) -> None:
+        with contextlib.suppress(BlockingIOError, OSError):
+            os.write(self._wake_w, b"x")
+
+    def _write(self, n: int, frame: bytes) -> None:
+        port = self._ports.get(n)
+        if port is None:
+            return
+        data = api.encode(frame, self.radios[n].current_api_mode)
+        try:
+            written = os.write(port.master, data)
+        except BlockingIOError:
+            written = 0
+        except OSError:
+            return
+        if written < len(data):
+            self.uart_overflows += 1
+
+    # -- the thread ---------------------------------------------------------------------
+    def _at(self, delay: float, action: Callable[[], None]) -> None:
+        heapq.heappush(self._timers, _Timer(time.monotonic() + delay, next(self._order), action))
+
+    def _run(self) -> None:
+        while not self._stopping:
+            with self._lock:
+                timeout = 0.2
+                if self._timers:
+                    timeout = max(0.0, min(timeout, self._timers[0].at - time.monotonic()))
+            try:
+                ready = self._selector.select(timeout)
+            except (OSError, ValueError):
+                ready = []  # an fd closed under us by unplug(); the loop goes on
+            with self._lock:
+                for key, _ in ready:
+                    n = key.data
+                    if n == 0:
+                        with contextlib.suppress(BlockingIOError, OSError):
+                            os.read(self._wake_r, 4096)
+                        continue
+                    self._read(n)
+                now = time.monotonic()
+                while self._timers and self._timers[0].at <= now:
+                    heapq.heappop(self._timers).action()
+
+    def _read(self, n: int) -> None:
+        port = self._ports.get(n)
+        if port is None:
+            return
+        try:
+            data = os.read(port.master, 4096)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            if exc.errno == errno.EIO:
+                return  # no client attached right now
+            raise
+        radio = self.radios[n]
+        port.parser.api_mode = radio.current_api_mode
+        for frame in port.parser.feed(data):
+            for out in radio.handle(frame):
+                match out:
+                    case Reply(reply):
+                        self._at(self.reply_delay, functools.partial(self._write, n, reply))
+                    case Transmit():
+                        self._transmit(radio, out)
+            port.parser.api_mode = radio.current_api_mode
+
+    def _transmit(self, radio: EmulatedRadio, request: Transmit) -> None:
+        n = radio.number
+        if len(request.data) > radio.max_payload:
+            refusal = radio.status_frame(request, TX_PAYLOAD_TOO_LARGE)
+            if refusal is not None:
+                self._at(self.reply_delay, functools.partial(self._write, n, refusal))
+            return
+        # The shared channel: start after the previous transmission on this network.
+        now = time.monotonic()
+        net = radio.network
+        start = max(now, self._busy_until.get(net, 0.0))
+        end = start + airtime(radio.protocol, len(request.data))
+        self._busy_until[net] = end
+        done = end - now + radio.delay
+        status = radio.status_frame(request, TX_OK)
+        if status is not None:
+            self._at(max(done, self.reply_delay), functools.partial(self._write, n, status))
+        broadcast = request.dest64 == BROADCAST64
+        for m, peer in self.radios.items():
+            if m == n or m not in self._ports or peer.network != net:
+                continue
+            if not broadcast and peer.address64 != request.dest64:
+                continue
+            if self._rng.random() < radio.loss or self._rng.random() < peer.loss:
+                self.lost += 1
+                continue
+            frame = peer.receive_frame(radio, request.data, broadcast)
+            self.delivered += 1
+            self._at(done, functools.partial(self._write, m, frame))

@@ -1,0 +1,237 @@
+"""One emulated XBee 3 radio: its AT parameter table and what it does with API frames.
+
+Pure state machine (no I/O): `handle(frame)` returns what the radio answers on its UART
+(`Reply`) and what it puts on the air (`Transmit`); the `Medium` does the timing and the
+ptys. What is emulated follows notes/xbee.md, which was read off digi-xbee 1.5.0's
+`open()`: AT requests arrive as 0x09 (queued) as well as 0x08, HV must start with an
+XBee 3 code, VR's first digit selects the protocol.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+PROTOCOLS = ("zigbee", "802.15.4", "digimesh")
+
+# Firmware versions digi-xbee maps to each protocol on XBee 3 hardware (notes/xbee.md).
+_VR = {"zigbee": b"\x10\x0d", "802.15.4": b"\x20\x14", "digimesh": b"\x30\x0d"}
+HV_XBEE3 = b"\x42\x40"
+
+MAX_PAYLOAD = {"zigbee": 92, "802.15.4": 100, "digimesh": 73}
+"""Largest broadcast payload per protocol, unencrypted (Digi's XBee 3 manuals)."""
+MAX_PAYLOAD_ENCRYPTED = {"zigbee": 74, "802.15.4": 95, "digimesh": 65}
+
+BROADCAST64 = 0x000000000000FFFF
+
+# AT status codes in a 0x88 response.
+AT_OK, AT_ERROR, AT_INVALID_COMMAND, AT_INVALID_PARAMETER = 0, 1, 2, 3
+# Delivery status in 0x8B / 0x89 (Digi API reference).
+TX_OK = 0x00
+TX_PAYLOAD_TOO_LARGE = 0x74
+
+# Width in bytes of numeric parameters (values set with other widths are normalised).
+_WIDTH = {
+    "AP": 1, "CE": 1, "CH": 1, "ID": 2, "MY": 2, "DH": 4, "DL": 4, "SH": 4, "SL": 4,
+    "SM": 1, "NP": 2, "EE": 1, "AI": 1, "BD": 1, "RO": 1, "NO": 1, "HV": 2, "VR": 2,
+    "MM": 1, "TO": 1,
+}
+_READ_ONLY = frozenset({"HV", "VR", "SH", "SL", "NP", "AI"})
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """API frame data the radio writes to its UART."""
+
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Transmit:
+    """A transmit request accepted from the UART, to be put on the air by the medium."""
+
+    frame_id: int
+    request_type: int  # 0x10 (Transmit Request) or 0x00 (TX64, 802.15.4)
+    dest64: int
+    data: bytes
+
+
+Output = Reply | Transmit
+
+
+@dataclass
+class EmulatedRadio:
+    """State of one radio. `number` is 1-based and names the pty symlink."""
+
+    number: int
+    protocol: str
+    api_mode: int = 1
+    pan_id: int = 0x0607
+    channel: int = 0x0C
+    coordinator: bool = False
+    loss: float = 0.0
+    """Probability that a frame this radio sends, or one sent to it, is lost."""
+    delay: float = 0.0
+    """s. Extra latency added to every frame this radio sends."""
+    params: dict[str, bytes] = field(default_factory=dict)
+    saved: dict[str, bytes] = field(default_factory=dict)
+    pending: dict[str, bytes] = field(default_factory=dict)
+    counters: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.protocol not in PROTOCOLS:
+            raise ValueError(f"unknown protocol {self.protocol!r}; one of {PROTOCOLS}")
+        if self.api_mode not in (1, 2):
+            raise ValueError("api_mode must be 1 or 2")
+        n = self.number
+        p: dict[str, bytes] = {
+            "AP": bytes((self.api_mode,)),
+            "HV": HV_XBEE3,
+            "VR": _VR[self.protocol],
+            "SH": (0x0013A200).to_bytes(4, "big"),
+            "SL": (0x40000000 + n).to_bytes(4, "big"),
+            "NI": f"robot{n}".encode(),
+            "CE": b"\x01" if self.coordinator else b"\x00",
+            "ID": self.pan_id.to_bytes(2, "big"),
+            "CH": bytes((self.channel,)),
+            "DH": b"\x00\x00\x00\x00",
+            "DL": b"\x00\x00\x00\x00",
+            "NP": MAX_PAYLOAD[self.protocol].to_bytes(2, "big"),
+            "EE": b"\x00",
+            "AI": b"\x00",
+            "BD": b"\x03",  # 9600 baud
+        }
+        if self.protocol == "zigbee":
+            # Zigbee: the network assigns MY; the coordinator is always 0x0000.
+            p["MY"] = b"\x00\x00" if self.coordinator else (0x1000 + n).to_bytes(2, "big")
+            p["SM"] = b"\x00"
+        elif self.protocol == "802.15.4":
+            # Factory default MY=0 makes the radio send with 16-bit source addresses, the
+            # ones that trip digi-xbee (xbee-python #296); the transport sets 0xFFFE.
+            p["MY"] = b"\x00\x00"
+        # DigiMesh has no MY and no SS on XBee 3: both answer "invalid command".
+        self.params = p
+        self.saved = dict(p)
+
+    # -- derived ------------------------------------------------------------------------
+    @property
+    def address64(self) -> int:
+        return int.from_bytes(self.params["SH"] + self.params["SL"], "big")
+
+    @property
+    def my16(self) -> int:
+        return int.from_bytes(self.params.get("MY", b"\xff\xfe"), "big")
+
+    @property
+    def current_api_mode(self) -> int:
+        return self.params["AP"][0]
+
+    @property
+    def network(self) -> tuple[str, bytes, bytes]:
+        """Radios hear each other when protocol, PAN id and channel all match."""
+        return (self.protocol, self.params["ID"], self.params["CH"])
+
+    @property
+    def max_payload(self) -> int:
+        table = MAX_PAYLOAD_ENCRYPTED if self.params["EE"] != b"\x00" else MAX_PAYLOAD
+        return table[self.protocol]
+
+    def count(self, name: str) -> None:
+        self.counters[name] = self.counters.get(name, 0) + 1
+
+    def power_cycle(self) -> None:
+        """Unplugging loses everything not written with WR (as on the real radio)."""
+        self.params = dict(self.saved)
+        self.pending.clear()
+
+    # -- UART input ---------------------------------------------------------------------
+    def handle(self, frame: bytes) -> list[Output]:
+        """Process one API frame's data (frame type first)."""
+        ftype = frame[0]
+        if ftype in (0x08, 0x09) and len(frame) >= 4:
+            return self._at(frame, queued=ftype == 0x09)
+        if ftype == 0x10 and len(frame) >= 14:
+            return [Transmit(frame[1], 0x10, int.from_bytes(frame[2:10], "big"), frame[14:])]
+        if ftype == 0x00 and len(frame) >= 11:
+            return [Transmit(frame[1], 0x00, int.from_bytes(frame[2:10], "big"), frame[11:])]
+        self.count("unsupported_frame")
+        return []
+
+    def _at(self, frame: bytes, *, queued: bool) -> list[Output]:
+        fid = frame[1]
+        try:
+            cmd = frame[2:4].decode("ascii").upper()
+        except UnicodeDecodeError:
+            cmd = "??"
+        value = frame[4:]
+        status, answer = self._command(cmd, value, queued=queued)
+        if fid == 0:
+            return []  # frame id 0: the host asked for no response
+        return [Reply(bytes((0x88, fid)) + frame[2:4] + bytes((status,)) + answer)]
+
+    def _command(self, cmd: str, value: bytes, *, queued: bool) -> tuple[int, bytes]:
+        if cmd == "AC":
+            self._apply()
+            return AT_OK, b""
+        if cmd == "WR":
+            self._apply()
+            self.saved = dict(self.params)
+            return AT_OK, b""
+        if cmd in ("FR", "RE"):
+            if cmd == "RE":
+                return AT_OK, b""  # defaults not modelled; acknowledge
+            self.power_cycle()
+            return AT_OK, b""
+        if cmd not in self.params:
+            return AT_INVALID_COMMAND, b""
+        if not value:
+            return AT_OK, self.params[cmd]
+        if cmd in _READ_ONLY or (cmd == "MY" and self.protocol == "zigbee"):
+            return AT_ERROR, b""
+        norm = self._normalise(cmd, value)
+        if norm is None:
+            return AT_INVALID_PARAMETER, b""
+        if cmd == "AP" and norm[0] not in (1, 2):
+            # Transparent mode would take this radio off the API: not emulated here.
+            return AT_INVALID_PARAMETER, b""
+        if queued:
+            self.pending[cmd] = norm  # 0x09: held until AC (or the next 0x08)
+        else:
+            self._apply()
+            self.params[cmd] = norm
+        return AT_OK, b""
+
+    def _normalise(self, cmd: str, value: bytes) -> bytes | None:
+        width = _WIDTH.get(cmd)
+        if width is None:
+            return bytes(value)
+        number = int.from_bytes(value, "big")
+        if number >= 1 << (8 * width):
+            return None
+        return number.to_bytes(width, "big")
+
+    def _apply(self) -> None:
+        self.params.update(self.pending)
+        self.pending.clear()
+
+    # -- air side -----------------------------------------------------------------------
+    def status_frame(self, request: Transmit, status: int) -> bytes | None:
+        """The transmit status for `request` (None when frame id 0 asked for none)."""
+        if request.frame_id == 0:
+            return None
+        if request.request_type == 0x00:
+            return bytes((0x89, request.frame_id, status))
+        return bytes((0x8B, request.frame_id, 0xFF, 0xFE, 0x00, status, 0x00))
+
+    def receive_frame(self, sender: EmulatedRadio, data: bytes, broadcast: bool) -> bytes:
+        """What this radio writes to its UART when it receives `data` from `sender`."""
+        options = 0x02 if broadcast else 0x01
+        if self.protocol == "802.15.4":
+            rssi = 0x28  # -40 dBm
+            if sender.my16 == 0xFFFE:
+                return bytes((0x80,)) + sender.address64.to_bytes(8, "big") + bytes(
+                    (rssi, options)) + data
+            return bytes((0x81,)) + sender.my16.to_bytes(2, "big") + bytes(
+                (rssi, options)) + data
+        src16 = sender.my16 if self.protocol == "zigbee" else 0xFFFE
+        return (bytes((0x90,)) + sender.address64.to_bytes(8, "big")
+                + src16.to_bytes(2, "big") + bytes((options,)) + data)
