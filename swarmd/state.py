@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from swarmd.core.node import Restored
+from swarmd.core.node import Restored, Snapshot
+from swarmd.core.roles import Role
 
 FORMAT_VERSION = 1
 
@@ -174,3 +175,38 @@ def initial_seq(now_seq: int, persisted: PersistedState | None) -> int:
     may have used before (a reservation survives a clock that went backwards)."""
     reserved = persisted.seq_reserved if persisted is not None else 0
     return max(now_seq, reserved)
+
+
+class StateFile:
+    """The daemon's handle on its state file: remembers the reservation and turns core
+    snapshots into `PersistedState` writes (used as the runtime's `state_writer`)."""
+
+    def __init__(self, path: Path, *, robot: int, swarm: int) -> None:
+        self.path = Path(path)
+        self.robot = robot
+        self.swarm = swarm
+        self.seq_reserved = 0
+
+    def load(self) -> PersistedState | None:
+        """`load()` of this file (raises StateError when corrupt)."""
+        return load(self.path, robot=self.robot, swarm=self.swarm)
+
+    def write_initial(self, persisted: PersistedState | None, seq_start: int) -> int:
+        """At start-up: keep what was persisted, reserve sequence numbers from
+        `seq_start` before the first frame goes out. Returns the seq at which the next
+        write is due (the runtime's `seq_write_at`)."""
+        self.seq_reserved = seq_start + SEQ_RESERVE
+        base = persisted or PersistedState(robot=self.robot, swarm=self.swarm)
+        save(self.path, PersistedState(robot=self.robot, swarm=self.swarm, known=base.known,
+                                       held=base.held, seq_reserved=self.seq_reserved))
+        return self.seq_reserved - SEQ_RESERVE // 2
+
+    def write_snapshot(self, snap: Snapshot) -> int:
+        """Persist a core snapshot; `held` is the function while ACTIVE (rule 2: only a
+        function the robot was executing is ever resumed, after the rejoin hold)."""
+        held = (snap.function, snap.epoch) if snap.role == Role.ACTIVE and snap.function else None
+        if snap.seq + SEQ_RESERVE // 2 >= self.seq_reserved:
+            self.seq_reserved = snap.seq + SEQ_RESERVE
+        save(self.path, PersistedState(robot=self.robot, swarm=self.swarm, known=snap.known,
+                                       held=held, seq_reserved=self.seq_reserved))
+        return self.seq_reserved - SEQ_RESERVE // 2

@@ -1,0 +1,43 @@
+"""`swarmd start --config robot.yaml`: run one robot's daemon (systemd runs this).
+
+Logs one JSON object a line on stdout (journald), appends the event log if configured,
+stops cleanly on SIGTERM / SIGINT (LEAVE when it held a function and handover_on_stop),
+reloads on SIGHUP. Exit codes: 0 clean stop, 1 start-up failure, 2 unusable config.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def start(
+        config: Annotated[Path, typer.Option("--config", "-c", help="Robot file (YAML).")],
+        log_level: Annotated[str, typer.Option(
+            "--log-level", help="debug, info, warning or error.")] = "info",
+    ) -> None:
+        """Run one robot's daemon until SIGTERM / SIGINT."""
+        import asyncio
+        import logging
+
+        from swarmd.config import ConfigError, load_robot
+        from swarmd.daemon import EXIT_CONFIG, run_daemon
+        from swarmd.logs import setup_logging
+
+        setup_logging(log_level)
+        log = logging.getLogger("swarmd.start")
+        try:
+            cfg = load_robot(config)
+        except ConfigError as exc:
+            # Every problem on its own line, each naming file and field.
+            for problem in exc.problems:
+                log.error(str(problem), extra={"config": str(config)})
+            raise typer.Exit(EXIT_CONFIG) from None
+        for warning in cfg.warnings:
+            log.warning(str(warning))
+        code = asyncio.run(run_daemon(cfg, handle_signals=True, config_path=config))
+        raise typer.Exit(code)

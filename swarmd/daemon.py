@@ -1,0 +1,358 @@
+"""One robot's daemon: config in, a running `Runtime` until told to stop (issue 3 point 4).
+
+`run_daemon` is what `swarmd start` runs and what the multi-process simulator runs in
+each robot process (injecting its own link, a receive filter for loss and partitions,
+an event sink and a time origin). It:
+
+1. loads the swarm plan, timing and keys; reads the state file (a corrupt one is set
+   aside with a clear error and the robot starts fresh);
+2. builds the core `Node` with a sequence seed above anything sent before
+   (`seq_seed(time.time())` or the persisted reservation) and `Restored(...)` when a
+   state file exists, so a restarted holder listens before resuming (DESIGN rule 2);
+3. starts transport and link, waits for the first heartbeat, then tells systemd READY;
+4. runs until `stop_event` is set (SIGTERM / SIGINT with `handle_signals`), then stops
+   the node (LEAVE when it held a function and `handover_on_stop`), writes the state,
+   closes everything and returns 0.
+
+SIGHUP (with `handle_signals` and `config_path`) re-reads the robot and swarm files and
+applies what can change without a restart; see `Daemon.reload` and docs/daemon.md.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib
+import logging
+import os
+import signal
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from swarmd import state as state_mod
+from swarmd.config import ConfigError, RobotConfig, load_robot
+from swarmd.core.node import Node
+from swarmd.core.wire import seq_seed
+from swarmd.eventlog import EventLog
+from swarmd.keys import load_keys
+from swarmd.link.base import RobotLink
+from swarmd.link.factory import make_link
+from swarmd.metrics import Metrics, MetricsServer
+from swarmd.notify import Notifier
+from swarmd.runtime import EventSink, ReceiveFilter, Runtime
+from swarmd.transport.base import Transport, TransportError
+from swarmd.transport.udp import UdpTransport
+
+log = logging.getLogger("swarmd.daemon")
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+"""Start-up failed (transport, link, state directory, keys): systemd may retry."""
+EXIT_CONFIG = 2
+"""The config cannot be used: retrying will not help."""
+
+READY_TIMEOUT = 3.0
+"""s. READY is sent after the first heartbeat; a robot that reports itself faulty at
+start never heartbeats, so READY goes out anyway after this long (it is running)."""
+
+
+def make_transport(cfg: Any) -> Transport:
+    """The transport the robot file asks for. Radios live in their own modules, loaded
+    only when configured (digi-xbee and pyserial are heavy imports)."""
+    kind = getattr(cfg, "kind", "udp")
+    if kind == "udp":
+        return UdpTransport.from_config(cfg)
+    modules = {"serial": ("swarmd.transport.serial", "SerialTransport"),
+               "xbee": ("swarmd.transport.xbee", "XBeeTransport")}
+    if kind not in modules:
+        raise TransportError(f"unknown transport kind {kind!r} (udp, serial, xbee)")
+    module_name, class_name = modules[kind]
+    try:
+        cls = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError) as exc:
+        raise TransportError(f"transport {kind!r} is not available: {exc}") from exc
+    transport: Transport = cls.from_config(cfg)
+    return transport
+
+
+def load_swarm_keys(cfg: RobotConfig) -> list[bytes]:
+    """Signing key first, then the keys also accepted (rotation window). The swarm's
+    key_file signs; without one, the first of the robot's key_files does (A.md schema).
+    Key files readable by others are refused (swarmd/keys.py says why)."""
+    signing = cfg.swarm.key_path
+    extra = list(cfg.key_files)
+    if signing is None and extra:
+        signing = extra.pop(0)
+    return load_keys(signing, extra)
+
+
+class Daemon:
+    """The pieces of one running daemon; `run_daemon` drives it."""
+
+    def __init__(
+        self,
+        cfg: RobotConfig,
+        *,
+        transport: Transport | None = None,
+        link: RobotLink | None = None,
+        receive_filter: ReceiveFilter | None = None,
+        event_sink: EventSink | None = None,
+        time_origin: float = 0.0,
+        config_path: Path | None = None,
+        notifier: Notifier | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.config_path = config_path
+        self.robot_id = cfg.robot
+        self.swarm_id = cfg.swarm.swarm.id
+        self.handover_on_stop = cfg.handover_on_stop
+        self._injected_transport = transport
+        self._injected_link = link
+        self.receive_filter = receive_filter
+        self.extra_sink = event_sink
+        self.time_origin = time_origin
+        self.notifier = notifier if notifier is not None else Notifier.from_env()
+        self.metrics = Metrics(robot_id=cfg.robot, swarm_id=self.swarm_id)
+        self.metrics_server: MetricsServer | None = None
+        self.event_log: EventLog | None = None
+        self.runtime: Runtime | None = None
+        self.state_file = state_mod.StateFile(
+            state_mod.state_path(cfg.state_dir, self.swarm_id, cfg.robot),
+            robot=cfg.robot, swarm=self.swarm_id)
+        self.state_errors = 0
+        self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
+        self._alert_hook = cfg.swarm.alert_hook
+        self._hook_tasks: set[asyncio.Task[None]] = set()
+
+    @staticmethod
+    def _specs(cfg: RobotConfig) -> dict[str, dict[str, Any]]:
+        return {f: cfg.swarm.function_spec(f) for f in cfg.swarm.functions}
+
+    def function_params(self, function: str) -> Mapping[str, Any]:
+        """Assign carries only (function, epoch); the robot gets the function's spec
+        from the swarm file (`{"kind": "slot", "position": [...]}`, ...)."""
+        return self._function_specs.get(function, {})
+
+    # ---------------------------------------------------------------- events
+    def on_event(self, record: dict[str, Any]) -> None:
+        """Every event-log record: file, injected sink, stdout log, alert hook."""
+        if self.event_log is not None:
+            self.event_log.write(record)
+        if self.extra_sink is not None:
+            self.extra_sink(record)
+        fields = {k: v for k, v in record.items() if k not in ("t", "robot", "event")}
+        log.info("event %s", record.get("event"), extra={"event": record.get("event"),
+                                                         "fields": fields})
+        if record.get("event") == "alert" and self._alert_hook:
+            self._run_hook(record)
+
+    def _run_hook(self, record: Mapping[str, Any]) -> None:
+        """DESIGN rule 8: an alert (no standby left) runs the configured hook, in the
+        background, with the alert in its environment."""
+        hook = self._alert_hook
+        assert hook is not None
+        env = {**os.environ, "SWARMD_ROBOT": str(self.robot_id),
+               "SWARMD_FUNCTION": str(record.get("function", "")),
+               "SWARMD_REASON": str(record.get("reason", ""))}
+
+        async def run() -> None:
+            try:
+                if isinstance(hook, str):
+                    proc = await asyncio.create_subprocess_shell(
+                        hook, env=env, stdin=asyncio.subprocess.DEVNULL)
+                else:
+                    proc = await asyncio.create_subprocess_exec(
+                        *hook, env=env, stdin=asyncio.subprocess.DEVNULL)
+                status = await asyncio.wait_for(proc.wait(), 30.0)
+                if status != 0:
+                    log.error("alert hook failed", extra={"status": status})
+            except (OSError, TimeoutError) as exc:
+                log.error("alert hook could not run", extra={"error": str(exc)})
+
+        task = asyncio.get_running_loop().create_task(run())
+        self._hook_tasks.add(task)
+        task.add_done_callback(self._hook_tasks.discard)
+
+    # ---------------------------------------------------------------- state
+    def _load_state(self) -> state_mod.PersistedState | None:
+        try:
+            return self.state_file.load()
+        except state_mod.StateError as exc:
+            self.state_errors += 1
+            moved = state_mod.set_aside(self.state_file.path)
+            log.error("state file unusable; starting fresh", extra={
+                "error": str(exc), "moved_to": str(moved) if moved else None})
+            return None
+
+    # ---------------------------------------------------------------- lifecycle
+    async def start(self) -> Runtime:
+        """Build the node and start transport, link and timers. Raises on set-up
+        failure (the caller turns it into an exit code)."""
+        cfg = self.cfg
+        loop = asyncio.get_running_loop()
+        keys = load_swarm_keys(cfg)
+        persisted = self._load_state()
+        seq_start = state_mod.initial_seq(seq_seed(time.time()), persisted)
+        params = cfg.swarm.params()
+        now = loop.time()
+        restored = persisted.restored() if persisted is not None else None
+        node = Node(cfg.robot, cfg.swarm.to_plan(), params, now, keys=keys,
+                    seq_start=seq_start, restored=restored)
+        write_at = self.state_file.write_initial(persisted, seq_start)
+        if cfg.event_log is not None:
+            self.event_log = EventLog(cfg.event_log)
+        if cfg.metrics is not None:
+            self.metrics_server = self.metrics.start_server(
+                cfg.metrics.host, cfg.metrics.port, allow_remote=cfg.metrics.allow_remote)
+        transport = self._injected_transport or make_transport(cfg.transport)
+        link = self._injected_link or make_link(cfg.link)
+        # A restored holder keeps `held` on disk until its rejoin hold is over.
+        holding = restored is not None and restored.held is not None
+        self.runtime = Runtime(
+            node, transport, link,
+            function_params=self.function_params,
+            event_sink=self.on_event,
+            receive_filter=self.receive_filter,
+            state_writer=self.state_file.write_snapshot,
+            persist_after=now + params.rejoin_hold if holding else now,
+            metrics=self.metrics,
+            notifier=self.notifier,
+            time_origin=self.time_origin,
+        )
+        self.runtime.seq_write_at = write_at
+        log.info("starting", extra={
+            "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
+            "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
+            "restored": persisted.to_json() if persisted is not None else None,
+            "signed": bool(keys)})
+        await self.runtime.start()
+        return self.runtime
+
+    async def stop(self) -> None:
+        """Stop the node (LEAVE if configured), then close everything, in that order."""
+        self.notifier.stopping()
+        rt = self.runtime
+        if rt is not None:
+            await rt.stop(handover=self.handover_on_stop)
+            log.info("stopped", extra={"stats": rt.stats()})
+            for what, closer in (("link", rt.link.close), ("transport", rt.transport.close)):
+                try:
+                    await asyncio.wait_for(closer(), 10.0)
+                except Exception:
+                    log.exception("closing the %s failed", what)
+        for task in list(self._hook_tasks):
+            with contextlib.suppress(asyncio.TimeoutError, Exception):
+                await asyncio.wait_for(asyncio.shield(task), 5.0)
+        if self.event_log is not None:
+            self.event_log.close()
+        if self.metrics_server is not None:
+            self.metrics_server.close()
+        self.notifier.close()
+
+    def reload(self) -> None:
+        """SIGHUP: re-read the config and apply what can change live: the event log
+        (reopened: logrotate, or a new path), handover_on_stop, the alert hook, the
+        function parameters sent on the next assign, and the keys (rotation). Anything
+        else (robot id, transport, link, timing, the plan) needs a restart; a change
+        there is logged as such and ignored."""
+        if self.config_path is None:
+            log.warning("SIGHUP: no config path to reload from; ignored")
+            return
+        try:
+            new = load_robot(self.config_path)
+        except ConfigError as exc:
+            log.error("SIGHUP: config not reloaded", extra={
+                "problems": [str(p) for p in exc.problems]})
+            return
+        old = self.cfg
+        try:
+            keys = load_swarm_keys(new)
+        except Exception as exc:
+            log.error("SIGHUP: keys not reloaded", extra={"error": str(exc)})
+            keys = None
+        if keys is not None and self.runtime is not None:
+            # The node signs with keys[0] and accepts any: the rotation window.
+            self.runtime.node.keys = tuple(keys)
+        if new.event_log != old.event_log or self.event_log is not None:
+            if self.event_log is not None and new.event_log is not None:
+                self.event_log.reopen(new.event_log)
+            elif self.event_log is not None:
+                self.event_log.close()
+                self.event_log = None
+            elif new.event_log is not None:
+                self.event_log = EventLog(new.event_log)
+        self.handover_on_stop = new.handover_on_stop
+        self._alert_hook = new.swarm.alert_hook
+        self._function_specs = self._specs(new)
+        restart_needed = [name for name, a, b in (
+            ("robot", old.robot, new.robot),
+            ("transport", old.transport, new.transport),
+            ("link", old.link, new.link),
+            ("timing", old.swarm.params(), new.swarm.params()),
+            ("plan", old.swarm.to_plan(), new.swarm.to_plan()),
+            ("state_dir", old.state_dir, new.state_dir),
+            ("metrics", old.metrics, new.metrics),
+        ) if a != b]
+        self.cfg = new
+        log.info("SIGHUP: config reloaded", extra={
+            "keys": len(keys) if keys is not None else None,
+            "restart_needed_for": restart_needed})
+
+
+async def run_daemon(
+    robot_cfg: RobotConfig,
+    *,
+    transport: Transport | None = None,
+    link: RobotLink | None = None,
+    receive_filter: ReceiveFilter | None = None,
+    event_sink: EventSink | None = None,
+    stop_event: asyncio.Event | None = None,
+    on_ready: Callable[[Daemon], None] | None = None,
+    time_origin: float = 0.0,
+    handle_signals: bool = False,
+    config_path: Path | None = None,
+) -> int:
+    """Run one robot's daemon until `stop_event` is set; returns the exit code.
+
+    `transport` / `link` replace the configured ones (the simulator's MuJoCo link);
+    `receive_filter(data, now) -> False` drops a frame before the node sees it (loss,
+    partitions); `event_sink` receives every event record as well as the event log
+    file; event times are `time.time() - time_origin`. `on_ready(daemon)` is called
+    once the first heartbeat is out. `handle_signals` installs SIGTERM / SIGINT (stop)
+    and SIGHUP (reload from `config_path`) handlers on the running loop: only one daemon
+    per process may ask for that.
+    """
+    stop = stop_event if stop_event is not None else asyncio.Event()
+    daemon = Daemon(robot_cfg, transport=transport, link=link, receive_filter=receive_filter,
+                    event_sink=event_sink, time_origin=time_origin, config_path=config_path)
+    loop = asyncio.get_running_loop()
+    installed: list[signal.Signals] = []
+    if handle_signals:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, stop.set)
+            installed.append(sig)
+        loop.add_signal_handler(signal.SIGHUP, daemon.reload)
+        installed.append(signal.SIGHUP)
+    try:
+        try:
+            runtime = await daemon.start()
+        except Exception as exc:
+            log.error("daemon failed to start", extra={"error": str(exc),
+                                                        "error_type": type(exc).__name__})
+            await daemon.stop()
+            return EXIT_FAILURE
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(runtime.first_broadcast.wait(), READY_TIMEOUT)
+        daemon.notifier.ready()
+        log.info("ready", extra={"robot": daemon.robot_id})
+        if on_ready is not None:
+            on_ready(daemon)
+        await stop.wait()
+        log.info("stopping", extra={"handover": daemon.handover_on_stop})
+        await daemon.stop()
+        return EXIT_OK
+    finally:
+        for sig in installed:
+            loop.remove_signal_handler(sig)

@@ -1,0 +1,397 @@
+"""The asyncio runtime: the one owner of a core `Node` (issue 3 point 1, STYLE.md point 8).
+
+Theory of operation. Everything that reaches the node goes through one step path, as in
+aioquic's asyncio layer:
+
+    input (frame / timer / robot health / stop)
+      -> node.<entry>(..., now)            returns actions
+      -> execute them in order             Broadcast -> transport, Assign/Release -> link,
+                                           Event -> event sink
+      -> re-arm ONE TimerHandle at node.next_deadline()
+
+Time is `loop.time()` (monotonic), the same clock the node was built with. The node
+schedules its heartbeats from the previous deadline, not from "now + period", so they
+keep their period under load; the runtime's only job is to call `tick()` on time.
+
+Receive path. A flood of frames must not delay our own heartbeats (a late heartbeat is a
+false suspicion at the neighbours). The transport's callback only appends the frame to a
+bounded deque (drop-oldest, counted as `queue_overflow`: under a flood the newest frames
+are the ones worth reading) and schedules a drain. The drain feeds the node at most
+`batch` frames, then yields to the loop with `call_soon`, so a due timer runs after at
+most one batch (~1 ms) however long the queue is.
+
+Nothing raised by the transport, the link, the event sink or even the node propagates:
+it is logged, counted in `counters`, and the daemon goes on (common rule: bad input never
+takes the daemon down). A node exception is a bug; the timer is re-armed regardless so
+heartbeats continue.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from swarmd.core import wire
+from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.node import Node, Snapshot
+from swarmd.core.roles import Health, Role
+from swarmd.link.base import RobotLink
+from swarmd.metrics import Metrics
+from swarmd.notify import Notifier
+from swarmd.transport.base import Transport
+
+log = logging.getLogger(__name__)
+
+ReceiveFilter = Callable[[bytes, float], bool]
+"""(frame, loop time) -> False to drop the frame (the simulator's loss and partitions)."""
+EventSink = Callable[[dict[str, Any]], None]
+"""Receives each event-log record (`Event.record(t, robot)`)."""
+StateWriter = Callable[[Snapshot], int]
+"""Persists a snapshot (see swarmd/state.py); called on role / function / epoch change
+and when the sequence number nears the reservation; returns the sequence number at which
+the next write is due however nothing else changed."""
+
+QUEUE_SIZE = 1024
+BATCH = 64
+_RATE_LIMIT_S = 1.0  # per name, for channel condition reports (send errors can be per frame)
+
+
+class Runtime:
+    """Drives one `Node` with one transport and one robot link. See the module docstring."""
+
+    def __init__(
+        self,
+        node: Node,
+        transport: Transport,
+        link: RobotLink,
+        *,
+        function_params: Callable[[str], Mapping[str, Any]] | None = None,
+        event_sink: EventSink | None = None,
+        receive_filter: ReceiveFilter | None = None,
+        state_writer: StateWriter | None = None,
+        persist_after: float = 0.0,
+        metrics: Metrics | None = None,
+        notifier: Notifier | None = None,
+        time_origin: float = 0.0,
+        wall_clock: Callable[[], float] = time.time,
+        queue_size: int = QUEUE_SIZE,
+        batch: int = BATCH,
+    ) -> None:
+        self.node = node
+        self.robot_id = node.robot_id
+        self.transport = transport
+        self.link = link
+        self.function_params = function_params
+        self.event_sink = event_sink
+        self.receive_filter = receive_filter
+        self.state_writer = state_writer
+        self.persist_after = persist_after
+        """loop time before which node-driven state is not written: a restarted holder
+        keeps its persisted `held` until its rejoin hold is over, so a crash during the
+        hold does not forget it."""
+        self.metrics = metrics
+        self.notifier = notifier
+        self.time_origin = time_origin
+        self.wall_clock = wall_clock
+        self.batch = batch
+        self.counters: dict[str, int] = {
+            "received": 0, "filtered": 0, "queue_overflow": 0, "sent": 0, "ticks": 0,
+            "node_errors": 0, "transport_errors": 0, "link_errors": 0, "sink_errors": 0,
+            "filter_errors": 0, "persist_errors": 0, "state_writes": 0,
+        }
+        self.max_lateness = 0.0
+        """s. Largest delay seen between a deadline and the tick that served it."""
+        self.first_broadcast = asyncio.Event()
+        """Set once the first frame (the first heartbeat) went out: READY (notify.py)."""
+        self._queue: deque[bytes] = deque()
+        self._queue_size = queue_size
+        self._drain_scheduled = False
+        self._timer: asyncio.TimerHandle | None = None
+        self._armed_at: float | None = None
+        self._watchdog: asyncio.TimerHandle | None = None
+        self._last_persisted: tuple[Any, ...] | None = None
+        self.seq_write_at = 0
+        """Reaching this sequence number forces a state write (the reservation in the
+        state file must stay ahead of every seq sent; swarmd/state.py)."""
+        self._last_role: tuple[Role, str | None, int] | None = None
+        self._last_health: Health | None = None
+        self._reported: dict[str, float] = {}
+        self._running = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    # ---------------------------------------------------------------- lifecycle
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            self._loop = asyncio.get_running_loop()
+        return self._loop
+
+    async def start(self) -> None:
+        """Open the transport and the link, then fire the node's first tick at once
+        (its deadline right after construction is `now`). Raises what the transport or
+        link raise on set-up (bad device, socket path taken): the daemon reports it."""
+        self._loop = asyncio.get_running_loop()
+        self._running = True
+        await self.transport.start(self._on_frame, self._on_transport_event)
+        await self.link.start(self._on_health)
+        self._rearm()
+        period = self.notifier.watchdog_period() if self.notifier is not None else None
+        if period is not None:
+            self._watchdog_at(self.loop.time() + period, period)
+
+    async def stop(self, *, handover: bool) -> None:
+        """Graceful stop: the node's LEAVE (if it held a function and `handover`) and
+        Release go out, state is written, timers stop. The caller closes transport and
+        link afterwards, so the LEAVE is on the wire before the socket closes."""
+        if not self._running:
+            return
+        self._step(lambda now: self.node.stop(now, handover=handover))
+        self._running = False
+        self._queue.clear()
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
+        self._check_state(force=True)
+
+    def inject(self, msg: wire.Message) -> None:
+        """Broadcast an arbitrary message as this robot (fault injection: `liar:R@T`)."""
+        self._step(lambda now: self.node.send_message(msg, now))
+
+    # ---------------------------------------------------------------- the step path
+    def _step(self, call: Callable[[float], list[Action]]) -> None:
+        now = self.loop.time()
+        try:
+            actions = call(now)
+        except Exception:
+            self.counters["node_errors"] += 1
+            log.exception("core node raised (a bug); the daemon continues")
+            actions = []
+        self._execute(actions)
+        self._rearm()
+
+    def _execute(self, actions: list[Action]) -> None:
+        changed = False
+        for action in actions:
+            match action:
+                case Broadcast(frame):
+                    self._send(frame)
+                case Assign(function, epoch):
+                    changed = True
+                    self._assign(function, epoch)
+                case Release(function):
+                    changed = True
+                    try:
+                        self.link.release(function)
+                    except Exception:
+                        self.counters["link_errors"] += 1
+                        log.exception("robot link release failed",
+                                      extra={"function": function})
+                case Event():
+                    changed = True
+                    self._event(action)
+        if self.metrics is not None and actions:
+            self.metrics.observe_actions(actions)
+        if changed:
+            self._check_state()
+
+    def _send(self, frame: bytes) -> None:
+        try:
+            self.transport.send(frame)
+        except Exception:
+            self.counters["transport_errors"] += 1
+            log.exception("transport send raised")
+            return
+        self.counters["sent"] += 1
+        if self.metrics is not None:
+            self.metrics.frame_sent()
+        if not self.first_broadcast.is_set():
+            self.first_broadcast.set()
+
+    def _assign(self, function: str, epoch: int) -> None:
+        params: Mapping[str, Any] = {}
+        if self.function_params is not None:
+            try:
+                params = self.function_params(function)
+            except Exception:
+                log.exception("no parameters for function", extra={"function": function})
+        try:
+            self.link.assign(function, epoch, params)
+        except Exception:
+            self.counters["link_errors"] += 1
+            log.exception("robot link assign failed", extra={"function": function})
+
+    def _event(self, event: Event) -> None:
+        record = event.record(round(self.wall_clock() - self.time_origin, 6), self.robot_id)
+        self._emit_record(record)
+
+    def _emit_record(self, record: dict[str, Any]) -> None:
+        if self.event_sink is None:
+            return
+        try:
+            self.event_sink(record)
+        except Exception:
+            self.counters["sink_errors"] += 1
+            log.exception("event sink failed")
+
+    # ---------------------------------------------------------------- the single timer
+    def _rearm(self) -> None:
+        if not self._running:
+            return
+        try:
+            deadline = self.node.next_deadline()
+        except Exception:
+            self.counters["node_errors"] += 1
+            log.exception("next_deadline raised (a bug); retrying in 100 ms")
+            deadline = self.loop.time() + 0.1
+        if deadline == self._armed_at and self._timer is not None:
+            return  # already armed there; spare the heap a cancel and a push
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        self._armed_at = deadline
+        if deadline is not None:
+            self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        due = self._armed_at
+        self._armed_at = None
+        now = self.loop.time()
+        if due is not None:
+            lateness = max(0.0, now - due)
+            self.max_lateness = max(self.max_lateness, lateness)
+            if self.metrics is not None:
+                self.metrics.heartbeat_lateness(lateness)
+        self.counters["ticks"] += 1
+        self._step(self.node.tick)
+        # Receive-only steps do not look at the snapshot (a flood would make that
+        # costly); a tick does, so an epoch learnt from a heartbeat is persisted within
+        # one deadline.
+        self._check_state()
+
+    def _watchdog_at(self, when: float, period: float) -> None:
+        def ping() -> None:
+            if self.notifier is not None:
+                self.notifier.watchdog()
+            # Scheduled from the previous deadline, so the ping period does not drift.
+            self._watchdog_at(when + period, period)
+
+        self._watchdog = self.loop.call_at(when, ping)
+
+    # ---------------------------------------------------------------- receive path
+    def _on_frame(self, data: bytes) -> None:
+        if not self._running:
+            return
+        self.counters["received"] += 1
+        if self.metrics is not None:
+            self.metrics.frame_received()
+        if self.receive_filter is not None:
+            try:
+                keep = self.receive_filter(data, self.loop.time())
+            except Exception:
+                self.counters["filter_errors"] += 1
+                log.exception("receive filter raised; frame kept")
+                keep = True
+            if not keep:
+                self.counters["filtered"] += 1
+                return
+        if len(self._queue) >= self._queue_size:
+            self._queue.popleft()
+            self.counters["queue_overflow"] += 1
+            if self.metrics is not None:
+                self.metrics.dropped("queue_overflow")
+        self._queue.append(data)
+        if not self._drain_scheduled:
+            self._drain_scheduled = True
+            self.loop.call_soon(self._drain)
+
+    def _drain(self) -> None:
+        self._drain_scheduled = False
+        if not self._running:
+            return
+        node, queue, loop = self.node, self._queue, self.loop
+        for _ in range(min(self.batch, len(queue))):
+            data = queue.popleft()
+            try:
+                actions = node.receive(data, loop.time())
+            except Exception:
+                self.counters["node_errors"] += 1
+                log.exception("core node raised on a frame (a bug); frame dropped")
+                continue
+            if actions:
+                self._execute(actions)
+        self._rearm()
+        if queue and not self._drain_scheduled:
+            # Yield: timers due meanwhile (our heartbeat) run before the next batch.
+            self._drain_scheduled = True
+            loop.call_soon(self._drain)
+
+    # ---------------------------------------------------------------- robot health
+    def _on_health(self, health: Health) -> None:
+        if not self._running or health == self._last_health:
+            return  # the socket link repeats health every line; only changes matter
+        if self._last_health is not None:
+            log.info("robot health changed", extra={"health": health.name.lower()})
+        self._last_health = health
+        self._step(lambda now: self.node.robot_health(health, now))
+        self._check_state()
+
+    # ---------------------------------------------------------------- channel events
+    def _on_transport_event(self, name: str, fields: Mapping[str, Any]) -> None:
+        now = self.loop.time()
+        if name in ("send_error", "transport_error"):
+            self.counters["transport_errors"] += 1
+            last = self._reported.get(name)
+            if last is not None and now - last < _RATE_LIMIT_S:
+                return  # counted; reported at most once a second
+            self._reported[name] = now
+        log.info("transport: %s", name, extra={"transport_event": name, **fields})
+        t = round(self.wall_clock() - self.time_origin, 6)
+        self._emit_record({"t": t, "robot": self.robot_id, "event": name, **fields})
+
+    # ---------------------------------------------------------------- persistence
+    def _check_state(self, *, force: bool = False) -> None:
+        try:
+            snap = self.node.snapshot()
+        except Exception:
+            self.counters["node_errors"] += 1
+            log.exception("snapshot raised (a bug)")
+            return
+        role_key = (snap.role, snap.function, snap.epoch)
+        if role_key != self._last_role:
+            self._last_role = role_key
+            status = f"{snap.role.name.lower()} {snap.function or '-'} epoch {snap.epoch}"
+            log.info("role", extra={"role": snap.role.name.lower(),
+                                    "function": snap.function, "epoch": snap.epoch})
+            if self.notifier is not None:
+                self.notifier.status(status)
+        if self.metrics is not None:
+            self.metrics.update(snap)
+        if self.state_writer is None:
+            return
+        if not force and self.loop.time() < self.persist_after:
+            return
+        key = (snap.role, snap.function, snap.epoch, tuple(sorted(snap.known.items())))
+        if not force and key == self._last_persisted and snap.seq < self.seq_write_at:
+            return
+        try:
+            self.seq_write_at = self.state_writer(snap)
+        except Exception:
+            self.counters["persist_errors"] += 1
+            log.exception("cannot write the state file; will retry on the next change")
+            return
+        self.counters["state_writes"] += 1
+        self._last_persisted = key
+
+    # ---------------------------------------------------------------- introspection
+    def stats(self) -> dict[str, Any]:
+        """Counters, the core's drops and the largest tick lateness (s)."""
+        return {**self.counters, "queue": len(self._queue),
+                "max_lateness": self.max_lateness, "drops": dict(self.node.drops)}
