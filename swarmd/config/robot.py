@@ -205,15 +205,16 @@ def load_robot(path: str | Path) -> RobotConfig:
 
     Raises ConfigUnreadable (robot file unreadable) or ConfigError (every problem of
     both files; those of the swarm file name the swarm file)."""
-    return _finish(read_source(path))
+    return from_source(read_source(path))
 
 
 def parse_robot(text: str, name: str = "<string>", path: Path | None = None) -> RobotConfig:
     """Like `load_robot` for YAML text; `path` anchors relative paths."""
-    return _finish(parse_source(text, name, path))
+    return from_source(parse_source(text, name, path))
 
 
-def _finish(src: Source) -> RobotConfig:
+def from_source(src: Source) -> RobotConfig:
+    """Validate a parsed robot file and load its swarm file. Raises ConfigError."""
     f: RobotFile = validate(RobotFile, src)
     problems: list[Problem] = []
     swarm_path = src.resolve(f.swarm)

@@ -1,0 +1,217 @@
+"""`swarmd check`: validate a swarm (or robot) file and report what it will do.
+
+The report is a list of sections, each built from a validated `SwarmConfig` by a
+function in `SECTIONS`. A new concern (the channel budget of `swarmd/budget.py`) is
+one more builder appended there; rendering as rich tables and as JSON is shared.
+
+Exit codes (DESIGN.md section 3, `swarmd check`): 0 when usable (warnings allowed),
+1 on any error, 2 when the file cannot be read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, has_errors
+from swarmd.config.robot import from_source as robot_from_source
+from swarmd.config.source import read_source
+from swarmd.config.swarm import SwarmConfig, inspect_swarm
+from swarmd.core.params import Params, ParamsError
+
+EXIT_OK, EXIT_ERRORS, EXIT_UNREADABLE = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class Section:
+    """One part of the report: a table for people and `data` for `--json`."""
+
+    key: str
+    """Key of `data` in the JSON report."""
+    title: str
+    columns: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    data: Any
+    """JSON-serialisable form of the same content."""
+    notes: tuple[str, ...] = ()
+    """Lines printed under the table."""
+
+
+SectionBuilder = Callable[[SwarmConfig], Section | None]
+
+
+@dataclass
+class CheckReport:
+    file: str
+    problems: list[Problem] = field(default_factory=list)
+    sections: list[Section] = field(default_factory=list)
+    unreadable: bool = False
+
+    @property
+    def exit_code(self) -> int:
+        if self.unreadable:
+            return EXIT_UNREADABLE
+        return EXIT_ERRORS if has_errors(self.problems) else EXIT_OK
+
+    def as_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "file": self.file,
+            "ok": self.exit_code == EXIT_OK,
+            "problems": [p.as_json() for p in self.problems],
+        }
+        for s in self.sections:
+            out[s.key] = s.data
+        return out
+
+
+# -- sections -----------------------------------------------------------------------------
+
+
+def _params(cfg: SwarmConfig) -> Params | None:
+    try:
+        return cfg.params()
+    except (ParamsError, TypeError):
+        return None  # already reported as a problem of the timing field
+
+
+def coverage_section(cfg: SwarmConfig) -> Section:
+    """Function -> holder, watchers (rule 3 witnesses), covering standbys (rule 6)."""
+    params = _params(cfg)
+    quorum = params.quorum if params is not None else None
+    rows: list[tuple[str, ...]] = []
+    data: list[dict[str, Any]] = []
+    for c in cfg.coverage():
+        status = []
+        if not c.holders:
+            status.append("NO HOLDER")
+        elif len(c.holders) > 1:
+            status.append("TWO HOLDERS")
+        if quorum is not None and c.holders and len(c.watchers) < quorum:
+            status.append("UNDER QUORUM")
+        if not c.standbys:
+            status.append("NO STANDBY")
+        text = ", ".join(status) or "OK"
+        rows.append((
+            c.function,
+            c.kind,
+            ", ".join(map(str, c.holders)) or "-",
+            ", ".join(map(str, c.watchers)) or "-",
+            ", ".join(map(str, c.standbys)) or "-",
+            text,
+        ))
+        data.append({
+            "function": c.function,
+            "kind": c.kind,
+            "holder": c.holders[0] if c.holders else None,
+            "watchers": list(c.watchers),
+            "standbys": list(c.standbys),
+            "status": text,
+        })
+    q = f"quorum {quorum}" if quorum is not None else "quorum unknown (timing invalid)"
+    return Section(
+        key="coverage",
+        title=f"Coverage ({len(cfg.functions)} functions, {len(cfg.robots)} robots, {q})",
+        columns=("function", "kind", "holder", "watchers", "standbys", "status"),
+        rows=tuple(rows),
+        data=data,
+    )
+
+
+def timing_section(cfg: SwarmConfig) -> Section | None:
+    """The Params in use and the detection bound that follows from them."""
+    params = _params(cfg)
+    if params is None:
+        return None
+    overrides = cfg.timing.overrides()
+    rows = tuple(
+        (name, f"{value:g}" + ("" if name == "quorum" else " s"),
+         "file" if name in overrides else cfg.timing.preset)
+        for name, value in params.as_dict().items()
+    )
+    # A watcher fires t_max after the last heartbeat (Fig. 7), warnings repeat every
+    # warn_interval until a quorum met, then the standby holds its claim (wait state).
+    bound = params.t_max + params.claim_hold + params.warn_interval
+    return Section(
+        key="timing",
+        title=f"Timing (preset {cfg.timing.preset})",
+        columns=("parameter", "value", "from"),
+        rows=rows,
+        data={
+            "preset": cfg.timing.preset,
+            "params": params.as_dict(),
+            "overrides": sorted(overrides),
+            "detection_bound_s": round(bound, 6),
+        },
+        notes=(
+            f"expected detection bound (no loss): t_max + claim_hold + warn_interval = "
+            f"{bound:g} s",
+        ),
+    )
+
+
+SECTIONS: list[SectionBuilder] = [coverage_section, timing_section]
+"""Report sections in order; append a builder to add one (e.g. the channel budget)."""
+
+
+# -- running ------------------------------------------------------------------------------
+
+
+def run_check(path: str | Path) -> CheckReport:
+    """Validate `path` (a swarm file, or a robot file: then its swarm is reported)."""
+    report = CheckReport(file=str(path))
+    try:
+        source = read_source(path)
+    except ConfigUnreadable as exc:
+        report.problems = list(exc.problems)
+        report.unreadable = True
+        return report
+    except ConfigError as exc:  # YAML syntax
+        report.problems = list(exc.problems)
+        return report
+    cfg: SwarmConfig | None
+    data = source.data
+    if isinstance(data, dict) and "robot" in data and "robots" not in data:
+        try:
+            robot = robot_from_source(source)
+        except ConfigError as exc:
+            report.problems = list(exc.problems)
+            return report
+        cfg, report.problems = robot.swarm, list(robot.warnings)
+    else:
+        cfg, report.problems = inspect_swarm(source)
+    if cfg is not None:
+        for build in SECTIONS:
+            section = build(cfg)
+            if section is not None:
+                report.sections.append(section)
+    return report
+
+
+def render(report: CheckReport, console: Console) -> None:
+    """Print the report for people: problems, then each section's table."""
+    for p in report.problems:
+        style = "red" if p.severity == "error" else "yellow"
+        console.print(Text(str(p), style=style), soft_wrap=True)
+    for s in report.sections:
+        table = Table(title=s.title, title_justify="left")
+        for col in s.columns:
+            table.add_column(col)
+        for row in s.rows:
+            table.add_row(*(Text(cell) for cell in row))
+        console.print(table)
+        for note in s.notes:
+            console.print(Text(note), soft_wrap=True)
+    errors = sum(p.severity == "error" for p in report.problems)
+    warnings = len(report.problems) - errors
+    if report.exit_code == EXIT_OK:
+        console.print(Text(f"{report.file}: OK ({warnings} warning(s))", style="green"),
+                      soft_wrap=True)
+    else:
+        console.print(Text(f"{report.file}: {errors} error(s), {warnings} warning(s)",
+                           style="red"), soft_wrap=True)

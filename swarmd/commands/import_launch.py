@@ -1,0 +1,62 @@
+"""`swarmd import-launch FILE.launch [-o SWARM.yaml]`: the paper's ROS launch file as a
+swarm file (DESIGN.md section 3)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `import-launch` command to the CLI."""
+
+    @app.command("import-launch")
+    def import_launch(
+        file: Annotated[Path, typer.Argument(help="ROS launch file (paper's appendix).")],
+        output: Annotated[
+            Path | None, typer.Option("-o", "--output", help="Write here instead of stdout.")
+        ] = None,
+        swarm_id: Annotated[
+            int, typer.Option("--swarm-id", min=0, max=0xFFFF, help="16-bit swarm id.")
+        ] = 1543,
+        name: Annotated[
+            str | None, typer.Option("--name", help="Swarm name (default: file stem).")
+        ] = None,
+    ) -> None:
+        """Convert a launch file: active robot R gets slot fR; neighbours and subs carry
+        over; timing preset udp. Exit 1 on a bad launch file, 2 if it cannot be read."""
+        from swarmd.config import ConfigError, parse_swarm
+        from swarmd.launch import LaunchError, import_launch_file
+
+        try:
+            text = import_launch_file(file, swarm_id=swarm_id, name=name)
+        except (OSError, UnicodeDecodeError) as exc:
+            typer.echo(f"{file}: cannot read the file: {exc}", err=True)
+            raise typer.Exit(2) from None
+        except LaunchError as exc:
+            typer.echo(str(exc), err=True)
+            raise typer.Exit(1) from None
+        # The result must be a valid swarm (an unknown neighbour in the launch file, a
+        # slot with too few watchers): say so in the launch file's terms, write nothing.
+        target = output if output is not None else Path(f"<{file.name} converted>")
+        try:
+            cfg = parse_swarm(text, str(target), target)
+        except ConfigError as exc:
+            typer.echo(f"{file}: the converted swarm is not valid:", err=True)
+            for p in exc.problems:
+                typer.echo(f"  {p}", err=True)
+            raise typer.Exit(1) from None
+        for w in cfg.warnings:
+            typer.echo(str(w), err=True)
+        if output is None:
+            typer.echo(text, nl=False)
+        else:
+            try:
+                output.write_text(text, encoding="utf-8")
+            except OSError as exc:
+                typer.echo(f"{output}: cannot write: {exc}", err=True)
+                raise typer.Exit(2) from None
+            typer.echo(f"wrote {output} ({len(cfg.robots)} robots, "
+                       f"{len(cfg.functions)} functions)", err=True)
