@@ -1,0 +1,262 @@
+"""A passive listener on the swarm channel: the paper's base station (section III-C).
+
+`MonitorState` is sans-IO like the core: `feed(frame, now)` folds one frame into a view of
+every robot heard; `rows(now)` / `alerts(now)` / `to_json(now)` read it. `listen()` is
+the thin I/O part: it opens the swarm's transport, never sends anything (a base station
+that transmitted would be a robot), and feeds received frames with the loop's clock.
+
+What it shows, per robot: role, function and epoch from its last HEARTBEAT, how long ago
+it was heard, its reported health, who currently warns about it (the paper's warnings,
+Fig. 2) and how many distinct witnesses that is within the vote window (what a standby
+counts, Fig. 9 and DESIGN rule 3). Alerts are the things an operator must look at:
+- a function whose holder has been silent longer than `t_max` (nobody heartbeats it);
+- warnings about a robot for longer than `alert_after` with no CLAIM (DESIGN rule 8:
+  nobody is coming to take over);
+- a LEAVE with no CLAIM after `alert_after`;
+- two robots heartbeating the same function at the same epoch (split brain: DESIGN
+  rule 2 says this must never last).
+Frames that do not decode (garbage, wrong key, another swarm, replays) are counted by
+reason, never raised (STYLE.md point 4).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from swarmd.core import wire
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+from swarmd.core.roles import Health, Role
+from swarmd.transport.base import Transport
+
+
+@dataclass(slots=True)
+class Heard:
+    """What the monitor knows about one robot."""
+
+    robot: int
+    last_heard: float
+    role: str | None = None
+    function: str | None = None
+    epoch: int | None = None
+    health: str | None = None
+    frames: int = 0
+    last_seq: int = -1
+    warned_by: dict[int, float] = field(default_factory=dict)
+    """witness -> time of its last WARN naming this robot (its suspicion)."""
+    warned_since: float | None = None
+    leave_at: float | None = None
+    leave_function: str | None = None
+
+
+def _name(enum: type[Role] | type[Health], value: int) -> str:
+    try:
+        return enum(value).name
+    except ValueError:
+        return f"?{value}"
+
+
+class MonitorState:
+    """Everything heard on the channel, folded per robot. Pure: time is an argument."""
+
+    def __init__(self, plan: SwarmPlan, params: Params, keys: Sequence[bytes] = ()) -> None:
+        self.plan = plan
+        self.params = params
+        self.keys = tuple(keys)
+        self.robots: dict[int, Heard] = {}
+        self.drops: dict[str, int] = {}
+        self.frames = 0
+        self.claims: dict[str, tuple[int, int, float]] = {}
+        """function -> (claimant, epoch, time) of the last CLAIM heard."""
+
+    def _drop(self, reason: str) -> None:
+        self.drops[reason] = self.drops.get(reason, 0) + 1
+
+    def feed(self, data: bytes, now: float) -> None:
+        """Fold one frame in. Never raises on peer input (counted drop instead)."""
+        try:
+            frame = wire.decode(data, self.keys)
+        except wire.CodecError as exc:
+            self._drop(exc.reason)
+            return
+        if frame.swarm_id != self.plan.swarm_id:
+            self._drop("other_swarm")
+            return
+        if frame.sender not in self.plan.robots:
+            self._drop("unknown_sender")
+            return
+        seen = self.robots.get(frame.sender)
+        if seen is None:
+            seen = self.robots[frame.sender] = Heard(frame.sender, now)
+        if frame.seq <= seen.last_seq:
+            self._drop("replay")
+            return
+        self.frames += 1
+        seen.last_seq = frame.seq
+        seen.last_heard = now
+        seen.frames += 1
+        match frame.msg:
+            case wire.Heartbeat(function, epoch, role, health):
+                seen.role = _name(Role, role)
+                seen.function = self.plan.function_at(function)
+                seen.epoch = epoch
+                seen.health = _name(Health, health)
+            case wire.Warn(suspect, function, _epoch):
+                target = self.robots.get(suspect)
+                if target is None and suspect in self.plan.robots:
+                    target = self.robots[suspect] = Heard(suspect, float("-inf"))
+                if target is not None and suspect != frame.sender:
+                    if not self._fresh_warnings(target, now):
+                        target.warned_since = now
+                    target.warned_by[frame.sender] = now
+            case wire.Claim(failed, function, epoch):
+                name = self.plan.function_at(function)
+                if name is not None:
+                    self.claims[name] = (frame.sender, epoch, now)
+                failed_seen = self.robots.get(failed)
+                if failed_seen is not None:
+                    # A claim tells the watchers to stop warning (paper section IV-A).
+                    failed_seen.warned_by.clear()
+                    failed_seen.warned_since = None
+            case wire.Leave(function, _epoch, _reason):
+                seen.leave_at = now
+                seen.leave_function = self.plan.function_at(function)
+                seen.function = None
+
+    def _fresh_warnings(self, seen: Heard, now: float) -> dict[int, float]:
+        window = self.params.vote_window
+        return {w: t for w, t in seen.warned_by.items() if now - t <= window}
+
+    def rows(self, now: float) -> list[dict[str, Any]]:
+        """One dict per robot heard (or warned about), by robot id."""
+        out = []
+        for rid in sorted(self.robots):
+            seen = self.robots[rid]
+            fresh = self._fresh_warnings(seen, now)
+            out.append({
+                "robot": rid,
+                "role": seen.role,
+                "function": seen.function,
+                "epoch": seen.epoch,
+                "last_heard_s": None if seen.frames == 0 else round(now - seen.last_heard, 3),
+                "health": seen.health,
+                "warned_by": sorted(fresh),
+                "votes": len(fresh),
+                "alerts": self._robot_alerts(seen, now),
+            })
+        return out
+
+    def _live_holders(self, function: str, now: float) -> list[int]:
+        return sorted(
+            rid for rid, seen in self.robots.items()
+            if seen.function == function and seen.role == Role.ACTIVE.name
+            and seen.frames and now - seen.last_heard <= self.params.t_max
+        )
+
+    def _robot_alerts(self, seen: Heard, now: float) -> list[str]:
+        p = self.params
+        alerts = []
+        silent = seen.frames == 0 or now - seen.last_heard > p.t_max
+        if (seen.function is not None and silent and seen.role == Role.ACTIVE.name
+                and not self._live_holders(seen.function, now)):
+            alerts.append(f"holder of {seen.function} silent for "
+                          f"{now - seen.last_heard:.1f} s")
+        fresh = self._fresh_warnings(seen, now)
+        if fresh and seen.warned_since is not None and now - seen.warned_since > p.alert_after:
+            alerts.append(f"warned about by {sorted(fresh)} for {now - seen.warned_since:.1f} s "
+                          "and nobody claimed")
+        if seen.leave_at is not None and seen.leave_function is not None:
+            claim = self.claims.get(seen.leave_function)
+            if (claim is None or claim[2] < seen.leave_at) and now - seen.leave_at > p.alert_after:
+                alerts.append(f"left {seen.leave_function} {now - seen.leave_at:.1f} s ago "
+                              "and nobody claimed")
+        return alerts
+
+    def alerts(self, now: float) -> list[str]:
+        """Swarm-wide alerts: per-robot ones plus split brain (two live holders)."""
+        out = [f"robot {r['robot']}: {a}" for r in self.rows(now) for a in r["alerts"]]
+        holders: dict[tuple[str, int], list[int]] = {}
+        for rid, seen in self.robots.items():
+            live = seen.frames and now - seen.last_heard <= self.params.t_max
+            if live and seen.function is not None and seen.role == Role.ACTIVE.name:
+                holders.setdefault((seen.function, seen.epoch or 0), []).append(rid)
+        for (function, epoch), rids in sorted(holders.items()):
+            if len(rids) > 1:
+                out.append(f"{function} executed by robots {sorted(rids)} at epoch {epoch} "
+                           "(split brain)")
+        return out
+
+    def to_json(self, now: float, listened: float | None = None) -> dict[str, Any]:
+        """The `--json` document."""
+        doc: dict[str, Any] = {
+            "swarm_id": self.plan.swarm_id,
+            "robots": self.rows(now),
+            "alerts": self.alerts(now),
+            "frames": self.frames,
+            "drops": dict(sorted(self.drops.items())),
+        }
+        if listened is not None:
+            doc["listened_s"] = round(listened, 3)
+        return doc
+
+    def table(self, now: float) -> Any:
+        """A rich renderable: the robots table and the alerts under it."""
+        from rich.console import Group
+        from rich.table import Table
+        from rich.text import Text
+
+        table = Table(title=f"swarm {self.plan.swarm_id}: {len(self.robots)} robots heard, "
+                            f"{self.frames} frames, {sum(self.drops.values())} dropped")
+        for col in ("robot", "role", "function", "epoch", "last heard", "health",
+                    "warned by", "votes", "alerts"):
+            table.add_column(col)
+        for row in self.rows(now):
+            heard = row["last_heard_s"]
+            table.add_row(
+                str(row["robot"]), row["role"] or "-", row["function"] or "-",
+                "-" if row["epoch"] is None else str(row["epoch"]),
+                "never" if heard is None else f"{heard:.1f} s ago", row["health"] or "-",
+                ",".join(map(str, row["warned_by"])) or "-", str(row["votes"]),
+                "; ".join(row["alerts"]) or "-",
+            )
+        alerts = self.alerts(now)
+        lines = [Text(f"ALERT {a}", style="bold red") for a in alerts]
+        return Group(table, *lines)
+
+
+async def listen(
+    state: MonitorState,
+    transport: Transport,
+    *,
+    duration: float | None,
+    on_refresh: Any = None,
+    refresh: float = 0.25,
+) -> float:
+    """Feed every received frame to `state` for `duration` s (None: until cancelled).
+
+    Passive: `transport.send` is never called. Returns the seconds listened.
+    `on_refresh(now)` is called every `refresh` s (the live table)."""
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+
+    def on_frame(data: bytes) -> None:
+        state.feed(data, loop.time())
+
+    def on_event(name: str, fields: Mapping[str, Any]) -> None:
+        if name.endswith("error"):
+            state._drop(f"transport_{name}")
+
+    await transport.start(on_frame, on_event)
+    try:
+        end = None if duration is None else start + duration
+        while end is None or loop.time() < end:
+            wait = refresh if end is None else max(0.0, min(refresh, end - loop.time()))
+            await asyncio.sleep(wait)
+            if on_refresh is not None:
+                on_refresh(loop.time())
+    finally:
+        await transport.close()
+    return loop.time() - start

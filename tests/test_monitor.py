@@ -1,0 +1,206 @@
+"""swarmd.monitor: the passive base-station view, on virtual time, plus the CLI once."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from swarmd.cli import app
+from swarmd.config import load_swarm
+from swarmd.core import params, wire
+from swarmd.core.plan import RobotPlan, SwarmPlan
+from swarmd.core.roles import Health, Role
+from swarmd.monitor import MonitorState
+
+PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
+SWARM = 1543
+
+
+def paper_plan() -> SwarmPlan:
+    """The paper's appendix swarm: 1-4 active in a ring, 5 covers f1/f4, 6 covers f2/f3."""
+    robots = {r: RobotPlan(r, f"f{r}") for r in range(1, 5)}
+    robots[5] = RobotPlan(5, None, ("f1", "f4"))
+    robots[6] = RobotPlan(6, None, ("f2", "f3"))
+    watches = {"f1": ("f2", "f4"), "f2": ("f1", "f3"), "f3": ("f2", "f4"), "f4": ("f1", "f3")}
+    return SwarmPlan(SWARM, ("f1", "f2", "f3", "f4"), robots, watches)
+
+
+class Sender:
+    """Frames as robots would send them, with rising sequence numbers per sender."""
+
+    def __init__(self, key: bytes | None = None) -> None:
+        self.seq: dict[int, int] = {}
+        self.key = key
+
+    def frame(self, sender: int, msg: wire.Message, swarm: int = SWARM) -> bytes:
+        self.seq[sender] = self.seq.get(sender, 100) + 1
+        return wire.encode(wire.Frame(swarm, sender, self.seq[sender], msg), self.key)
+
+    def hb(self, sender: int, slot: int, epoch: int = 0, role: Role = Role.ACTIVE) -> bytes:
+        return self.frame(sender, wire.Heartbeat(slot, epoch, role, Health.OK))
+
+
+def healthy_swarm(state: MonitorState, tx: Sender, now: float) -> None:
+    for r in range(1, 5):
+        state.feed(tx.hb(r, r), now)
+    for r in (5, 6):
+        state.feed(tx.hb(r, 0, role=Role.STANDBY), now)
+
+
+def test_monitor_rows_show_role_function_epoch_health() -> None:
+    state = MonitorState(paper_plan(), params.udp())
+    tx = Sender()
+    healthy_swarm(state, tx, 10.0)
+    rows = {r["robot"]: r for r in state.rows(10.25)}
+    assert rows[2]["role"] == "ACTIVE" and rows[2]["function"] == "f2"
+    assert rows[2]["epoch"] == 0 and rows[2]["health"] == "OK"
+    assert rows[2]["last_heard_s"] == 0.25
+    assert rows[6]["role"] == "STANDBY" and rows[6]["function"] is None
+    assert state.alerts(10.25) == []
+
+
+def test_monitor_counts_garbage_replays_and_other_swarms_without_raising() -> None:
+    state = MonitorState(paper_plan(), params.udp())
+    tx = Sender()
+    first = tx.hb(1, 1)
+    state.feed(first, 1.0)
+    state.feed(first, 1.1)  # replayed
+    state.feed(b"\x00" * 20, 1.2)  # version 0
+    state.feed(b"", 1.2)
+    state.feed(tx.hb(1, 1)[:-1], 1.3)
+    state.feed(tx.frame(1, wire.Heartbeat(1, 0, 1, 0), swarm=7), 1.4)
+    state.feed(tx.frame(99, wire.Heartbeat(1, 0, 1, 0)), 1.5)
+    assert state.frames == 1
+    assert state.drops == {"replay": 1, "version": 1, "malformed": 2, "other_swarm": 1,
+                           "unknown_sender": 1}
+
+
+def test_monitor_with_key_rejects_unsigned_frames() -> None:
+    key = bytes(range(32))
+    state = MonitorState(paper_plan(), params.udp(), [key])
+    state.feed(Sender().hb(1, 1), 1.0)
+    state.feed(Sender(key).hb(2, 2), 1.0)
+    assert state.drops == {"auth": 1}
+    assert [r["robot"] for r in state.rows(1.0)] == [2]
+
+
+def test_monitor_warnings_are_votes_within_the_window_and_a_claim_clears_them() -> None:
+    p = params.udp()
+    state = MonitorState(paper_plan(), p)
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    state.feed(tx.frame(1, wire.Warn(2, 2, 0)), 1.0)
+    state.feed(tx.frame(3, wire.Warn(2, 2, 0)), 1.05)
+    row = next(r for r in state.rows(1.1) if r["robot"] == 2)
+    assert row["warned_by"] == [1, 3] and row["votes"] == 2
+    # Outside the vote window the warnings no longer count (Fig. 9 time window).
+    later = next(r for r in state.rows(1.05 + p.vote_window + 0.01) if r["robot"] == 2)
+    assert later["votes"] == 0
+    state.feed(tx.frame(1, wire.Warn(2, 2, 0)), 3.0)
+    state.feed(tx.frame(6, wire.Claim(2, 2, 1)), 3.1)
+    row = next(r for r in state.rows(3.2) if r["robot"] == 2)
+    assert row["votes"] == 0
+
+
+def test_monitor_alerts_when_warnings_last_with_nobody_claiming() -> None:
+    p = params.udp()
+    state = MonitorState(paper_plan(), p)
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    t = 1.0
+    while t < 1.0 + p.alert_after + 0.5:
+        state.feed(tx.frame(1, wire.Warn(2, 2, 0)), t)
+        state.feed(tx.frame(3, wire.Warn(2, 2, 0)), t)
+        t += p.warn_interval
+    alerts = state.alerts(t)
+    assert any("robot 2: warned about by [1, 3]" in a and "nobody claimed" in a
+               for a in alerts), alerts
+    assert any("robot 2: holder of f2 silent" in a for a in alerts), alerts
+
+
+def test_monitor_silent_holder_is_no_alert_once_replaced() -> None:
+    p = params.udp()
+    state = MonitorState(paper_plan(), p)
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    now = p.t_max + 1.0
+    for r in (1, 3, 4):
+        state.feed(tx.hb(r, r), now)
+    assert any("holder of f2 silent" in a for a in state.alerts(now))
+    state.feed(tx.hb(6, 2, epoch=1), now)
+    assert not any("f2" in a for a in state.alerts(now)), state.alerts(now)
+    assert next(r for r in state.rows(now) if r["robot"] == 6)["function"] == "f2"
+
+
+def test_monitor_flags_split_brain_and_leave_without_claim() -> None:
+    p = params.udp()
+    state = MonitorState(paper_plan(), p)
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    state.feed(tx.hb(6, 2, epoch=0), 0.1)
+    assert any("split brain" in a and "[2, 6]" in a for a in state.alerts(0.1))
+    state.feed(tx.frame(4, wire.Leave(4, 0, wire.LeaveReason.FAULT)), 0.2)
+    assert not any("left f4" in a for a in state.alerts(0.3))
+    assert any("robot 4: left f4" in a for a in state.alerts(0.3 + p.alert_after))
+    doc = state.to_json(0.3 + p.alert_after, listened=2.0)
+    assert json.loads(json.dumps(doc))["listened_s"] == 2.0
+
+
+def test_monitor_table_renders() -> None:
+    from rich.console import Console
+
+    state = MonitorState(paper_plan(), params.udp())
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    console = Console(width=160, record=True)
+    console.print(state.table(0.5))
+    text = console.export_text()
+    assert "f2" in text and "STANDBY" in text
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def test_monitor_cli_once_json_hears_the_loopback_channel() -> None:
+    swarm = load_swarm(PAPER)
+    port = _free_port()
+    group = "239.255.77.7"
+    stop = threading.Event()
+    tx = Sender()
+
+    def send() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+            s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+            while not stop.wait(0.05):
+                for r in (1, 2):
+                    s.sendto(tx.frame(r, wire.Heartbeat(r, 0, Role.ACTIVE, Health.OK),
+                                      swarm=swarm.to_plan().swarm_id), (group, port))
+
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    try:
+        result = CliRunner().invoke(app, ["monitor", "--swarm", str(PAPER), "--port", str(port),
+                                          "--once", "--json", "--duration", "0.6"])
+    finally:
+        stop.set()
+        thread.join(timeout=2)
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)
+    robots = {r["robot"]: r for r in doc["robots"]}
+    assert set(robots) == {1, 2}
+    assert robots[2]["function"] == "f2" and robots[2]["role"] == "ACTIVE"
+    assert doc["frames"] >= 4
+
+
+def test_monitor_cli_needs_exactly_one_source() -> None:
+    result = CliRunner().invoke(app, ["monitor", "--once"])
+    assert result.exit_code == 2
