@@ -152,6 +152,18 @@ class Node:
             frame = wire.decode(data, self.keys)
         except wire.CodecError as exc:
             return self._drop(exc.reason)
+        return self._accept(frame, now)
+
+    def receive_frame(self, frame: wire.Frame, now: float) -> list[Action]:
+        """A frame already decoded and verified with this swarm's keys. For simulators
+        that deliver one broadcast to many nodes and decode it once; the runtime uses
+        `receive`."""
+        self._advance(now)
+        if self.stopped:
+            return self._drain()
+        return self._accept(frame, now)
+
+    def _accept(self, frame: wire.Frame, now: float) -> list[Action]:
         sender = frame.sender
         if frame.swarm_id != self.plan.swarm_id:
             return self._drop("swarm")
@@ -497,11 +509,15 @@ class Node:
         if fired.first:
             self._emit("suspect", subject=subject, function=g)
             self._emit("warn", subject=subject, function=g)
-            if not self._live_standby(g, subject, now):
-                watch.mark_alerted()
-                self._emit("alert", function=g, reason="no standby left")
         elif fired.alert:
             self._emit("alert", function=g, reason="no claim")
+        elif (not watch.alerted and watch.since is not None
+              and now - watch.since >= self.params.t_max
+              and not self._live_standby(g, subject, now)):
+            # Rule 8, without waiting for alert_after: nobody can take over. Not on the
+            # first fire: one more T_max of silence first, so loss alone rarely alerts.
+            watch.mark_alerted()
+            self._emit("alert", function=g, reason="no standby left")
         self._send(wire.Warn(subject, self.plan.slot(g), epoch))
 
     def _live_standby(self, f: str, subject: int, now: float) -> bool:
