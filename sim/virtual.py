@@ -31,6 +31,7 @@ from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
 
 _TICK, _DELIVER, _FAULT, _LIAR = 0, 1, 2, 3
+_OP_TICK, _OP_RECEIVE, _OP_HEALTH, _OP_STOP, _OP_SEND = range(5)
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,7 +165,7 @@ class VirtualSwarm:
                 if b != r.timer_gen or not r.alive or r.paused or r.node is None:
                     continue
                 r.timer_at = None
-                self._call(a, lambda n: n.tick(t))
+                self._call(a, _OP_TICK, None)
             elif kind == _DELIVER:
                 r = self.robots[a]
                 if not r.alive or r.node is None:
@@ -174,7 +175,7 @@ class VirtualSwarm:
                         r.buffered.append(b)
                     continue
                 self.deliveries += 1
-                self._call(a, lambda n: n.receive_frame(b, t))
+                self._call(a, _OP_RECEIVE, b)
             elif kind == _FAULT:
                 if a == -1:
                     self._boot(b)
@@ -202,12 +203,22 @@ class VirtualSwarm:
             final=final,
         )
 
-    def _call(self, rid: int, step: Callable[[Node], list[Action]]) -> None:
+    def _call(self, rid: int, op: int, arg: Any) -> None:
         r = self.robots[rid]
         node = r.node
         assert node is not None
+        now = self.now
         try:
-            actions = step(node)
+            if op == _OP_TICK:
+                actions = node.tick(now)
+            elif op == _OP_RECEIVE:
+                actions = node.receive_frame(arg, now)
+            elif op == _OP_HEALTH:
+                actions = node.robot_health(arg, now)
+            elif op == _OP_STOP:
+                actions = node.stop(now, handover=True)
+            else:
+                actions = node.send_message(arg, now)
         except Exception as exc:  # the invariant "no node raises on any input"
             self.checker.raised(self.now, rid, exc)
             r.alive = False
@@ -273,13 +284,13 @@ class VirtualSwarm:
         if fault.kind == "partition":
             if phase == "begin":
                 self.partition = {r: i for i, g in enumerate(fault.groups) for r in g}
-                for r in fault.robots:
-                    self._record({"t": round(t, 6), "robot": r, "event": "fault",
+                for target in fault.robots:
+                    self._record({"t": round(t, 6), "robot": target, "event": "fault",
                                   "kind": "partition", "spec": fault.spec()})
             else:
                 self.partition = None
-                for r in fault.robots:
-                    self._record({"t": round(t, 6), "robot": r, "event": "fault",
+                for target in fault.robots:
+                    self._record({"t": round(t, 6), "robot": target, "event": "fault",
                                   "kind": "heal", "spec": fault.spec()})
             self.checker.fault(t, fault, phase)
             return
@@ -317,16 +328,16 @@ class VirtualSwarm:
                 frames, r.buffered = r.buffered, []
                 for frame in frames:
                     if r.alive and r.node is not None:
-                        self._call(rid, lambda n, fr=frame: n.receive_frame(fr, t))
+                        self._call(rid, _OP_RECEIVE, frame)
                 if r.alive and r.node is not None:
-                    self._call(rid, lambda n: n.tick(t))
+                    self._call(rid, _OP_TICK, None)
             case "leave", _:
                 if node is not None and r.alive:
-                    self._call(rid, lambda n: n.stop(t, handover=True))
+                    self._call(rid, _OP_STOP, None)
                 r.alive = False
             case "unhealthy" | "motor", _:
                 if node is not None and r.alive:
-                    self._call(rid, lambda n: n.robot_health(Health.FAULTY, t))
+                    self._call(rid, _OP_HEALTH, Health.FAULTY)
             case "liar", _:
                 self._push(t, _LIAR, rid, None)
 
@@ -342,7 +353,7 @@ class VirtualSwarm:
             holder, epoch = node.known[g]
             if holder and holder != rid:
                 msg = wire.Warn(holder, self.plan.slot(g), epoch)
-                self._call(rid, lambda n, m=msg: n.send_message(m, self.now))
+                self._call(rid, _OP_SEND, msg)
         self._push(self.now + self.params.warn_interval, _LIAR, rid, None)
 
 
