@@ -1,0 +1,564 @@
+"""The real-time `swarmd sim`: one OS process per robot, real daemons on loopback multicast.
+
+Theory of operation
+-------------------
+`run_realtime` writes one robot file per robot of the swarm (the same file `swarmd start
+--config` takes: UDP multicast on 127.0.0.1, TTL 1, a port picked for this run so runs
+never hear each other) and starts one process per robot from a forkserver that preloads
+swarmd (50 robots are up in about a second, where a fresh interpreter each would take
+several). Each process (`sim/robot_proc.py`) loads its file, says `ready`, and waits for
+`go` with a run origin t0 a little in the future, so that every daemon starts at the same
+wall-clock instant and event times (seconds since t0) are comparable across processes.
+
+Faults happen to real processes at their times (DESIGN section 3):
+crash = SIGKILL of the robot's process group; pause = SIGSTOP, then SIGCONT after D;
+restart = a new process on the same state dir (so persisted epochs fence it, rule 2);
+leave / unhealthy / liar / motor = a control message to the robot process; loss and
+partition = the per-process receive filter (`sim/netfilter.py`), set at spawn. Every
+injected fault is logged as `fault{kind}` with robot = its target (0 for a partition).
+
+The run ends at t0 + duration with a SIGKILL of every robot at once: a graceful stop
+would hand functions over (LEAVE) in the last instant and write takeovers that are
+artefacts of the ending. Ctrl-C, SIGTERM or any exception ends the same way: every
+robot is killed and reaped before `run_realtime` returns or raises; robots also die by
+themselves if the orchestrator does (robot_proc: PDEATHSIG and control-pipe EOF).
+
+Events from every robot arrive over pipes and are merged by t into one log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import multiprocessing
+import os
+import shutil
+import signal
+import socket
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sim.faults import Fault
+from sim.netfilter import partition_windows
+
+START_MARGIN = 0.3
+"""s between the last robot's `ready` and t0: enough to deliver `go` to 50 processes."""
+READY_TIMEOUT = 20.0
+"""s allowed for every robot process to load its config and open its transport."""
+
+
+@dataclass(slots=True)
+class RealtimeResult:
+    """What a real-time run produced. `events` is the merged log, sorted by t."""
+
+    events: list[dict[str, Any]]
+    robots: tuple[int, ...]
+    duration: float
+    t0: float
+    startup_s: float
+    """s from the first process start to every robot ready (forkserver start-up)."""
+    run_dir: Path | None
+    """Robot files, per-robot logs and pids; kept only when `report_dir` was given."""
+    problems: list[str] = field(default_factory=list)
+    """Robots that failed to start or exited on their own with an error."""
+    stats: dict[int, dict[str, int]] = field(default_factory=dict)
+    """Receive-filter counters of robots that exited gracefully (leave)."""
+
+
+# -- live view ------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class RobotView:
+    """One robot's line in the live table, folded from its events."""
+
+    role: str = "?"
+    function: str | None = None
+    epoch: int | None = None
+    process: str = "starting"
+    last_event: str = ""
+    last_t: float = 0.0
+
+
+class SwarmView:
+    """Folds events into the per-robot view shown live (role, function, last event)."""
+
+    def __init__(self, robots: Sequence[int]) -> None:
+        self.robots = {r: RobotView() for r in robots}
+
+    def feed(self, rec: dict[str, Any]) -> None:
+        view = self.robots.get(int(rec.get("robot", 0)))
+        if view is None:
+            return
+        name = str(rec.get("event", ""))
+        match name:
+            case "started":
+                view.role = str(rec.get("role", "?"))
+                view.function = rec.get("function")
+                view.process = "running"
+            case "takeover":
+                view.role, view.function, view.epoch = "ACTIVE", rec.get("function"), rec.get(
+                    "epoch"
+                )
+            case "claim":
+                view.role = "CLAIMING"
+            case "backoff":
+                view.role = "STANDBY"
+            case "fenced":
+                view.role, view.function = "FENCED", None
+            case "leave":
+                view.role, view.function = "STANDBY", None
+            case "stopped":
+                view.process = "stopped"
+            case "fault":
+                kind = str(rec.get("kind", ""))
+                view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
+                                "leave": "leaving"}.get(kind, view.process)
+                if kind == "crash":
+                    view.role, view.function = "-", None
+        view.last_event = name if name != "fault" else f"fault {rec.get('kind')}"
+        view.last_t = float(rec.get("t", 0.0))
+
+    def table(self, now: float) -> Any:
+        """A rich Table of the swarm at run time `now`."""
+        from rich.table import Table
+
+        table = Table(title=f"swarmd sim (real time)  t = {now:6.1f} s")
+        for col in ("robot", "process", "role", "function", "epoch", "last event", "at"):
+            table.add_column(col)
+        for rid, v in sorted(self.robots.items()):
+            table.add_row(str(rid), v.process, v.role, v.function or "-",
+                          "-" if v.epoch is None else str(v.epoch), v.last_event,
+                          f"{v.last_t:.2f}")
+        return table
+
+
+# -- orchestration --------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _Proc:
+    robot_id: int
+    process: BaseProcess
+    events: Connection
+    control: Connection
+    ready: bool = False
+    alive: bool = True
+    eof: bool = False
+    error: str | None = None
+
+
+def free_udp_port() -> int:
+    """A UDP port nothing on 127.0.0.1 uses now: each run gets its own channel."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def robot_ids(swarm_path: Path) -> tuple[int, ...]:
+    """Robot ids of a swarm file, validated by the config layer."""
+    from swarmd.config import load_swarm
+
+    cfg = load_swarm(swarm_path)
+    return tuple(sorted(int(r.id) for r in cfg.robots))
+
+
+def write_robot_file(
+    run_dir: Path, swarm_path: Path, robot: int, *, group: str, port: int,
+    interface: str = "127.0.0.1",
+) -> Path:
+    """The robot file of one simulated robot: literally what `swarmd start` would take."""
+    doc = {
+        "robot": robot,
+        "swarm": str(swarm_path.resolve()),
+        "transport": {"kind": "udp", "group": group, "port": port, "interface": interface,
+                      "ttl": 1, "loopback": True},
+        "link": {"kind": "none"},
+        "event_log": None,
+        "state_dir": str(run_dir / "state" / str(robot)),
+        "handover_on_stop": True,
+    }
+    path = run_dir / "robots" / f"robot{robot}.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _context() -> Any:
+    ctx = multiprocessing.get_context("forkserver")
+    # Preloading swarmd in the forkserver makes each robot a cheap fork (~20 ms instead
+    # of a ~0.5 s interpreter start-up): 50 robots start within about a second.
+    ctx.set_forkserver_preload(["sim.robot_proc"])
+    return ctx
+
+
+@contextlib.contextmanager
+def _main_not_reimported() -> Iterator[None]:
+    """Hide `__main__`'s file from multiprocessing while a robot process is started.
+
+    A forkserver child re-imports the parent's main script (as `__mp_main__`) before it
+    runs its target. The robots need nothing from it (their entry is in
+    sim/robot_proc.py, preloaded in the forkserver), and re-importing it costs each
+    robot the whole CLI's imports, or re-runs a script that has no main guard."""
+    main = sys.modules.get("__main__")
+    if main is None:
+        yield
+        return
+    saved = {k: main.__dict__[k] for k in ("__file__", "__spec__") if k in main.__dict__}
+    main.__dict__.pop("__file__", None)
+    main.__dict__["__spec__"] = None
+    try:
+        yield
+    finally:
+        main.__dict__.pop("__spec__", None)
+        main.__dict__.update(saved)
+
+
+def _kill(pid: int, sig: int) -> None:
+    # Robots lead their own process group (robot_proc); signal the group so anything a
+    # robot link started dies with it. Before setpgid ran, fall back to the pid.
+    try:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, sig)
+
+
+class Orchestrator:
+    """One real-time run. Use `run_realtime` / `run_realtime_async`."""
+
+    def __init__(
+        self,
+        swarm_path: Path,
+        *,
+        duration: float,
+        faults: Sequence[Fault],
+        loss: float,
+        seed: int,
+        physics: bool,
+        live: bool,
+        report_dir: Path | None,
+        group: str = "239.255.77.7",
+        port: int | None = None,
+    ) -> None:
+        self.swarm_path = swarm_path
+        self.duration = duration
+        self.faults = sorted(faults, key=lambda f: f.at)
+        self.loss = loss
+        self.seed = seed
+        self.link = "quad" if physics else "none"
+        self.live = live
+        self.report_dir = report_dir
+        self.group = group
+        self.port = port or free_udp_port()
+        self.robots = robot_ids(swarm_path)
+        self.run_dir = (
+            report_dir / "realtime" if report_dir else Path(tempfile.mkdtemp(prefix="swarmd-"))
+        )
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        (self.run_dir / "logs").mkdir(exist_ok=True)
+        self.partitions = partition_windows(
+            [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
+        )
+        self.procs: dict[int, _Proc] = {}
+        self.retired: list[_Proc] = []
+        self.events: list[dict[str, Any]] = []
+        self.stats: dict[int, dict[str, int]] = {}
+        self.problems: list[str] = []
+        self.view = SwarmView(self.robots)
+        self.t0 = 0.0
+        self._ready = asyncio.Event()
+        self._ctx = _context()
+
+    # -- processes --------------------------------------------------------------------------
+    def _spawn(self, robot: int, t0: float | None) -> _Proc:
+        from sim.robot_proc import RobotSpec, child_main
+
+        cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
+                               port=self.port)
+        spec = RobotSpec(
+            robot_id=robot, config_path=str(cfg),
+            log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
+            loss=self.loss, seed=self.seed, partitions=self.partitions, link=self.link, t0=t0,
+        )
+        ev_r, ev_w = self._ctx.Pipe(duplex=False)
+        ctl_r, ctl_w = self._ctx.Pipe(duplex=False)
+        process = self._ctx.Process(target=child_main, args=(spec, ev_w, ctl_r),
+                                    name=f"swarmd-robot{robot}", daemon=False)
+        with _main_not_reimported():
+            process.start()
+        ev_w.close()
+        ctl_r.close()
+        proc = _Proc(robot, process, ev_r, ctl_w, ready=t0 is not None)
+        asyncio.get_running_loop().add_reader(ev_r.fileno(), self._on_events, proc)
+        self._write_pids(proc)
+        return proc
+
+    def _write_pids(self, latest: _Proc) -> None:
+        pids = {str(p.robot_id): p.process.pid for p in self.procs.values()}
+        pids[str(latest.robot_id)] = latest.process.pid
+        doc = {"orchestrator": os.getpid(), "robots": pids,
+               "retired": [p.process.pid for p in self.retired]}
+        tmp = self.run_dir / "pids.json.tmp"
+        tmp.write_text(json.dumps(doc))
+        os.replace(tmp, self.run_dir / "pids.json")
+
+    def _on_events(self, proc: _Proc) -> None:
+        try:
+            while proc.events.poll():
+                self._record(proc, json.loads(proc.events.recv_bytes()))
+        except (EOFError, OSError):
+            self._close_events(proc)
+        except ValueError as exc:  # a robot wrote something that is not JSON: count it
+            self.problems.append(f"robot {proc.robot_id}: bad event message: {exc}")
+
+    def _close_events(self, proc: _Proc) -> None:
+        if not proc.eof:
+            proc.eof = True
+            with contextlib.suppress(ValueError, OSError):
+                asyncio.get_running_loop().remove_reader(proc.events.fileno())
+            if not proc.ready:
+                self._ready_check()
+
+    def _record(self, proc: _Proc, rec: dict[str, Any]) -> None:
+        ctl = rec.get("_ctl")
+        if ctl == "ready":
+            proc.ready = True
+            self._ready_check()
+        elif ctl == "error":
+            proc.error = str(rec.get("error"))
+            self.problems.append(f"robot {proc.robot_id} failed: {proc.error}")
+            self._ready_check()
+        elif ctl == "stats":
+            self.stats[proc.robot_id] = {k: int(v) for k, v in rec.items() if k != "_ctl"}
+        elif ctl is None:
+            self.events.append(rec)
+            self.view.feed(rec)
+
+    def _ready_check(self) -> None:
+        if all(p.ready or p.eof or p.error for p in self.procs.values()):
+            self._ready.set()
+
+    def _send(self, proc: _Proc, msg: dict[str, Any]) -> None:
+        try:
+            proc.control.send_bytes(json.dumps(msg).encode())
+        except OSError as exc:  # the robot is gone; the fault still goes in the log
+            self.problems.append(f"robot {proc.robot_id}: control {msg.get('cmd')}: {exc}")
+
+    def _kill_proc(self, proc: _Proc) -> None:
+        if proc.alive and proc.process.pid is not None:
+            _kill(proc.process.pid, signal.SIGKILL)
+        proc.alive = False
+
+    def kill_all(self) -> None:
+        """SIGKILL every robot process and reap it; safe to call more than once."""
+        for proc in [*self.procs.values(), *self.retired]:
+            self._kill_proc(proc)
+        for proc in [*self.procs.values(), *self.retired]:
+            proc.process.join(timeout=5.0)
+            with contextlib.suppress(OSError):
+                proc.control.close()
+
+    # -- faults -----------------------------------------------------------------------------
+    def run_time(self) -> float:
+        return time.time() - self.t0
+
+    def _fault_event(self, fault: Fault, robot: int) -> None:
+        rec: dict[str, Any] = {"t": round(self.run_time(), 6), "robot": robot, "event": "fault",
+                               "kind": fault.kind, "spec": fault.spec()}
+        if fault.duration is not None:
+            rec["duration"] = fault.duration
+        if fault.groups:
+            rec["groups"] = [list(g) for g in fault.groups]
+        self.events.append(rec)
+        self.view.feed(rec)
+
+    def _apply(self, fault: Fault) -> None:
+        loop = asyncio.get_running_loop()
+        if fault.kind == "partition":
+            self._fault_event(fault, 0)  # the receive filters already hold the window
+            return
+        robot = fault.robot
+        self._fault_event(fault, robot)
+        proc = self.procs.get(robot)
+        match fault.kind:
+            case "crash":
+                if proc is not None:
+                    self._kill_proc(proc)
+            case "pause":
+                if proc is not None and proc.alive and proc.process.pid is not None:
+                    pid = proc.process.pid
+                    _kill(pid, signal.SIGSTOP)
+                    loop.call_later(fault.duration or 0.0, self._resume, proc)
+            case "restart":
+                if proc is not None:
+                    self._kill_proc(proc)  # a restart of a live robot is a crash first
+                    self.retired.append(proc)
+                self.procs[robot] = self._spawn(robot, self.t0)
+            case "leave" | "unhealthy" | "liar" | "motor":
+                if proc is not None and proc.alive:
+                    self._send(proc, {"cmd": fault.kind})
+            case _:
+                self.problems.append(f"fault kind {fault.kind} is not supported in real time")
+
+    def _resume(self, proc: _Proc) -> None:
+        if proc.alive and proc.process.pid is not None:
+            _kill(proc.process.pid, signal.SIGCONT)
+
+    # -- the run ----------------------------------------------------------------------------
+    async def run(self) -> RealtimeResult:
+        loop = asyncio.get_running_loop()
+        handles: list[asyncio.TimerHandle] = []
+        live_ctx: Any = contextlib.nullcontext()
+        try:
+            started = time.monotonic()
+            for robot in self.robots:
+                self.procs[robot] = self._spawn(robot, None)
+            self._ready_check()
+            try:
+                await asyncio.wait_for(self._ready.wait(), READY_TIMEOUT)
+            except TimeoutError:
+                slow = [r for r, p in self.procs.items() if not p.ready]
+                raise RuntimeError(f"robots {slow} not ready after {READY_TIMEOUT} s") from None
+            startup = time.monotonic() - started
+            failed = [p for p in self.procs.values() if not p.ready]
+            if failed:
+                raise RuntimeError(
+                    "robot processes failed to start: "
+                    + "; ".join(f"robot {p.robot_id}: {p.error or self._log_tail(p)}"
+                                for p in failed)
+                )
+            self.t0 = time.time() + START_MARGIN
+            for proc in self.procs.values():
+                self._send(proc, {"cmd": "go", "t0": self.t0})
+            for fault in self.faults:
+                if fault.at <= self.duration:
+                    delay = self.t0 + fault.at - time.time()
+                    handles.append(loop.call_later(max(0.0, delay), self._apply, fault))
+            if self.live and sys.stdout.isatty():
+                from rich.live import Live
+
+                live_ctx = Live(get_renderable=lambda: self.view.table(self.run_time()),
+                                refresh_per_second=4, transient=False)
+            with live_ctx:
+                await asyncio.sleep(max(0.0, self.t0 + self.duration - time.time()))
+        finally:
+            for h in handles:
+                h.cancel()
+            self.kill_all()
+            await self._drain()
+        for p in [*self.procs.values(), *self.retired]:
+            if p.error is None and p.process.exitcode not in (0, -signal.SIGKILL, None):
+                self.problems.append(f"robot {p.robot_id} exited with {p.process.exitcode}: "
+                                     f"{self._log_tail(p)}")
+        self.events.sort(key=lambda r: float(r.get("t", 0.0)))
+        return RealtimeResult(
+            events=self.events, robots=self.robots, duration=self.duration, t0=self.t0,
+            startup_s=startup, run_dir=self.run_dir if self.report_dir else None,
+            problems=self.problems, stats=self.stats,
+        )
+
+    async def _drain(self) -> None:
+        """Read what the killed robots wrote before they died (bounded)."""
+        deadline = time.monotonic() + 2.0
+        procs = [*self.procs.values(), *self.retired]
+        while time.monotonic() < deadline and not all(p.eof for p in procs):
+            for p in procs:
+                if not p.eof:
+                    self._on_events(p)
+            await asyncio.sleep(0.01)
+        for p in procs:
+            self._close_events(p)
+            with contextlib.suppress(OSError):
+                p.events.close()
+
+    def _log_tail(self, proc: _Proc, lines: int = 5) -> str:
+        path = self.run_dir / "logs" / f"robot{proc.robot_id}.log"
+        try:
+            return " | ".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
+        except OSError:
+            return "(no log)"
+
+    def cleanup(self) -> None:
+        if self.report_dir is None:
+            shutil.rmtree(self.run_dir, ignore_errors=True)
+
+
+async def run_realtime_async(
+    swarm_path: Path,
+    *,
+    duration: float,
+    faults: Sequence[Fault] = (),
+    loss: float = 0.0,
+    seed: int = 0,
+    events_path: Path | None = None,
+    report_dir: Path | None = None,
+    physics: bool = False,
+    transport: str = "udp",
+    live: bool = False,
+    port: int | None = None,
+) -> RealtimeResult:
+    """Run the swarm in real time (see the module docstring); awaitable form for tests."""
+    if transport != "udp":
+        raise ValueError(f"transport {transport!r} is not available in real time yet (udp)")
+    if physics:
+        from sim.robot_proc import LINK_FACTORIES
+
+        try:
+            import sim.quad.link  # type: ignore[import-not-found,unused-ignore]  # noqa: F401
+        except ImportError:
+            raise RuntimeError("physics is not available yet: run with --no-physics") from None
+        assert "quad" in LINK_FACTORIES
+    orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
+                        physics=physics, live=live, report_dir=report_dir, port=port)
+    try:
+        result = await orch.run()
+    finally:
+        orch.cleanup()
+    if events_path is not None:
+        events_path.parent.mkdir(parents=True, exist_ok=True)
+        with events_path.open("w") as out:
+            for rec in result.events:
+                out.write(json.dumps(rec, separators=(",", ":")) + "\n")
+    return result
+
+
+def run_realtime(
+    swarm_path: Path,
+    *,
+    duration: float,
+    faults: Sequence[Fault] = (),
+    loss: float = 0.0,
+    seed: int = 0,
+    events_path: Path | None = None,
+    report_dir: Path | None = None,
+    physics: bool = False,
+    transport: str = "udp",
+    live: bool = True,
+    port: int | None = None,
+) -> RealtimeResult:
+    """`swarmd sim` without --virtual. Ctrl-C / SIGTERM kill every robot, then raise."""
+
+    async def main() -> RealtimeResult:
+        task = asyncio.current_task()
+        assert task is not None
+        # SIGTERM ends the run like Ctrl-C (asyncio.run turns SIGINT into a cancel).
+        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, task.cancel)
+        return await run_realtime_async(
+            swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
+            events_path=events_path, report_dir=report_dir, physics=physics,
+            transport=transport, live=live, port=port,
+        )
+
+    return asyncio.run(main())

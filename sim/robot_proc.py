@@ -1,0 +1,340 @@
+"""One robot of the real-time `swarmd sim`: a real `swarmd start` daemon in its own process.
+
+The orchestrator (`sim/realtime.py`) writes a robot file per robot (so each process runs
+exactly what `swarmd start --config` runs: `swarmd.daemon.run_daemon`) and starts this
+module's `child_main` in a forkserver child. What the simulator adds around the daemon:
+
+- a receive filter (`sim/netfilter.py`): seeded loss and partitions, per receiver;
+- a robot link chosen by name (`LINK_FACTORIES`): the bare `none` link today, the MuJoCo
+  quadrotor (`sim.quad.link.QuadLink`) when physics is on, so a new robot plugs in here;
+- the `liar` fault: forged WARN frames about its neighbours, sent through the daemon's
+  own runtime so they are signed and sequenced like its real frames (`Liar`);
+- two pipes to the orchestrator: events out (one JSON object a message, t relative to
+  the run's t0), control in (`go`, `leave`, `unhealthy`, `liar`, `motor`). EOF on the
+  control pipe means the orchestrator is gone: the daemon stops.
+
+Process hygiene (issue 3 item 5: Ctrl-C leaves no process behind): the child puts itself
+in its own process group (so the terminal's SIGINT reaches only the orchestrator, which
+decides) and asks the kernel to SIGKILL it if its parent (the forkserver, which exits
+with the orchestrator) dies.
+
+`python -m sim.robot_proc --config robot.yaml [--events FILE] [--t0 UNIX]` runs the same
+thing without an orchestrator (used by the network-namespace test).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import ctypes
+import json
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from sim.netfilter import FilterStats, PartitionWindow, ReceiveFilter
+from swarmd.config import load_robot
+from swarmd.core import wire
+from swarmd.core.node import Snapshot
+from swarmd.core.plan import SwarmPlan
+from swarmd.core.roles import Health
+from swarmd.daemon import Daemon, run_daemon
+from swarmd.link.base import RobotLink
+from swarmd.link.none import NoneLink
+from swarmd.runtime import Runtime
+
+_PR_SET_PDEATHSIG = 1
+
+
+@dataclass(frozen=True, slots=True)
+class RobotSpec:
+    """Everything a robot process needs; pickled to the forkserver child."""
+
+    robot_id: int
+    config_path: str
+    """The robot file written by the orchestrator (`swarmd start --config` equivalent)."""
+    log_path: str
+    """The daemon's stdout/stderr (JSON log lines) go here, not to the orchestrator's tty."""
+    loss: float = 0.0
+    seed: int = 0
+    partitions: tuple[PartitionWindow, ...] = ()
+    link: str = "none"
+    t0: float | None = None
+    """Start at once with this run origin (a restart); None: wait for the `go` message."""
+
+
+# -- robot links ----------------------------------------------------------------------------
+
+
+def _none_link(spec: RobotSpec, cfg: Any) -> RobotLink:
+    return NoneLink()
+
+
+def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
+    try:
+        from sim.quad.link import QuadLink  # type: ignore[import-not-found,unused-ignore]
+    except ImportError as exc:
+        raise RuntimeError(
+            f"physics is not available yet ({exc}); run with --no-physics"
+        ) from exc
+    link: RobotLink = QuadLink.for_robot(cfg)
+    return link
+
+
+LINK_FACTORIES: dict[str, Callable[[RobotSpec, Any], RobotLink]] = {
+    "none": _none_link,
+    "quad": _quad_link,
+}
+"""Robot links by name: the orchestrator picks one; add a robot model here."""
+
+
+# -- the liar -------------------------------------------------------------------------------
+
+
+class Liar:
+    """Forges WARN frames about this robot's neighbours once `start()` is called.
+
+    They go out through the daemon's own runtime (`Runtime.inject`), so they carry the
+    robot's sender id, its rising sequence numbers and its signature: receivers accept
+    them as real. The point of the `liar` fault is that one witness, however loud, never
+    makes a quorum of *distinct* witnesses (paper section III-B, DESIGN rule 3).
+    """
+
+    def __init__(self, plan: SwarmPlan, interval: float) -> None:
+        self.plan = plan
+        self.interval = interval
+        self.runtime: Runtime | None = None
+        self.forged = 0
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def targets(self, snap: Snapshot) -> list[tuple[int, int, int]]:
+        """(suspect, slot, epoch) for each slot this robot's function watches; a robot
+        without a function lies about every slot it knows a holder of."""
+        functions = (self.plan.watched(snap.function) if snap.function is not None
+                     else tuple(snap.known))
+        out = []
+        for f in functions:
+            holder = snap.known.get(f)
+            if holder is not None and holder[0] != snap.robot_id:
+                out.append((holder[0], self.plan.slot(f), holder[1]))
+        return out
+
+    async def _run(self) -> None:
+        while True:
+            rt = self.runtime
+            if rt is not None:
+                for suspect, slot, epoch in self.targets(rt.node.snapshot()):
+                    rt.inject(wire.Warn(suspect=suspect, function=slot, epoch=epoch))
+                    self.forged += 1
+            await asyncio.sleep(self.interval)
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+
+# -- process set-up -------------------------------------------------------------------------
+
+
+def _die_with_parent() -> None:
+    """Own process group; SIGKILL from the kernel when the parent goes (Linux)."""
+    with contextlib.suppress(OSError):
+        os.setpgid(0, 0)
+    parent = os.getppid()
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def _redirect_output(path: str) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+
+
+class _Robot:
+    """The asyncio side of one robot process."""
+
+    def __init__(
+        self,
+        spec: RobotSpec,
+        emit: Callable[[Mapping[str, Any]], None],
+        control: Connection | None,
+    ) -> None:
+        self.spec = spec
+        self.emit = emit
+        self.control = control
+        self.cfg = load_robot(Path(spec.config_path))
+        plan = self.cfg.swarm.to_plan()
+        params = self.cfg.swarm.params()
+        self.link = LINK_FACTORIES[spec.link](spec, self.cfg)
+        self.liar = Liar(plan, params.warn_interval)
+        self.t0 = spec.t0
+        self.filter = ReceiveFilter(
+            spec.robot_id,
+            loss=spec.loss,
+            seed=spec.seed,
+            partitions=spec.partitions,
+            clock=self._run_time,
+        )
+        self.stop_event: asyncio.Event | None = None
+        self.go: asyncio.Event | None = None
+
+    def _run_time(self) -> float:
+        return time.time() - (self.t0 or 0.0)
+
+    def _on_control(self) -> None:
+        assert self.control is not None
+        try:
+            while self.control.poll():
+                msg = json.loads(self.control.recv_bytes())
+                self._command(msg)
+        except (EOFError, OSError):
+            # The orchestrator is gone: stop (no orphan daemons, issue 3 item 5).
+            asyncio.get_running_loop().remove_reader(self.control.fileno())
+            if self.go is not None:
+                self.go.set()
+            if self.stop_event is not None:
+                self.stop_event.set()
+        except (ValueError, TypeError) as exc:
+            print(f"robot {self.spec.robot_id}: bad control message: {exc}", file=sys.stderr)
+
+    def _command(self, msg: Mapping[str, Any]) -> None:
+        cmd = msg.get("cmd")
+        if cmd == "go":
+            self.t0 = float(msg["t0"])
+            if self.go is not None:
+                self.go.set()
+        elif cmd == "leave":
+            # DESIGN section 3 `leave`: the node's stop(handover=True) path, then exit.
+            if self.stop_event is not None:
+                self.stop_event.set()
+        elif cmd == "unhealthy":
+            # DESIGN rule 7: the robot reports a fault; the daemon sends LEAVE.
+            set_health = getattr(self.link, "set_health", None)
+            if set_health is not None:
+                set_health(Health.FAULTY)
+        elif cmd == "liar":
+            self.liar.start()
+        elif cmd == "motor":
+            fail = getattr(self.link, "fail_motor", None)
+            if fail is not None:
+                fail()
+        else:
+            print(f"robot {self.spec.robot_id}: unknown control {msg!r}", file=sys.stderr)
+
+    async def run(self) -> int:
+        loop = asyncio.get_running_loop()
+        self.stop_event = asyncio.Event()
+        self.go = asyncio.Event()
+        if self.control is not None:
+            loop.add_reader(self.control.fileno(), self._on_control)
+        if self.t0 is None:
+            self.emit({"_ctl": "ready", "pid": os.getpid()})
+            await self.go.wait()
+            if self.stop_event.is_set():
+                return 0
+        assert self.t0 is not None
+        # All robots start together at t0 (a wall-clock time the orchestrator picked).
+        await asyncio.sleep(max(0.0, self.t0 - time.time()))
+
+        def sink(record: Mapping[str, Any]) -> None:
+            self.emit(record)
+
+        def ready(daemon: Daemon) -> None:
+            self.liar.runtime = daemon.runtime
+
+        try:
+            return await run_daemon(
+                self.cfg,
+                link=self.link,
+                receive_filter=self.filter,
+                event_sink=sink,
+                stop_event=self.stop_event,
+                on_ready=ready,
+                time_origin=self.t0,
+                handle_signals=self.control is None,
+                config_path=Path(self.spec.config_path),
+            )
+        finally:
+            self.liar.stop()
+
+
+def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None:
+    """Forkserver entry: run one robot until killed, told to leave, or orphaned."""
+    _die_with_parent()
+    _redirect_output(spec.log_path)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def emit(record: Mapping[str, Any]) -> None:
+        # One message per record: a pipe write below PIPE_BUF is atomic, so a SIGKILL
+        # never leaves half a record for the orchestrator.
+        with contextlib.suppress(OSError):
+            events.send_bytes(json.dumps(record, separators=(",", ":")).encode())
+
+    code = 1
+    try:
+        robot = _Robot(spec, emit, control)
+        code = asyncio.run(robot.run())
+        _report_stats(robot.filter.stats, robot.liar.forged, emit)
+    except Exception as exc:  # a robot that cannot start says why, in its log and pipe
+        emit({"_ctl": "error", "error": f"{type(exc).__name__}: {exc}"})
+        raise
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    os._exit(code)
+
+
+def _report_stats(
+    stats: FilterStats, forged: int, emit: Callable[[Mapping[str, Any]], None]
+) -> None:
+    emit({"_ctl": "stats", "passed": stats.passed, "lost": stats.lost,
+          "partitioned": stats.partitioned, "forged": forged})
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone robot process (no orchestrator): `python -m sim.robot_proc`."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", required=True, help="robot file")
+    ap.add_argument("--events", help="append the event log (JSON lines) here")
+    ap.add_argument("--t0", type=float, default=None, help="run origin (Unix time)")
+    ap.add_argument("--loss", type=float, default=0.0)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    cfg_path = Path(args.config)
+    out = open(args.events, "a", buffering=1) if args.events else None  # noqa: SIM115
+
+    def emit(record: Mapping[str, Any]) -> None:
+        if out is not None and "_ctl" not in record:
+            out.write(json.dumps(record, separators=(",", ":")) + "\n")
+
+    robot_id = int(load_robot(cfg_path).robot)
+    t0 = args.t0 if args.t0 is not None else time.time()
+    spec = RobotSpec(robot_id, str(cfg_path), "", loss=args.loss, seed=args.seed, t0=t0)
+    robot = _Robot(spec, emit, None)
+    try:
+        return asyncio.run(robot.run())
+    finally:
+        if out is not None:
+            out.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
