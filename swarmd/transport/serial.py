@@ -1,0 +1,193 @@
+"""Transparent serial radios through pyserial-asyncio (issue 5 point 2).
+
+For an XBee in transparent mode (AP=0, the paper's DH/DL 0x0000/0xFFFF broadcast
+setting on every robot) or a SiK telemetry radio: whatever is written comes out of
+every other radio's UART as a byte stream, packetised, merged and maybe corrupted by
+the radios. Frames are therefore COBS-delimited and CRC-checked (`framing.py`), so the
+receiver yields exactly the good frames and counts the rest.
+
+The port is opened on the event loop by pyserial-asyncio (non-blocking fd, no thread).
+A lost port (USB pulled) is reported as `transport_down` and reopened with back-off.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections import Counter
+from collections.abc import Mapping
+from typing import Any
+
+from swarmd.transport import framing
+from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_MAX_PAYLOAD = 64
+"""Largest swarmd frame: after framing (+7 B) it still fits one RF packet of the
+smallest radio payload in use (DigiMesh 73 B), so radios never split a frame and
+packets of two senders cannot interleave inside one."""
+
+
+class _Protocol(asyncio.Protocol):
+    def __init__(self, owner: SerialTransport) -> None:
+        self.owner = owner
+
+    def data_received(self, data: bytes) -> None:
+        self.owner._on_bytes(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.owner._on_lost(exc)
+
+
+class SerialTransport:
+    """Broadcast frames over a transparent serial radio (see the module docstring)."""
+
+    def __init__(
+        self,
+        *,
+        port: str,
+        baud: int = 57600,
+        max_payload: int = DEFAULT_MAX_PAYLOAD,
+        write_buffer_limit: int = 4096,
+        reopen_min: float = 0.5,
+        reopen_max: float = 10.0,
+    ) -> None:
+        if not 1 <= max_payload <= framing.MAX_FRAME:
+            raise TransportError(f"max_payload must be 1..{framing.MAX_FRAME}")
+        self.port = port
+        self.baud = baud
+        self._max_payload = max_payload
+        self.write_buffer_limit = write_buffer_limit
+        self.reopen_min = reopen_min
+        self.reopen_max = reopen_max
+        self.counters: Counter[str] = Counter()
+        self.decoder = framing.FrameDecoder(max_frame=max(max_payload, 255))
+        self._transport: asyncio.Transport | None = None
+        self._on_frame: FrameCallback | None = None
+        self._on_event: EventCallback | None = None
+        self._closing = False
+        self._lost = asyncio.Event()
+        self._supervisor: asyncio.Task[None] | None = None
+
+    @classmethod
+    def from_config(cls, cfg: Any) -> SerialTransport:
+        """Build from `swarmd.config.SerialTransportConfig` (duck-typed)."""
+        return cls(port=cfg.port, baud=cfg.baud)
+
+    @property
+    def max_payload(self) -> int:
+        return self._max_payload
+
+    @property
+    def up(self) -> bool:
+        return self._transport is not None
+
+    async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
+        """Open the port. A missing port is reported and retried, not raised: the
+        daemon keeps running until the radio is plugged in."""
+        self._on_frame, self._on_event = on_frame, on_event
+        self._lost = asyncio.Event()
+        try:
+            await self._open()
+        except Exception as exc:
+            self._event("transport_down", {"kind": "serial", "port": self.port,
+                                           "reason": f"cannot open: {exc}"})
+            self._lost.set()
+        self._supervisor = asyncio.create_task(self._supervise(), name="serial-reopen")
+
+    async def _open(self) -> None:
+        import serial_asyncio
+
+        loop = asyncio.get_running_loop()
+        transport, _ = await serial_asyncio.create_serial_connection(
+            loop, lambda: _Protocol(self), self.port, baudrate=self.baud)
+        self._transport = transport
+        self.decoder = framing.FrameDecoder(max_frame=max(self._max_payload, 255))
+        self._event("transport_up", {"kind": "serial", "port": self.port, "baud": self.baud,
+                                     "max_payload": self._max_payload})
+
+    async def _supervise(self) -> None:
+        backoff = self.reopen_min
+        while not self._closing:
+            await self._lost.wait()
+            if self._closing:
+                return
+            try:
+                await self._open()
+            except Exception as exc:
+                self.counters["reopen_failed"] += 1
+                log.info("serial %s still down (%s); retry in %.1f s", self.port, exc, backoff)
+                await asyncio.sleep(backoff)
+                backoff = min(self.reopen_max, backoff * 2)
+            else:
+                backoff = self.reopen_min
+                self._lost.clear()
+
+    async def close(self) -> None:
+        self._closing = True
+        self._lost.set()
+        if self._supervisor is not None:
+            self._supervisor.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._supervisor
+        transport, self._transport = self._transport, None
+        if transport is not None:
+            transport.close()
+            await asyncio.sleep(0)  # let connection_lost run before the loop goes
+
+    def send(self, frame: bytes) -> None:
+        """Write one framed broadcast; never blocks and never raises (base.py)."""
+        if len(frame) > self._max_payload:
+            self._send_error("oversize", size=len(frame), limit=self._max_payload)
+            return
+        transport = self._transport
+        if transport is None:
+            self._send_error("radio down")
+            return
+        if transport.get_write_buffer_size() > self.write_buffer_limit:
+            # The radio's flow control or baud rate cannot keep up: shed load rather
+            # than queue stale heartbeats without bound.
+            self._send_error("write buffer full")
+            return
+        try:
+            transport.write(framing.encode(frame))
+        except Exception as exc:
+            self._send_error(f"write failed: {exc}")
+            return
+        self.counters["sent"] += 1
+
+    def _on_bytes(self, data: bytes) -> None:
+        before = sum(self.decoder.drops.values())
+        for frame in self.decoder.feed(data):
+            self.counters["received"] += 1
+            if self._on_frame is not None:
+                try:
+                    self._on_frame(frame)
+                except Exception:
+                    log.exception("on_frame raised")
+        dropped = sum(self.decoder.drops.values()) - before
+        if dropped:
+            self.counters["bad_chunks"] += dropped
+
+    def _on_lost(self, exc: Exception | None) -> None:
+        self._transport = None
+        if self._closing:
+            return
+        reason = str(exc) if exc else "port closed"
+        log.warning("serial %s down: %s", self.port, reason)
+        self._event("transport_down", {"kind": "serial", "port": self.port, "reason": reason})
+        self._lost.set()
+
+    def _send_error(self, reason: str, **fields: Any) -> None:
+        self.counters[f"send_error:{reason}"] += 1
+        self._event("send_error", {"kind": "serial", "reason": reason, **fields})
+
+    def _event(self, name: str, fields: Mapping[str, Any]) -> None:
+        if self._on_event is None:
+            return
+        try:
+            self._on_event(name, fields)
+        except Exception:
+            log.exception("on_event raised")
