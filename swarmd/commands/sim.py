@@ -1,0 +1,167 @@
+"""`swarmd sim SWARM.yaml`: the whole swarm on this machine (DESIGN section 3).
+
+Without `--virtual`: one OS process per robot, each a real daemon over UDP multicast on
+loopback (`sim.realtime`). With `--virtual`: every robot's protocol core in this process
+on a virtual clock (`sim.virtual`), deterministic by `--seed`, far faster than real
+time. Both write the same event log and print the same summary.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+if TYPE_CHECKING:
+    from sim.summary import Summary
+
+FAULT_HELP = (
+    "Inject a fault (repeatable): crash:R@T, restart:R@T, pause:R@T+D, "
+    "partition:1,2|3,4@T+D, liar:R@T, leave:R@T, unhealthy:R@T, motor:R@T (physics). "
+    "T and D in seconds from the start."
+)
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `sim` command to the CLI."""
+
+    @app.command("sim")
+    def sim(
+        swarm: Annotated[Path, typer.Argument(help="Swarm file, e.g. configs/paper.yaml.")],
+        virtual: Annotated[bool, typer.Option(
+            "--virtual", help="Run every core in one process on a virtual clock "
+            "(deterministic by --seed, no processes, no physics).")] = False,
+        duration: Annotated[float, typer.Option(
+            "--duration", min=0.1, help="Seconds to simulate.")] = 15.0,
+        seed: Annotated[int, typer.Option("--seed", help="Seed of loss, jitter and start "
+                                          "times.")] = 0,
+        loss: Annotated[float, typer.Option(
+            "--loss", min=0.0, max=1.0, help="Probability that a receiver misses a "
+            "frame (per frame, per receiver).")] = 0.0,
+        fault: Annotated[list[str] | None, typer.Option("--fault", help=FAULT_HELP)] = None,
+        events: Annotated[Path | None, typer.Option(
+            "--events", help="Write the merged event log here (JSON Lines).")] = None,
+        report: Annotated[Path | None, typer.Option(
+            "--report", help="Write events, summary and pictures into this directory.")]
+        = None,
+        json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
+        = False,
+        no_physics: Annotated[bool, typer.Option(
+            "--no-physics", help="Real-time mode: bare daemons, no MuJoCo quadrotors.")]
+        = False,
+        transport: Annotated[str, typer.Option(
+            "--transport", help="Real-time mode channel: udp (multicast on loopback), "
+            "or xbee / serial over emulated radios.")] = "udp",
+    ) -> None:
+        """Run the whole swarm on this machine, inject faults, print a summary.
+
+        Exit 0 when no invariant was violated, 1 when one was, 2 on bad input.
+        """
+        from rich.console import Console
+
+        from sim.faults import FaultSpecError, check_faults, parse_fault
+        from swarmd.config import ConfigError, load_swarm
+
+        err = Console(stderr=True, highlight=False)
+        try:
+            cfg = load_swarm(swarm)
+        except ConfigError as exc:
+            for problem in exc.problems:
+                err.print(str(problem))
+            raise typer.Exit(2) from None
+        try:
+            faults = [parse_fault(s) for s in fault or []]
+        except FaultSpecError as exc:
+            err.print(f"--fault: {exc}")
+            raise typer.Exit(2) from None
+        plan, params = cfg.to_plan(), cfg.params()
+        problems = check_faults(faults, set(plan.robots), physics=virtual or not no_physics)
+        if problems:
+            for p in problems:
+                err.print(f"--fault: {p}")
+            raise typer.Exit(2)
+        if report is not None:
+            report.mkdir(parents=True, exist_ok=True)
+        out = Console(highlight=False, stderr=json_out)
+
+        if virtual:
+            summary = _run_virtual(cfg, plan, params, faults, duration=duration, seed=seed,
+                                   loss=loss)
+        else:
+            summary = _run_realtime(swarm, plan, params, faults, duration=duration, seed=seed,
+                                    loss=loss, report=report, physics=not no_physics,
+                                    transport=transport, live=not json_out)
+        events_list: list[dict[str, Any]] = summary.extra.pop("_events")
+        if events is not None:
+            _write_events(events, events_list)
+        if report is not None:
+            _write_report(report, events_list, summary, duration)
+        if json_out:
+            typer.echo(summary.to_json())
+        else:
+            from sim.summary import render_summary
+
+            render_summary(summary, out)
+        raise typer.Exit(0 if summary.ok else 1)
+
+
+def _run_virtual(cfg: Any, plan: Any, params: Any, faults: list[Any], *, duration: float,
+                 seed: int, loss: float) -> Summary:
+    import time
+
+    from sim.summary import summarize
+    from sim.virtual import run_virtual
+
+    key = cfg.key()
+    t0 = time.perf_counter()
+    result = run_virtual(plan, params, duration=duration, faults=faults, loss=loss, seed=seed,
+                         keys=(key,) if key else ())
+    wall = time.perf_counter() - t0
+    summary = summarize(result.events, faults, plan, params, loss=loss, duration=duration,
+                        mode="virtual", extra_violations=result.violations)
+    summary.extra["frames_sent"] = result.frames_sent
+    summary.extra["robot_seconds_per_wall_second"] = round(
+        result.robot_seconds / max(wall, 1e-9))
+    summary.extra["_events"] = result.events
+    return summary
+
+
+def _run_realtime(swarm: Path, plan: Any, params: Any, faults: list[Any], *, duration: float,
+                  seed: int, loss: float, report: Path | None, physics: bool, transport: str,
+                  live: bool) -> Summary:
+    from sim.realtime import run_realtime
+    from sim.summary import summarize
+
+    try:
+        result = run_realtime(swarm, duration=duration, faults=faults, loss=loss, seed=seed,
+                              report_dir=report, physics=physics, transport=transport,
+                              live=live)
+    except (ValueError, RuntimeError) as exc:
+        typer.echo(f"swarmd sim: {exc}", err=True)
+        raise typer.Exit(2) from None
+    summary = summarize(result.events, faults, plan, params, loss=loss, duration=duration,
+                        mode="real time")
+    if result.problems:
+        summary.extra["process problems"] = result.problems
+    summary.extra["startup_s"] = round(result.startup_s, 2)
+    summary.extra["_events"] = result.events
+    return summary
+
+
+def _write_events(path: Path, events: list[dict[str, Any]]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", encoding="utf-8") as fh:
+        for e in events:
+            fh.write(json.dumps(e, separators=(",", ":")) + "\n")
+
+
+def _write_report(report: Path, events: list[dict[str, Any]], summary: Summary,
+                  duration: float) -> None:
+    _write_events(report / "events.jsonl", events)
+    (report / "summary.json").write_text(summary.to_json() + "\n", encoding="utf-8")
+    from sim.plots import timeline_png
+
+    timeline_png(events, report / "timeline.png", end=duration,
+                 title=f"swarmd sim ({summary.mode})")
