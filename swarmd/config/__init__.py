@@ -9,7 +9,6 @@ is wrong. Only this package imports pydantic (STYLE.md point 5).
 """
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, format_loc
-from swarmd.config.keys import KeyFileError, read_key
 from swarmd.config.robot import (
     ExecLinkConfig,
     MetricsConfig,
@@ -39,7 +38,6 @@ __all__ = [
     "ConfigUnreadable",
     "Coverage",
     "ExecLinkConfig",
-    "KeyFileError",
     "MetricsConfig",
     "NoneLinkConfig",
     "PatrolFunction",
@@ -59,5 +57,4 @@ __all__ = [
     "load_swarm",
     "parse_robot",
     "parse_swarm",
-    "read_key",
 ]

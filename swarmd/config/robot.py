@@ -24,9 +24,9 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem
-from swarmd.config.keys import KeyFileError, read_key
 from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.config.swarm import RobotEntry, SwarmConfig, load_swarm
+from swarmd.keys import KeyFileError, load_key
 
 
 class _Model(BaseModel):
@@ -194,7 +194,7 @@ class RobotConfig:
         if swarm_key is not None:
             out.append(swarm_key)
         for path in self.key_files:
-            k = read_key(path)
+            k = load_key(path)
             if k not in out:
                 out.append(k)
         return tuple(out)
@@ -237,7 +237,7 @@ def from_source(src: Source) -> RobotConfig:
     key_files = tuple(src.resolve(k) for k in f.key_files)
     for i, k in enumerate(key_files):
         try:
-            read_key(k)
+            load_key(k)
         except KeyFileError as exc:
             problems.append(src.problem(("key_files", i), str(exc)))
     if f.metrics is not None and not f.metrics.allow_remote and not _is_loopback(f.metrics.host):

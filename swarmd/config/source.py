@@ -157,6 +157,10 @@ def validation_problems(
     seen: set[tuple[str, str]] = set()
     for err in exc.errors(include_url=False):
         raw: Loc = tuple(err["loc"])
+        if err["type"] == "missing" and raw and isinstance(raw[-1], int):
+            # A too-short tuple ([x, y] for a position) reports its missing item.
+            raw = raw[:-1]
+            err = {**err, "type": "too_short_tuple"}
         loc: Loc = tuple(
             p for i, p in enumerate(raw) if not (i > 0 and isinstance(p, str) and p in UNION_TAGS
                                                  and _is_tag_position(raw, i))
@@ -181,9 +185,13 @@ def _message(err: Any, loc: Loc, known: list[str]) -> str:
     ctx = err.get("ctx") or {}
     if kind == "extra_forbidden":
         name = str(loc[-1]) if loc else "?"
+        if name in known:  # e.g. `position` under a patrol: right word, wrong place
+            return f"unknown field '{name}' here (it belongs to another kind or section)"
         hint = difflib.get_close_matches(name, known, n=1)
         did = f"; did you mean '{hint[0]}'?" if hint else ""
         return f"unknown field '{name}' (typo?){did}"
+    if kind == "too_short_tuple":
+        return "too few items (a position is [x, y, z], a home [x, y])"
     if kind == "missing":
         return "required field is missing"
     if kind == "union_tag_invalid":
@@ -192,7 +200,7 @@ def _message(err: Any, loc: Loc, known: list[str]) -> str:
         )
     if kind == "union_tag_not_found":
         return f"'kind' is missing; expected one of {_tags_for(loc)}"
-    msg = str(err["msg"])
+    msg = str(err["msg"]).replace(" after validation", "")
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
     if kind not in ("value_error", "assertion_error"):

@@ -26,10 +26,10 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, PlainValidator, PrivateAttr, field_validator
 
 from swarmd.config.errors import ConfigError, Loc, Problem, has_errors
-from swarmd.config.keys import KeyFileError, read_key
 from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.core.params import PRESETS, Params, ParamsError
 from swarmd.core.plan import PlanError, RobotPlan, SwarmPlan
+from swarmd.keys import KeyFileError, load_key
 
 FUNCTION_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]{0,31}$")
 """Function names are free text on the config side only (the wire carries the slot
@@ -181,7 +181,7 @@ class SwarmConfig(_Model):
     def key(self) -> bytes | None:
         """The 32-byte swarm key, or None for an unsigned swarm."""
         path = self.key_path
-        return read_key(path) if path is not None else None
+        return load_key(path) if path is not None else None
 
     # -- what the rest of swarmd needs ---------------------------------------------------
     def params(self) -> Params:
@@ -333,7 +333,7 @@ def _cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
 
     if cfg.key_file is not None and cfg.key_path is not None:
         try:
-            read_key(cfg.key_path)
+            load_key(cfg.key_path)
         except KeyFileError as exc:
             err(("key_file",), str(exc))
 
@@ -430,13 +430,22 @@ def _cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
 
 
 def _params_field(message: str, timing: Timing) -> str:
-    """The Params field a ParamsError is about: the first field named in the message
-    that this file overrides, else the first field named, else `preset`."""
+    """The Params field a ParamsError is about. An override whose removal makes the
+    timing valid is the culprit (`heartbeat_interval: 0.3` breaks the preset's t_max);
+    else the first overridden field the message names, else the first named at all."""
+    overridden = timing.overrides()
+    preset = PRESETS[timing.preset]()
+    for name in overridden:
+        rest = {k: v for k, v in overridden.items() if k != name}
+        try:
+            preset.with_overrides(**rest)
+        except (ParamsError, TypeError):
+            continue
+        return name
     names = [n for n in Timing.model_fields if n != "preset"]
     mentioned = sorted(
         (message.find(n), n) for n in names if re.search(rf"\b{n}\b", message)
     )
-    overridden = timing.overrides()
     for _, n in mentioned:
         if n in overridden:
             return n
