@@ -9,7 +9,10 @@ at any point; skipping step 1 cuts the first switched robot off.
 from __future__ import annotations
 
 import os
+import re
 import stat
+import subprocess
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -208,3 +211,27 @@ def test_switching_without_the_window_cuts_the_robot_off() -> None:
     assert swarm.auth_drops() > 0
     suspected = {e.fields.get("subject") for r, e in swarm.suspicions() if e.name == "suspect"}
     assert 1 in suspected
+
+
+# -- the daemon refuses a key others can read ------------------------------------------
+def test_swarmd_start_refuses_a_key_readable_by_others(tmp_path: Path) -> None:
+    pytest.importorskip("swarmd.daemon", reason="daemon runtime not in this tree")
+    repo = Path(__file__).resolve().parent.parent
+    swarm = (repo / "configs" / "paper.yaml").read_text()
+    swarm, n = re.subn(r"(?m)^key_file:.*$", "key_file: swarm.key", swarm)
+    assert n == 1
+    (tmp_path / "swarm.yaml").write_text(swarm)
+    key = tmp_path / "swarm.key"
+    generate_key(key)
+    key.chmod(0o644)
+    robot = tmp_path / "robot.yaml"
+    robot.write_text("robot: 2\nswarm: swarm.yaml\nstate_dir: state\n"
+                     "transport: {kind: udp, port: 9, interface: 127.0.0.1, ttl: 1}\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "swarmd.cli", "start", "--config", str(robot)],
+        capture_output=True, text=True, timeout=30, cwd=tmp_path,
+    )
+    assert result.returncode != 0
+    said = result.stdout + result.stderr
+    assert "mode 0644" in said and "chmod 600" in said, said
+    assert not (tmp_path / "state").exists() or not any((tmp_path / "state").iterdir())
