@@ -1,0 +1,170 @@
+"""Robot links: socket (JSON Lines both ways, health timeout), exec (commands), none."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from swarmd.core.roles import Health
+from swarmd.link.exec import ExecLink
+from swarmd.link.factory import LinkConfigError, make_link
+from swarmd.link.none import NoneLink
+from swarmd.link.socket import SocketLink, SocketLinkError
+
+
+class HealthLog:
+    def __init__(self) -> None:
+        self.values: list[Health] = []
+        self.changed = asyncio.Event()
+
+    def __call__(self, h: Health) -> None:
+        self.values.append(h)
+        self.changed.set()
+
+    async def next(self, timeout: float = 3.0) -> Health:
+        await asyncio.wait_for(self.changed.wait(), timeout)
+        self.changed.clear()
+        return self.values[-1]
+
+
+async def read_json(reader: asyncio.StreamReader) -> dict[str, object]:
+    line = await asyncio.wait_for(reader.readline(), 3.0)
+    out: dict[str, object] = json.loads(line)
+    return out
+
+
+async def test_socket_link_json_lines_both_ways(tmp_path: Path) -> None:
+    path = tmp_path / "robot.sock"
+    link = SocketLink(path, health_timeout=5.0)
+    health = HealthLog()
+    await link.start(health)
+    try:
+        assert path.stat().st_mode & 0o777 == 0o660
+        reader, writer = await asyncio.open_unix_connection(str(path))
+        writer.write(b'{"health": "ok", "battery": 0.9}\n')
+        assert await health.next() == Health.OK
+        link.assign("f2", 3, {"kind": "slot", "position": [0.0, 2.0, 1.5]})
+        assert await read_json(reader) == {"assign": "f2", "epoch": 3,
+                                           "params": {"kind": "slot",
+                                                      "position": [0.0, 2.0, 1.5]}}
+        writer.write(b'not json\n{"health": "sick"}\n[1]\n{"health": "degraded"}\n')
+        assert await health.next() == Health.DEGRADED
+        assert link.counters["bad_lines"] == 3
+        # A robot controller that reconnects is told its current task at once.
+        writer.close()
+        r2, w2 = await asyncio.open_unix_connection(str(path))
+        assert (await read_json(r2))["assign"] == "f2"
+        link.release("f2")
+        assert await read_json(r2) == {"release": "f2"}
+        w2.close()
+    finally:
+        await link.close()
+    assert not path.exists()
+
+
+async def test_socket_link_health_timeout_reports_faulty_then_recovers(tmp_path: Path) -> None:
+    link = SocketLink(tmp_path / "r.sock", health_timeout=0.2)
+    health = HealthLog()
+    await link.start(health)
+    try:
+        # Never connected within the timeout: faulty (DESIGN rule 7).
+        assert await health.next() == Health.FAULTY
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
+        writer.write(b'{"health": "ok"}\n')
+        assert await health.next() == Health.OK
+        # Then silence: faulty again, reported once per silence.
+        assert await health.next() == Health.FAULTY
+        assert link.counters["timeouts"] == 2
+        writer.close()
+    finally:
+        await link.close()
+
+
+async def test_socket_link_refuses_to_replace_a_regular_file(tmp_path: Path) -> None:
+    path = tmp_path / "not-a-socket"
+    path.write_text("precious")
+    with pytest.raises(SocketLinkError, match="not a socket"):
+        await SocketLink(path).start(HealthLog())
+    assert path.read_text() == "precious"
+
+
+async def test_socket_link_drops_a_client_sending_an_endless_line(tmp_path: Path) -> None:
+    link = SocketLink(tmp_path / "r.sock", health_timeout=5.0)
+    await link.start(HealthLog())
+    try:
+        reader, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
+        writer.write(b"x" * (200 * 1024))
+        assert await asyncio.wait_for(reader.read(), 3.0) == b""  # closed by the link
+        assert link.counters["bad_lines"] == 1
+    finally:
+        await link.close()
+
+
+async def test_exec_link_runs_commands_with_the_task_in_env(tmp_path: Path) -> None:
+    out = tmp_path / "out.txt"
+    script = (f"import os; open({str(out)!r}, 'a').write(os.environ['SWARMD_ACTION'] + ' ' + "
+              "os.environ['SWARMD_FUNCTION'] + ' ' + os.environ.get('SWARMD_EPOCH', '-') + "
+              "' ' + os.environ.get('SWARMD_PARAMS', '-') + '\\n')")
+    cmd = [sys.executable, "-c", script]
+    link = ExecLink(on_assign=cmd, on_release=cmd)
+    health = HealthLog()
+    await link.start(health)
+    try:
+        assert health.values == [Health.OK]  # no health command: healthy
+        link.assign("f2", 4, {"kind": "slot"})
+        link.release("f2")
+        await asyncio.wait_for(link.wait_idle(), 10.0)
+    finally:
+        await link.close()
+    assert out.read_text().splitlines() == ['assign f2 4 {"kind": "slot"}', "release f2 - -"]
+    assert link.counters["failures"] == 0
+
+
+async def test_exec_link_health_command_and_failures(tmp_path: Path) -> None:
+    link = ExecLink(on_assign="exit 3", health_command="exit 1", health_interval=0.05)
+    health = HealthLog()
+    await link.start(health)
+    try:
+        assert await health.next(5.0) == Health.DEGRADED
+        link.assign("f1", 1, {})
+        await asyncio.wait_for(link.wait_idle(), 10.0)
+        assert link.counters["failures"] == 1
+    finally:
+        await link.close()
+
+
+async def test_exec_link_kills_a_hanging_health_command() -> None:
+    link = ExecLink(on_assign="true", health_command="sleep 30", timeout=0.2)
+    health = HealthLog()
+    await link.start(health)
+    try:
+        assert await health.next(5.0) == Health.FAULTY
+        assert link.counters["timeouts"] == 1
+    finally:
+        await link.close()
+
+
+async def test_none_link_records_and_factory_builds_kinds(tmp_path: Path) -> None:
+    link = NoneLink()
+    health = HealthLog()
+    await link.start(health)
+    link.assign("f1", 0, {})
+    link.release("f1")
+    link.set_health(Health.FAULTY)
+    assert link.history == [("assign", "f1", 0), ("release", "f1", None)]
+    assert health.values == [Health.OK, Health.FAULTY]
+    assert isinstance(make_link(None), NoneLink)
+
+    class Cfg:
+        kind = "socket"
+        path = str(tmp_path / "s.sock")
+        health_timeout = 1.0
+
+    assert isinstance(make_link(Cfg()), SocketLink)
+    Cfg.kind = "teleport"
+    with pytest.raises(LinkConfigError, match="teleport"):
+        make_link(Cfg())

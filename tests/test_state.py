@@ -1,0 +1,105 @@
+"""The persisted state file: atomic writes, validation, corrupt files, seq reservation."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from swarmd import state
+from swarmd.core.node import Restored, Snapshot
+from swarmd.core.roles import Health, Role
+
+
+def snap(role: Role, function: str | None, epoch: int, seq: int) -> Snapshot:
+    return Snapshot(robot_id=2, role=role, function=function, epoch=epoch, health=Health.OK,
+                    known={"f1": (1, 0), "f2": (2, epoch)}, suspects={}, votes={}, drops={},
+                    seq=seq)
+
+
+def test_state_round_trip_and_restored(tmp_path: Path) -> None:
+    path = state.state_path(tmp_path, 1543, 2)
+    st = state.PersistedState(robot=2, swarm=1543, known={"f2": (6, 3)}, held=("f2", 2),
+                              seq_reserved=99)
+    state.save(path, st)
+    back = state.load(path, robot=2, swarm=1543)
+    assert back == st
+    assert back.restored() == Restored(known={"f2": (6, 3)}, held=("f2", 2))
+    # Atomic write leaves no temporary file behind.
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_state_missing_file_is_a_first_start(tmp_path: Path) -> None:
+    assert state.load(tmp_path / "none.json", robot=1, swarm=1) is None
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("{not json", "not valid JSON"),
+        ("[]", "not a JSON object"),
+        ('{"version": 9}', "version 9"),
+        ('{"version": 1, "robot": 3, "swarm": 1543}', "robot 3 of swarm 1543"),
+        ('{"version": 1, "robot": 2, "swarm": 1543, "known": {"f1": [1]}}',
+         "not \\[holder, epoch\\]"),
+        ('{"version": 1, "robot": 2, "swarm": 1543, "held": ["f1", -1]}', "held epoch"),
+        ('{"version": 1, "robot": 2, "swarm": 1543, "seq_reserved": "x"}', "seq_reserved"),
+    ],
+)
+def test_state_corrupt_file_gives_a_clear_error(tmp_path: Path, content: str,
+                                                 message: str) -> None:
+    path = tmp_path / "s.json"
+    path.write_text(content)
+    with pytest.raises(state.StateError, match=message) as info:
+        state.load(path, robot=2, swarm=1543)
+    assert str(path) in str(info.value)
+
+
+def test_state_set_aside_moves_the_corrupt_file(tmp_path: Path) -> None:
+    path = tmp_path / "s.json"
+    path.write_text("garbage")
+    moved = state.set_aside(path)
+    assert moved is not None and moved.read_text() == "garbage" and not path.exists()
+
+
+def test_state_replace_is_atomic_under_a_failing_write(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "s.json"
+    good = state.PersistedState(robot=2, swarm=1, known={"f1": (1, 0)})
+    state.save(path, good)
+
+    def broken_fsync(fd: int) -> None:
+        raise OSError("disk on fire")
+
+    monkeypatch.setattr(os, "fsync", broken_fsync)
+    with pytest.raises(OSError, match="disk on fire"):
+        state.save(path, state.PersistedState(robot=2, swarm=1, known={"f1": (9, 9)}))
+    monkeypatch.undo()
+    assert state.load(path, robot=2, swarm=1) == good  # old content intact
+    assert [p.name for p in tmp_path.iterdir()] == ["s.json"]  # temp file removed
+
+
+def test_state_file_held_only_while_active_and_seq_reservation(tmp_path: Path) -> None:
+    sf = state.StateFile(tmp_path / "s.json", robot=2, swarm=1543)
+    write_at = sf.write_initial(None, seq_start=1_000)
+    assert sf.load() == state.PersistedState(robot=2, swarm=1543,
+                                             seq_reserved=1_000 + state.SEQ_RESERVE)
+    assert write_at == 1_000 + state.SEQ_RESERVE // 2
+    sf.write_snapshot(snap(Role.ACTIVE, "f2", 1, 1_010))
+    loaded = sf.load()
+    assert loaded is not None and loaded.held == ("f2", 1)
+    assert loaded.seq_reserved == 1_000 + state.SEQ_RESERVE  # far from it: unchanged
+    sf.write_snapshot(snap(Role.FENCED, None, 0, 1_000 + state.SEQ_RESERVE // 2))
+    loaded = sf.load()
+    assert loaded is not None and loaded.held is None
+    assert loaded.seq_reserved == 1_000 + state.SEQ_RESERVE // 2 + state.SEQ_RESERVE
+    assert json.loads((tmp_path / "s.json").read_text())["known"]["f2"] == [2, 0]
+
+
+def test_state_initial_seq_survives_a_clock_that_went_backwards() -> None:
+    persisted = state.PersistedState(robot=1, swarm=1, seq_reserved=5_000)
+    assert state.initial_seq(4_000, persisted) == 5_000  # clock behind: reservation wins
+    assert state.initial_seq(6_000, persisted) == 6_000
+    assert state.initial_seq(10, None) == 10

@@ -1,0 +1,118 @@
+"""UDP multicast transport on loopback (issue 3 point 2)."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+from collections.abc import Mapping
+from typing import Any
+
+import pytest
+
+from swarmd.transport.base import TransportError
+from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Sink:
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+        self.events: list[tuple[str, Mapping[str, Any]]] = []
+        self.got = asyncio.Event()
+
+    def frame(self, data: bytes) -> None:
+        self.frames.append(data)
+        self.got.set()
+
+    def event(self, name: str, fields: Mapping[str, Any]) -> None:
+        self.events.append((name, fields))
+
+
+async def test_udp_two_transports_exchange_frames_on_loopback() -> None:
+    port = free_port()
+    a, b = UdpTransport(port=port), UdpTransport(port=port)
+    sa, sb = Sink(), Sink()
+    await a.start(sa.frame, sa.event)
+    await b.start(sb.frame, sb.event)
+    try:
+        a.send(b"\x11hello")
+        await asyncio.wait_for(sb.got.wait(), 2.0)
+        assert sb.frames == [b"\x11hello"]
+        # Loopback on: the sender hears itself too (the core drops it by sender id).
+        await asyncio.wait_for(sa.got.wait(), 2.0)
+        assert sa.frames == [b"\x11hello"]
+        assert a.counters["sent"] == 1 and b.counters["received"] == 1
+        assert ("transport_up", {"kind": "udp", "group": a.group, "port": port,
+                                 "interface": "127.0.0.1"}) in sa.events
+    finally:
+        await a.close()
+        await b.close()
+
+
+async def test_udp_other_group_on_same_port_is_not_heard() -> None:
+    port = free_port()
+    a = UdpTransport(port=port, group="239.255.77.8")
+    b = UdpTransport(port=port)
+    sa, sb = Sink(), Sink()
+    await a.start(sa.frame, sa.event)
+    await b.start(sb.frame, sb.event)
+    try:
+        a.send(b"other group")
+        b.send(b"marker")
+        await asyncio.wait_for(sb.got.wait(), 2.0)
+        await asyncio.sleep(0.05)  # give a wrongly delivered datagram time to show up
+        assert sb.frames == [b"marker"]
+    finally:
+        await a.close()
+        await b.close()
+
+
+async def test_udp_socket_options_default_to_loopback_ttl_1() -> None:
+    t = UdpTransport(port=free_port())
+    sink = Sink()
+    await t.start(sink.frame, sink.event)
+    try:
+        assert t._transport is not None
+        sock = t._transport.get_extra_info("socket")
+        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 1
+        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP) == 1
+        iface = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)
+        assert socket.inet_ntoa(iface) == "127.0.0.1"
+        assert sock.getsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT) == 1
+    finally:
+        await t.close()
+
+
+async def test_udp_send_errors_are_counted_not_raised() -> None:
+    t = UdpTransport(port=free_port())
+    sink = Sink()
+    t.send(b"before start")  # not open yet
+    await t.start(sink.frame, sink.event)
+    try:
+        t.send(b"x" * (MAX_PAYLOAD + 1))
+        assert t.counters["send_errors"] == 2
+        assert [n for n, _ in sink.events].count("send_error") == 1  # only after start
+    finally:
+        await t.close()
+    t.send(b"after close")
+    assert t.counters["send_errors"] == 3
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"group": "10.0.0.1"}, "not a multicast address"),
+        ({"group": "nonsense"}, "not an IPv4 address"),
+        ({"interface": "eth0"}, "must be the IPv4 address"),
+        ({"port": 0}, "out of range"),
+        ({"ttl": 300}, "out of range"),
+    ],
+)
+def test_udp_rejects_bad_config_with_clear_message(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(TransportError, match=message):
+        UdpTransport(**kwargs)
