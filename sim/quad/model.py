@@ -114,10 +114,23 @@ def _v(*vs: float) -> str:
     return " ".join(_f(v) for v in vs)
 
 
-def quad_body(p: Preset, name: str, pos: Vec3, *, free: bool, rgba: str = "0.2 0.6 0.2 1") -> str:
+def quad_body(
+    p: Preset,
+    name: str,
+    pos: Vec3,
+    *,
+    free: bool,
+    rgba: str = "0.2 0.6 0.2 1",
+    scale: float = 1.0,
+) -> str:
     """MJCF of one craft. `free` gives it a free joint and rotor sites (physics);
-    otherwise it is a mocap body for replay (pictures)."""
-    hx, hy, hz = p.half_size
+    otherwise it is a mocap body for replay (pictures), drawn `scale` times its size so
+    it stays visible from a camera that sees the whole swarm."""
+    if free and scale != 1.0:
+        raise ValueError("only a picture (mocap) craft may be scaled")
+    hx, hy, hz = (v * scale for v in p.half_size)
+    rotors = [(x * scale, y * scale) for x, y in p.rotors]
+    radius = p.rotor_radius * scale
     parts = [f'<body name="{name}" pos="{_v(*pos)}"' + (' mocap="true">' if not free else ">")]
     if free:
         parts.append(f'<freejoint name="{name}_free"/>')
@@ -131,14 +144,14 @@ def quad_body(p: Preset, name: str, pos: Vec3, *, free: bool, rgba: str = "0.2 0
         + ("" if free else ' contype="0" conaffinity="0"')
         + "/>"
     )
-    for i, (x, y) in enumerate(p.rotors):
+    for i, (x, y) in enumerate(rotors):
         parts.append(
             f'<geom name="{name}_arm{i}" type="capsule" fromto="0 0 0 {_v(x, y, 0)}" '
             f'size="{_f(hz * 0.4)}" contype="0" conaffinity="0" rgba="0.25 0.25 0.25 1"/>'
         )
         parts.append(
             f'<geom name="{name}_prop{i}" type="cylinder" pos="{_v(x, y, hz)}" '
-            f'size="{_v(p.rotor_radius, hz * 0.15)}" contype="0" conaffinity="0" '
+            f'size="{_v(radius, hz * 0.15)}" contype="0" conaffinity="0" '
             f'rgba="0.1 0.1 0.1 0.5"/>'
         )
         if free:
@@ -188,13 +201,20 @@ def quad_xml(p: Preset, home: Vec3 = (0.0, 0.0, 0.0), name: str = "quad") -> str
 </mujoco>"""
 
 
-def scene_xml(p: Preset, n: int, extent: float = 20.0) -> str:
-    """N mocap crafts (`quad1`..`quadN`) over a floor, for replaying trajectories."""
+def scene_xml(p: Preset, n: int, extent: float = 20.0, scale: float = 2.0) -> str:
+    """N mocap crafts (`quad1`..`quadN`, drawn `scale` times their size) over a floor,
+    for replaying trajectories."""
     bodies = "\n".join(
-        quad_body(p, f"quad{i + 1}", (2.0 * i, 0.0, p.rest_height), free=False) for i in range(n)
+        quad_body(p, f"quad{i + 1}", (2.0 * i, 0.0, p.rest_height), free=False, scale=scale)
+        for i in range(n)
     )
     return f"""<mujoco model="swarm">
 {_HEADER}
+<visual><headlight ambient="0.45 0.45 0.45" diffuse="0.5 0.5 0.5" specular="0 0 0"/></visual>
+<asset>
+  <texture name="sky" type="skybox" builtin="gradient" rgb1="0.62 0.75 0.9" rgb2="1 1 1"
+    width="256" height="256"/>
+</asset>
 <worldbody>
   <light pos="0 0 30" dir="0 0 -1" directional="true" castshadow="false"/>
   <geom name="floor" type="plane" size="{_f(extent)} {_f(extent)} 0.1" material="grid"/>

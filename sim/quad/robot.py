@@ -332,15 +332,37 @@ def _trajectory(
 
 
 def load_trajectory(path: Path, t0: float | None = None) -> Trajectory:
-    """Read `traj-<robot>.jsonl`. With `t0` (the run's start, Unix time) and a header
-    `wall0`, times become run seconds; else they stay on the robot's clock."""
+    """Read a trajectory file: header lines `{"robot", "preset", "home", "wall0"}` (one
+    per process start: a restarted robot appends) and samples `{"t", "p", "q", "mode",
+    "function"[, "w"]}`. With `t0` (the run's start, Unix time) times become run
+    seconds, from each sample's Unix time `w` or its header's `wall0`; otherwise they
+    stay on the robot's clock. Lines that do not parse are skipped (a SIGKILL can cut
+    the last one)."""
+    rid, home, wall0 = 0, (0.0, 0.0, 0.0), None
+    rows: list[dict[str, Any]] = []
     with path.open() as f:
-        header = json.loads(f.readline())
-        rows = [json.loads(line) for line in f if line.strip()]
-    shift = 0.0
-    if t0 is not None and header.get("wall0") is not None:
-        shift = float(header["wall0"]) - t0
-    home = header.get("home") or [0.0, 0.0, 0.0]
-    return _trajectory(
-        int(header["robot"]), (float(home[0]), float(home[1]), float(home[2])), rows, shift
-    )
+        for line in f:
+            try:
+                row = json.loads(line)
+            except ValueError:
+                continue
+            if not isinstance(row, dict):
+                continue
+            if "robot" in row:
+                rid = int(row["robot"])
+                h = row.get("home") or (0.0, 0.0, 0.0)
+                home = (float(h[0]), float(h[1]), float(h[2]))
+                wall0 = row.get("wall0")
+                continue
+            if not {"t", "p", "q"} <= row.keys():
+                continue
+            if t0 is not None:
+                if "w" in row:
+                    row["t"] = float(row["w"]) - t0
+                elif wall0 is not None:
+                    row["t"] = float(row["t"]) + float(wall0) - t0
+            rows.append(row)
+    if not rows:
+        raise ValueError(f"{path}: no trajectory samples")
+    rows.sort(key=lambda r: float(r["t"]))
+    return _trajectory(rid, home, rows, 0.0)

@@ -1,0 +1,267 @@
+"""Pictures of a run (issue 4 item 5): a timeline of roles and functions, and a top-down
+trajectory plot. matplotlib with the Agg backend (no display needed).
+
+The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records
+`{"t", "robot", "event", ...}`), so it works for `--virtual` runs without physics too.
+`role_spans` turns the log into per-robot spans of (role, function); `sim/render.py`
+colours the crafts of the video with the same spans.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sim.quad.robot import Trajectory
+
+ROLE_COLORS: dict[str, str] = {
+    "active": "#2ca02c",
+    "standby": "#9e9e9e",
+    "claiming": "#ff7f0e",
+    "fenced": "#d62728",
+    "crashed": "#000000",
+}
+"""Role colours shared by the timeline and the video (issue 4: active green, standby grey,
+claiming orange, fenced red, crashed black)."""
+
+FENCE_SHOW = 1.0
+"""s a FENCED span lasts when no later event ends it: the node rejoins as standby after
+one heartbeat period and logs no event for that (roles.py FENCE_DONE)."""
+
+DOWN_FAULTS = frozenset({"crash", "motor"})
+"""Injected faults after which the craft is down (black) until it starts again."""
+
+
+@dataclass(frozen=True, slots=True)
+class Span:
+    """Robot `robot` had `role` (and executed `function`, if any) from start to end."""
+
+    robot: int
+    start: float
+    end: float
+    role: str
+    function: str | None
+
+
+def _role_name(value: Any) -> str:
+    name = str(value).lower()
+    if name.startswith("role."):
+        name = name[5:]
+    return "standby" if name == "inactive" else name
+
+
+def role_spans(
+    events: Iterable[Mapping[str, Any]], end: float | None = None
+) -> dict[int, list[Span]]:
+    """Per robot, the spans of (role, function) the event log implies, in time order.
+
+    started -> its role; claim -> claiming; backoff / leave -> standby; takeover ->
+    active; fenced -> fenced (FENCE_SHOW s, then standby); fault crash/motor -> crashed
+    until the robot starts again; stopped -> no span (the process is gone)."""
+    evs = sorted(
+        (e for e in events if isinstance(e.get("robot"), int) and e["robot"] > 0),
+        key=lambda e: float(e.get("t", 0.0)),
+    )
+    t_end = end if end is not None else max((float(e.get("t", 0.0)) for e in evs), default=0.0)
+    state: dict[int, tuple[float, str, str | None]] = {}
+    down: set[int] = set()
+    spans: dict[int, list[Span]] = {}
+
+    def close(rid: int, t: float) -> None:
+        if rid in state:
+            t0, role, fn = state.pop(rid)
+            if t > t0:
+                spans.setdefault(rid, []).append(Span(rid, t0, t, role, fn))
+
+    def enter(rid: int, t: float, role: str, fn: str | None) -> None:
+        if rid in down and role != "crashed":
+            return
+        prev = state.get(rid)
+        if prev is not None and prev[1] == role and prev[2] == fn:
+            return
+        close(rid, t)
+        state[rid] = (t, role, fn)
+
+    for e in evs:
+        rid, t, name = int(e["robot"]), float(e.get("t", 0.0)), str(e.get("event"))
+        prev = state.get(rid)
+        if prev is not None and prev[1] == "fenced" and t > prev[0] + FENCE_SHOW:
+            enter(rid, prev[0] + FENCE_SHOW, "standby", None)
+        fn = e.get("function")
+        fn = str(fn) if fn is not None else None
+        if name == "started":
+            down.discard(rid)
+            enter(rid, t, _role_name(e.get("role", "standby")), fn)
+        elif name == "claim":
+            enter(rid, t, "claiming", fn)
+        elif name in ("backoff", "leave"):
+            enter(rid, t, "standby", None)
+        elif name == "takeover":
+            enter(rid, t, "active", fn)
+        elif name == "fenced":
+            enter(rid, t, "fenced", fn)
+        elif name == "fault" and str(e.get("kind")) in DOWN_FAULTS:
+            enter(rid, t, "crashed", None)
+            down.add(rid)
+        elif name == "stopped":
+            close(rid, t)
+    for rid, (t0, role, _fn) in list(state.items()):
+        stop = t_end
+        if role == "fenced":
+            stop = min(t_end, t0 + FENCE_SHOW)
+        close(rid, max(stop, t0))
+        if role == "fenced" and stop < t_end:
+            spans.setdefault(rid, []).append(Span(rid, stop, t_end, "standby", None))
+    return spans
+
+
+def role_at(spans: Sequence[Span], t: float) -> Span | None:
+    """The span covering time t (None before the first and after a stop)."""
+    for s in spans:
+        if s.start <= t < s.end:
+            return s
+    if spans and abs(t - spans[-1].end) < 1e-9:
+        return spans[-1]
+    return None
+
+
+_MARKERS = {
+    # event -> (marker, colour, which robot's lane: the event's robot or its subject)
+    "fault": ("X", "#d62728", "robot"),
+    "suspect": ("v", "#9467bd", "subject"),
+    "claim": ("o", "#ff7f0e", "robot"),
+    "takeover": ("*", "#1f77b4", "robot"),
+    "alert": ("!", "#d62728", "robot"),
+}
+
+
+def timeline_png(
+    events: Sequence[Mapping[str, Any]],
+    path: Path,
+    *,
+    end: float | None = None,
+    title: str | None = None,
+) -> Path:
+    """One lane per robot: bars coloured by role with the function written on them;
+    markers for faults (X, with the kind), suspicions (v, on the suspect's lane),
+    claims (o), takeovers (*, with `fN eK`) and alerts."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.artist import Artist
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    spans = role_spans(events, end)
+    robots = sorted(
+        (set(spans) | {int(e["robot"]) for e in events if isinstance(e.get("robot"), int)})
+        - {0}
+    )
+    t_end = end if end is not None else max((float(e.get("t", 0.0)) for e in events), default=1.0)
+    lane = {rid: i for i, rid in enumerate(robots)}
+    fig, ax = plt.subplots(figsize=(12, 1.2 + 0.6 * max(1, len(robots))), dpi=100)
+    for rid, ss in spans.items():
+        for s in ss:
+            row = lane[rid]
+            ax.barh(row, s.end - s.start, left=s.start, height=0.6,
+                    color=ROLE_COLORS.get(s.role, "#cccccc"), edgecolor="white", linewidth=0.5)
+            if s.function and s.end - s.start > 0.03 * max(t_end, 1e-9):
+                ax.text((s.start + s.end) / 2, row, s.function, ha="center", va="center",
+                        color="white", fontsize=8, fontweight="bold")
+    for e in events:
+        name = str(e.get("event"))
+        if name not in _MARKERS:
+            continue
+        marker, colour, which = _MARKERS[name]
+        who = e.get("subject") if which == "subject" else e.get("robot")
+        if not isinstance(who, int) or who not in lane:
+            if name == "fault":  # robot 0: a partition; draw it across the chart
+                ax.axvline(float(e.get("t", 0.0)), color=colour, linestyle=":", linewidth=1)
+            continue
+        t = float(e.get("t", 0.0))
+        y = lane[who] + 0.38  # just below the bar (the y axis is inverted)
+        if marker == "!":
+            ax.text(t, y, "!", color=colour, fontsize=12, fontweight="bold", ha="center")
+        else:
+            ax.plot([t], [y], marker=marker, color=colour, markersize=8 if marker == "*" else 6,
+                    linestyle="none")
+        if name == "fault":
+            ax.text(t, y + 0.15, str(e.get("kind", "")), fontsize=7, color=colour, ha="left")
+        elif name == "takeover":
+            ax.text(t, y + 0.15, f"{e.get('function', '')} e{e.get('epoch', '')}", fontsize=7,
+                    color=colour, ha="left")
+    ax.set_yticks(range(len(robots)), [f"robot {r}" for r in robots])
+    ax.set_ylim(-0.6, len(robots) - 0.2)
+    ax.invert_yaxis()
+    ax.set_xlim(0, max(t_end, 1e-3))
+    ax.set_xlabel("time since the run's start (s)")
+    ax.grid(axis="x", alpha=0.3)
+    handles: list[Artist] = [Patch(color=c, label=r) for r, c in ROLE_COLORS.items()]
+    handles += [
+        Line2D([], [], marker=m, color=c, linestyle="none", label=n)
+        for n, (m, c, _w) in _MARKERS.items() if m != "!"
+    ]
+    below = -0.18 - 0.3 / max(1, len(robots))
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, below),
+              ncol=len(handles), fontsize=8, frameon=False)
+    ax.set_title(title or "roles and functions over time")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def trajectory_png(
+    trajectories: Sequence[Trajectory],
+    path: Path,
+    functions: Mapping[str, Mapping[str, Any]] | None = None,
+    *,
+    title: str | None = None,
+) -> Path:
+    """Top-down (x, y) view: every robot's path from its home (square) to where it ended
+    (dot); slots as circles and patrol loops as dashed polygons, named."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    fig, ax = plt.subplots(figsize=(8, 8), dpi=100)
+    cmap = plt.get_cmap("tab10")
+    for name, spec in (functions or {}).items():
+        kind = spec.get("kind", "slot")
+        if kind == "slot" and "position" in spec:
+            x, y = float(spec["position"][0]), float(spec["position"][1])
+            ax.add_patch(Circle((x, y), 0.25, fill=False, color="#555555", linewidth=1.5))
+            ax.text(x + 0.3, y + 0.3, name, fontsize=10, color="#333333")
+        elif kind == "patrol" and spec.get("waypoints"):
+            wps = [(float(w[0]), float(w[1])) for w in spec["waypoints"]]
+            xs = [w[0] for w in wps] + [wps[0][0]]
+            ys = [w[1] for w in wps] + [wps[0][1]]
+            ax.plot(xs, ys, linestyle="--", color="#555555", linewidth=1.2)
+            for i, (x, y) in enumerate(wps):
+                ax.text(x, y, f" {name}:{i}", fontsize=8, color="#333333")
+    for i, tr in enumerate(sorted(trajectories, key=lambda tr: tr.robot)):
+        c = cmap(i % 10)
+        ax.plot(tr.pos[:, 0], tr.pos[:, 1], color=c, linewidth=1.2, label=f"robot {tr.robot}")
+        ax.plot([tr.home[0]], [tr.home[1]], marker="s", color=c, markersize=7)
+        ax.plot([tr.pos[-1, 0]], [tr.pos[-1, 1]], marker="o", color=c, markersize=6)
+        if tr.modes and tr.modes[-1] == "crashed":
+            ax.plot([tr.pos[-1, 0]], [tr.pos[-1, 1]], marker="X", color="black", markersize=9)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(alpha=0.3)
+    if trajectories:
+        ax.legend(loc="best", fontsize=8)
+    ax.set_title(title or "top-down trajectories (square: home, dot: end, X: crashed)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -1,0 +1,296 @@
+"""Render a run: replay every robot's recorded trajectory in one MuJoCo scene.
+
+N crafts are mocap bodies (no physics here: the flying already happened in the robot
+processes), each coloured by its role at that instant from the event log (the same
+spans as the timeline: active green, standby grey, claiming orange, fenced red, crashed
+black). A fixed camera sees the whole swarm; 640x480, shadows and reflections off and
+`offsamples=0` (about 20 ms a frame instead of 100-140 ms, notes/mujoco.md). Output:
+`swarm.mp4` (imageio-ffmpeg's bundled ffmpeg) or `swarm.gif` when that fails, and key
+frames `key-*.png` at the faults and takeovers.
+
+MuJoCo picks its GL backend when it is imported (`MUJOCO_GL`), and a robot or test
+process has usually imported it already without one; so rendering always runs in a
+child process (`python -m sim.render JOB`) with `MUJOCO_GL` set to a backend that
+`gl_available()` proved loads (egl, then osmesa).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.plots import ROLE_COLORS, Span, role_at, role_spans
+from sim.quad.robot import Trajectory
+
+BACKENDS = ("egl", "osmesa")
+WIDTH, HEIGHT = 640, 480
+KEY_EVENTS = ("fault", "takeover")
+
+_PROBE = """
+import mujoco
+m = mujoco.MjModel.from_xml_string('<mujoco><worldbody><geom size="1"/></worldbody></mujoco>')
+r = mujoco.Renderer(m, 32, 32)
+r.update_scene(mujoco.MjData(m))
+img = r.render()
+assert img.shape == (32, 32, 3)
+"""
+
+
+def _gl_env(backend: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env["MUJOCO_GL"] = backend
+    env["PYOPENGL_PLATFORM"] = backend
+    return env
+
+
+@functools.cache
+def gl_available() -> tuple[bool, str]:
+    """(True, backend) for the first headless GL backend that renders a frame in a
+    child process, else (False, why each failed)."""
+    tried = []
+    first = os.environ.get("MUJOCO_GL")
+    for backend in ((first,) if first in BACKENDS else ()) + BACKENDS:
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-c", _PROBE], env=_gl_env(backend),
+                capture_output=True, text=True, timeout=60,
+            )
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            tried.append(f"{backend}: {exc}")
+            continue
+        if proc.returncode == 0:
+            return True, backend
+        last = (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[-1]
+        tried.append(f"{backend}: {last}")
+    return False, "no headless GL backend loads (" + "; ".join(tried) + ")"
+
+
+@dataclass(slots=True)
+class RenderResult:
+    """What `render_swarm` wrote."""
+
+    video: Path | None = None
+    keyframes: list[Path] = field(default_factory=list)
+    frames: int = 0
+    backend: str | None = None
+    error: str | None = None
+    """Why no video was made (no GL backend, the child failed), else None."""
+
+
+def key_times(events: Sequence[Mapping[str, Any]]) -> list[tuple[float, str]]:
+    """(t, label) of the moments worth a still: faults and takeovers."""
+    out = []
+    for e in events:
+        name = e.get("event")
+        if name == "fault":
+            out.append((float(e["t"]), f"fault-{e.get('kind', '')}-r{e.get('robot', '')}"))
+        elif name == "takeover":
+            out.append((float(e["t"]), f"takeover-{e.get('function', '')}-r{e.get('robot', '')}"))
+    return sorted(out)
+
+
+def render_swarm(
+    trajectories: Sequence[Trajectory],
+    events: Sequence[Mapping[str, Any]],
+    out_dir: Path,
+    *,
+    fps: int = 20,
+    speed: float = 1.0,
+    start: float | None = None,
+    end: float | None = None,
+    keyframes: bool = True,
+    fmt: str = "mp4",
+    preset_name: str = "x2",
+    timeout: float = 600.0,
+) -> RenderResult:
+    """Render the swarm from `start` to `end` (run seconds; default: the recorded span)
+    at `fps` frames per second of video, `speed` seconds of run per second of video.
+    Never raises for a missing backend or a failed child: see `RenderResult.error`."""
+    ok, backend = gl_available()
+    if not ok:
+        return RenderResult(error=backend)
+    if not trajectories:
+        return RenderResult(error="no trajectories to render")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t_lo = start if start is not None else min(float(tr.t[0]) for tr in trajectories)
+    t_hi = end if end is not None else max(float(tr.t[-1]) for tr in trajectories)
+    with tempfile.TemporaryDirectory(prefix="swarmd-render-") as tmp:
+        arrays: dict[str, Any] = {}
+        for i, tr in enumerate(trajectories):
+            arrays[f"t{i}"], arrays[f"p{i}"], arrays[f"q{i}"] = tr.t, tr.pos, tr.quat
+        np.savez(Path(tmp) / "traj.npz", **arrays)
+        job = {
+            "robots": [tr.robot for tr in trajectories],
+            "events": [dict(e) for e in events],
+            "out_dir": str(out_dir),
+            "fps": fps,
+            "speed": speed,
+            "start": t_lo,
+            "end": t_hi,
+            "keyframes": keyframes,
+            "fmt": fmt,
+            "preset": preset_name,
+            "traj": str(Path(tmp) / "traj.npz"),
+        }
+        job_path = Path(tmp) / "job.json"
+        job_path.write_text(json.dumps(job))
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-m", "sim.render", str(job_path)], env=_gl_env(backend),
+                capture_output=True, text=True, timeout=timeout,
+            )
+        except subprocess.TimeoutExpired:
+            return RenderResult(backend=backend, error=f"render took over {timeout:.0f} s")
+    if proc.returncode != 0:
+        tail = " | ".join(proc.stderr.strip().splitlines()[-3:])
+        return RenderResult(backend=backend, error=f"render child failed: {tail}")
+    done = json.loads(proc.stdout.strip().splitlines()[-1])
+    return RenderResult(
+        video=Path(done["video"]) if done.get("video") else None,
+        keyframes=[Path(p) for p in done["keyframes"]],
+        frames=int(done["frames"]),
+        backend=backend,
+        error=done.get("error"),
+    )
+
+
+# -- the child ----------------------------------------------------------------------------
+
+
+def _rgba(hex_colour: str) -> tuple[float, float, float, float]:
+    h = hex_colour.lstrip("#")
+    return (int(h[0:2], 16) / 255, int(h[2:4], 16) / 255, int(h[4:6], 16) / 255, 1.0)
+
+
+class _Scene:
+    """The replay scene and its renderer (child process only: needs MUJOCO_GL)."""
+
+    def __init__(self, trajs: list[Trajectory], preset_name: str) -> None:
+        import mujoco
+
+        from sim.quad.model import preset, scene_xml
+
+        self.mj = mujoco
+        self.trajs = trajs
+        lo = np.min([tr.pos.min(axis=0) for tr in trajs], axis=0)
+        hi = np.max([tr.pos.max(axis=0) for tr in trajs], axis=0)
+        extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 4.0))
+        self.model = mujoco.MjModel.from_xml_string(
+            scene_xml(preset(preset_name), len(trajs), extent=extent + 10.0)
+        )
+        self.data = mujoco.MjData(self.model)
+        self.mocap = [
+            int(self.model.body_mocapid[self.model.body(f"quad{i + 1}").id])
+            for i in range(len(trajs))
+        ]
+        self.hull = [self.model.geom(f"quad{i + 1}_hull").id for i in range(len(trajs))]
+        self.renderer = mujoco.Renderer(self.model, HEIGHT, WIDTH)
+        flags = self.renderer.scene.flags
+        flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+        flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+        cam = mujoco.MjvCamera()
+        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+        centre = (lo + hi) / 2
+        cam.lookat[:] = (centre[0], centre[1], max(0.5, centre[2]))
+        cam.distance = 0.95 * extent + 3.0
+        cam.azimuth = -90.0 + 30.0
+        cam.elevation = -35.0
+        self.camera = cam
+
+    def frame(self, t: float, spans: Mapping[int, Sequence[Span]]) -> np.ndarray[Any, Any]:
+        for i, tr in enumerate(self.trajs):
+            pos, quat = tr.at(t)
+            self.data.mocap_pos[self.mocap[i]] = pos
+            self.data.mocap_quat[self.mocap[i]] = quat
+            span = role_at(spans.get(tr.robot, ()), t)
+            role = span.role if span is not None else "standby"
+            self.model.geom_rgba[self.hull[i]] = _rgba(ROLE_COLORS.get(role, "#cccccc"))
+        self.mj.mj_kinematics(self.model, self.data)
+        self.renderer.update_scene(self.data, camera=self.camera)
+        flags = self.renderer.scene.flags
+        flags[self.mj.mjtRndFlag.mjRND_SHADOW] = 0
+        flags[self.mj.mjtRndFlag.mjRND_REFLECTION] = 0
+        img: np.ndarray[Any, Any] = self.renderer.render()
+        return img
+
+
+def _annotate(img: np.ndarray[Any, Any], text: str) -> np.ndarray[Any, Any]:
+    from PIL import Image, ImageDraw
+
+    im = Image.fromarray(img)
+    draw = ImageDraw.Draw(im)
+    draw.rectangle((0, 0, 8 + 7 * len(text), 20), fill=(255, 255, 255))
+    draw.text((4, 4), text, fill=(0, 0, 0))
+    return np.asarray(im)
+
+
+def _write_video(frames: list[np.ndarray[Any, Any]], out_dir: Path, fps: int, fmt: str) -> Path:
+    if fmt == "mp4":
+        try:
+            import imageio.v2 as imageio
+
+            path = out_dir / "swarm.mp4"
+            with imageio.get_writer(path, fps=fps, codec="libx264", quality=7,
+                                    macro_block_size=16) as w:
+                for f in frames:
+                    w.append_data(f)  # type: ignore[attr-defined]
+            return path
+        except Exception as exc:  # no ffmpeg: fall back to a GIF (still a moving picture)
+            print(f"mp4 failed ({exc}); writing a GIF", file=sys.stderr)
+    from PIL import Image
+
+    path = out_dir / "swarm.gif"
+    ims = [Image.fromarray(f).quantize(colors=128) for f in frames]
+    ims[0].save(path, save_all=True, append_images=ims[1:], duration=int(1000 / fps), loop=0)
+    return path
+
+
+def _child(job_path: Path) -> dict[str, Any]:
+    from PIL import Image
+
+    job = json.loads(job_path.read_text())
+    arrays = np.load(job["traj"])
+    trajs = [
+        Trajectory(rid, arrays[f"t{i}"], arrays[f"p{i}"], arrays[f"q{i}"], (), ())
+        for i, rid in enumerate(job["robots"])
+    ]
+    out_dir = Path(job["out_dir"])
+    events = job["events"]
+    spans = role_spans(events, end=job["end"])
+    scene = _Scene(trajs, job["preset"])
+    fps, speed = int(job["fps"]), float(job["speed"])
+    t_lo, t_hi = float(job["start"]), float(job["end"])
+    n = max(1, math.floor((t_hi - t_lo) * fps / speed) + 1)
+    frames = []
+    for k in range(n):
+        t = t_lo + k * speed / fps
+        frames.append(_annotate(scene.frame(t, spans), f"t = {t:5.1f} s"))
+    video = _write_video(frames, out_dir, fps, job["fmt"])
+    keys: list[str] = []
+    if job["keyframes"]:
+        moments = [(t_lo, "start"), *key_times(events), (t_hi, "end")]
+        for t, label in moments:
+            if not t_lo <= t <= t_hi:
+                continue
+            # A still a little after the event shows its effect (the substitute leaving).
+            shot = min(t_hi, t + (0.5 if label not in ("start", "end") else 0.0))
+            path = out_dir / f"key-{shot:07.2f}-{label}.png"
+            img = _annotate(scene.frame(shot, spans), f"t = {shot:5.1f} s  {label}")
+            Image.fromarray(img).save(path)
+            keys.append(str(path))
+    return {"video": str(video), "keyframes": keys, "frames": len(frames)}
+
+
+if __name__ == "__main__":
+    print(json.dumps(_child(Path(sys.argv[1]))))
