@@ -1,0 +1,101 @@
+"""`swarmd check`: exit codes 0/1/2, the coverage table, JSON, extensible sections."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from swarmd import check as check_mod
+from swarmd.check import Section, run_check
+from swarmd.cli import app
+from swarmd.config import SwarmConfig
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+runner = CliRunner()
+
+
+def _paper_with(tmp_path: Path, **robot_changes: dict[str, object]) -> Path:
+    doc = yaml.safe_load((CONFIGS / "paper.yaml").read_text())
+    for index, change in robot_changes.items():
+        doc["robots"][int(index.removeprefix("r"))].update(change)
+    path = tmp_path / "swarm.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_check_paper_ok_with_table() -> None:
+    result = runner.invoke(app, ["check", str(CONFIGS / "paper.yaml")])
+    assert result.exit_code == 0, result.output
+    rows = [line for line in result.output.splitlines() if "│ f" in line]
+    assert len(rows) == 4
+    f1 = [cell.strip() for cell in rows[0].split("│")[1:-1]]
+    assert f1 == ["f1", "slot", "1", "2, 4", "5", "OK"]
+    assert "t_max" in result.output
+    assert "t_max + claim_hold + warn_interval = 0.8 s" in result.output
+
+
+def test_check_warning_no_standby_still_exit_0(tmp_path: Path) -> None:
+    path = _paper_with(tmp_path, r4={"subs": [1]})
+    result = runner.invoke(app, ["check", str(path)])
+    assert result.exit_code == 0, result.output
+    assert f"{path}: functions.f4: warning: no standby covers f4" in result.output
+    assert "NO STANDBY" in result.output
+
+
+def test_check_errors_exit_1_and_lists_them_all(tmp_path: Path) -> None:
+    path = _paper_with(tmp_path, r2={"neighbors": [2]}, r5={"subs": [2, 3, 9]})
+    result = runner.invoke(app, ["check", str(path)])
+    assert result.exit_code == 1, result.output
+    assert f"{path}: robots[5].subs: robot 9 is not in the swarm" in result.output
+    assert f"{path}: functions.f4: watched by 1 robot(s)" in result.output
+    assert "UNDER QUORUM" in result.output  # the table still shows the bad swarm
+
+
+def test_check_yaml_syntax_exit_1(tmp_path: Path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text("swarm: {id: 1\n")
+    result = runner.invoke(app, ["check", str(path)])
+    assert result.exit_code == 1
+    assert "YAML syntax error" in result.output
+
+
+def test_check_unreadable_exit_2(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["check", str(tmp_path / "missing.yaml")])
+    assert result.exit_code == 2
+    assert "cannot read the file" in result.output
+
+
+def test_check_json(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["check", "--json", str(CONFIGS / "ring12.yaml")])
+    assert result.exit_code == 0
+    data = json.loads(result.output)
+    assert data["ok"] is True and data["problems"] == []
+    assert [row["status"] for row in data["coverage"]] == ["OK"] * 12
+    assert data["coverage"][0] == {
+        "function": "f1", "kind": "slot", "holder": 1, "watchers": [2, 3, 11, 12],
+        "standbys": [13], "status": "OK",
+    }
+    assert data["timing"]["detection_bound_s"] == pytest.approx(0.8)
+    bad = runner.invoke(app, ["check", "--json", str(_paper_with(tmp_path, r0={"id": 2}))])
+    assert bad.exit_code == 1
+    assert json.loads(bad.output)["problems"][0]["field"] == "robots[1].id"
+
+
+def test_check_robot_file_checks_its_swarm() -> None:
+    result = runner.invoke(app, ["check", str(CONFIGS / "robot-example.yaml")])
+    assert result.exit_code == 0, result.output
+    assert "│ f2 " in result.output
+
+
+def test_sections_can_be_appended(monkeypatch: pytest.MonkeyPatch) -> None:
+    def budget(cfg: SwarmConfig) -> Section:
+        return Section("budget", "Budget", ("robots",), ((str(len(cfg.robots)),),), {"n": 6})
+
+    monkeypatch.setattr(check_mod, "SECTIONS", [*check_mod.SECTIONS, budget])
+    report = run_check(CONFIGS / "paper.yaml")
+    assert [s.key for s in report.sections] == ["coverage", "timing", "budget"]
+    assert report.as_json()["budget"] == {"n": 6}
