@@ -103,7 +103,7 @@ class SwarmView:
         name = str(rec.get("event", ""))
         match name:
             case "started":
-                view.role = str(rec.get("role", "?"))
+                view.role = str(rec.get("role", "?")).upper()
                 view.function = rec.get("function")
                 view.process = "running"
             case "takeover":
@@ -215,7 +215,9 @@ def _main_not_reimported() -> Iterator[None]:
     if main is None:
         yield
         return
-    saved = {k: main.__dict__[k] for k in ("__file__", "__spec__") if k in main.__dict__}
+    saved: dict[str, Any] = {
+        k: main.__dict__[k] for k in ("__file__", "__spec__") if k in main.__dict__
+    }
     main.__dict__.pop("__file__", None)
     main.__dict__["__spec__"] = None
     try:
