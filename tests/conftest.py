@@ -1,0 +1,45 @@
+"""Shared fixtures: the paper's swarm plan and parameters, and hypothesis profiles.
+
+Profiles: "ci" (the default here: a few hundred examples of the random-schedule
+property, no deadline because example cost depends on the drawn swarm) and "bench"
+(thousands; `HYPOTHESIS_PROFILE=bench pytest tests/test_properties.py`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, settings
+
+from swarmd.config import load_swarm
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIGS = ROOT / "configs"
+
+settings.register_profile("ci", deadline=None, derandomize=True,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("dev", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("bench", deadline=None, max_examples=5000,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+@pytest.fixture(scope="session")
+def paper() -> tuple[SwarmPlan, Params]:
+    """configs/paper.yaml: 1-4 active in a ring, 5 covers f1/f4, 6 covers f2/f3."""
+    cfg = load_swarm(CONFIGS / "paper.yaml")
+    return cfg.to_plan(), cfg.params()
+
+
+@pytest.fixture(scope="session")
+def paper_plan(paper: tuple[SwarmPlan, Params]) -> SwarmPlan:
+    return paper[0]
+
+
+@pytest.fixture(scope="session")
+def udp_params(paper: tuple[SwarmPlan, Params]) -> Params:
+    return paper[1]

@@ -1,0 +1,117 @@
+"""A small in-memory network of core nodes on virtual time (h11's ConnectionPair, for N).
+
+For node-level tests that need a few robots talking but not the full simulator
+(`sim.virtual`): every broadcast goes through `Net.deliver` to all other live nodes
+after `delay`, dropped with probability `loss` by a seeded `random.Random`, so a test
+is a pure function of its seed (STYLE.md point 7: no sleeps, virtual time only).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import random
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.node import Node, Restored
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+
+
+@dataclass(slots=True)
+class Net:
+    """N nodes on one virtual clock. Drive it with `run_until(t)`."""
+
+    plan: SwarmPlan
+    params: Params
+    ids: Sequence[int] = ()
+    loss: float = 0.0
+    seed: int = 0
+    delay: float = 0.001
+    keys: Sequence[bytes] = ()
+    now: float = 0.0
+    nodes: dict[int, Node] = field(default_factory=dict)
+    alive: set[int] = field(default_factory=set)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    outputs: dict[int, list[Assign | Release]] = field(default_factory=dict)
+    frames: list[tuple[float, int, bytes]] = field(default_factory=list)
+    """Every broadcast: (time, sender, frame bytes)."""
+    _rng: random.Random = field(init=False)
+    _queue: list[tuple[float, int, int, bytes]] = field(default_factory=list)
+    _order: itertools.count[int] = field(default_factory=itertools.count)
+
+    def __post_init__(self) -> None:
+        self._rng = random.Random(self.seed)
+        for rid in self.ids or sorted(self.plan.robots):
+            self.boot(rid)
+
+    # -- topology ----------------------------------------------------------------------
+    def boot(self, rid: int, restored: Restored | None = None, seq_start: int = 0) -> Node:
+        """Start (or restart) robot `rid` now and run its start-up tick."""
+        node = Node(rid, self.plan, self.params, self.now, keys=self.keys,
+                    seq_start=seq_start, restored=restored)
+        self.nodes[rid] = node
+        self.alive.add(rid)
+        self.outputs.setdefault(rid, [])
+        self._execute(rid, node.tick(self.now))
+        return node
+
+    def crash(self, rid: int) -> None:
+        """The robot vanishes: no more ticks, frames to it are lost."""
+        self.alive.discard(rid)
+
+    def inject(self, rid: int, actions: Iterable[Action]) -> None:
+        """Execute actions a test obtained by calling a node directly."""
+        self._execute(rid, list(actions))
+
+    # -- clock -------------------------------------------------------------------------
+    def run_until(self, t: float) -> None:
+        """Advance virtual time to `t`, firing deliveries and deadlines in order."""
+        while True:
+            nxt, rid = self._next_timer()
+            q = self._queue[0][0] if self._queue else None
+            if q is not None and q <= t and (nxt is None or q <= nxt):
+                at, _, dst, data = heapq.heappop(self._queue)
+                self.now = at
+                if dst in self.alive:
+                    self._execute(dst, self.nodes[dst].receive(data, at))
+            elif nxt is not None and nxt <= t:
+                assert rid is not None
+                self.now = max(self.now, nxt)
+                self._execute(rid, self.nodes[rid].tick(self.now))
+            else:
+                break
+        self.now = max(self.now, t)
+
+    def _next_timer(self) -> tuple[float | None, int | None]:
+        best: tuple[float | None, int | None] = (None, None)
+        for rid in sorted(self.alive):
+            d = self.nodes[rid].next_deadline()
+            if d is not None and (best[0] is None or d < best[0]):
+                best = (d, rid)
+        return best
+
+    # -- actions -----------------------------------------------------------------------
+    def _execute(self, rid: int, actions: list[Action]) -> None:
+        for a in actions:
+            match a:
+                case Broadcast(frame):
+                    self.frames.append((self.now, rid, frame))
+                    for dst in sorted(self.alive):
+                        if dst == rid or (self.loss and self._rng.random() < self.loss):
+                            continue
+                        heapq.heappush(self._queue,
+                                       (self.now + self.delay, next(self._order), dst, frame))
+                case Event() as ev:
+                    self.events.append(ev.record(self.now, rid))
+                case Assign() | Release():
+                    self.outputs[rid].append(a)
+
+    # -- queries -----------------------------------------------------------------------
+    def named(self, name: str, robot: int | None = None) -> list[dict[str, Any]]:
+        """Events called `name` (of one robot, if given), in order."""
+        return [e for e in self.events
+                if e["event"] == name and (robot is None or e["robot"] == robot)]

@@ -1,0 +1,58 @@
+"""Timing parameters (swarmd.core.params): presets and the consistency rules."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from swarmd.core.params import PRESETS, Params, ParamsError, radio, udp
+
+
+def test_udp_preset() -> None:
+    p = udp()
+    assert (p.heartbeat_interval, p.t_max, p.quorum) == (0.1, 0.5, 2)
+    assert (p.warn_interval, p.vote_window, p.claim_hold) == (0.1, 1.0, 0.2)
+    assert (p.standby_heartbeat_interval, p.standby_timeout) == (0.5, 2.0)
+    assert (p.startup_grace, p.alert_after, p.rejoin_hold) == (2.0, 2.0, 0.7)
+
+
+def test_radio_preset() -> None:
+    p = radio()
+    assert (p.heartbeat_interval, p.t_max, p.quorum) == (0.5, 2.0, 2)
+    assert (p.warn_interval, p.vote_window, p.claim_hold) == (0.5, 4.0, 1.0)
+    assert (p.standby_heartbeat_interval, p.standby_timeout) == (2.0, 8.0)
+    assert (p.startup_grace, p.alert_after, p.rejoin_hold) == (10.0, 8.0, 3.0)
+
+
+def test_presets_registry() -> None:
+    assert PRESETS["udp"]() == udp()
+    assert PRESETS["radio"]() == radio()
+
+
+def test_t_max_under_two_heartbeats_raises_naming_t_max() -> None:
+    with pytest.raises(ParamsError, match="t_max"):
+        udp().with_overrides(t_max=0.19)
+    udp().with_overrides(t_max=0.2)  # exactly two is allowed
+
+
+@pytest.mark.parametrize(
+    ("overrides", "needle"),
+    [
+        ({"vote_window": 0.15}, "vote_window"),
+        ({"standby_timeout": 0.9}, "standby_timeout"),
+        ({"quorum": 0}, "quorum"),
+        ({"quorum": 1.5}, "quorum"),
+        ({"claim_hold": 0.0}, "claim_hold"),
+        ({"heartbeat_interval": -1.0}, "heartbeat_interval"),
+    ],
+)
+def test_bad_values_raise_naming_the_field(overrides: dict[str, float], needle: str) -> None:
+    with pytest.raises(ParamsError, match=needle):
+        udp().with_overrides(**overrides)
+
+
+def test_as_dict_round_trips() -> None:
+    p = radio()
+    fields: dict[str, Any] = dict(p.as_dict())
+    assert Params(**fields) == p

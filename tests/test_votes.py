@@ -1,0 +1,38 @@
+"""Warning counter of a standby (paper Fig. 9, DESIGN rule 3), as a table."""
+
+from __future__ import annotations
+
+import pytest
+
+from swarmd.core.votes import VoteCounter
+
+# (witness, subject, epoch, now) steps and the count expected after each.
+CASES = {
+    "distinct witnesses": ([(1, 2, 0, 0.0), (3, 2, 0, 0.1)], [1, 2]),
+    "same witness twice counts once": ([(1, 2, 0, 0.0), (1, 2, 0, 0.1)], [1, 1]),
+    "window expiry": ([(1, 2, 0, 0.0), (3, 2, 0, 1.5)], [1, 1]),
+    "refresh keeps a witness in the window": (
+        [(1, 2, 0, 0.0), (1, 2, 0, 0.9), (3, 2, 0, 1.5)], [1, 1, 2]),
+    "new subject resets": ([(1, 2, 0, 0.0), (3, 4, 0, 0.1)], [1, 1]),
+    "new epoch resets": ([(1, 2, 0, 0.0), (3, 2, 1, 0.1)], [1, 1]),
+    "edge of the window still counts": ([(1, 2, 0, 0.0), (3, 2, 0, 1.0)], [1, 2]),
+}
+
+
+@pytest.mark.parametrize(("steps", "counts"), CASES.values(), ids=CASES.keys())
+def test_votes(steps: list[tuple[int, int, int, float]], counts: list[int]) -> None:
+    v = VoteCounter(window=1.0)
+    got = [v.add(w, s, e, t) for w, s, e, t in steps]
+    assert got == counts
+
+
+def test_count_ages_out_and_clear_resets() -> None:
+    v = VoteCounter(window=1.0)
+    v.add(1, 2, 0, 0.0)
+    v.add(3, 2, 0, 0.5)
+    assert v.count(1.2) == 1
+    assert v.count(2.0) == 0
+    v.add(1, 2, 0, 3.0)
+    v.clear()
+    assert (v.subject, v.epoch, v.witnesses) == (None, -1, {})
+    assert v.add(3, 2, 0, 3.1) == 1
