@@ -160,6 +160,12 @@ ERROR_CASES: list[tuple[str, Doc | str, str, str]] = [
      "swarm.id", "less than or equal to 65535"),
     ("swarm missing", _edit(_drop(("swarm",))), "swarm", "required field is missing"),
     ("no robots", _edit(_set(("robots",), [])), "robots", "at least 1"),
+    ("recursive alias", "a: &b {c: *b}\n", "a.c", "recursive YAML alias"),
+    ("nan timing", _edit(_set(("timing", "t_max"), float("nan"))),
+     "timing.t_max", "finite number"),
+    ("numeric function name", _edit(lambda d: d["functions"].update({1: {"kind": "slot"}})),
+     "functions[1]", "valid string"),
+    ("robot not a mapping", _edit(_set(("robots", 0), 1)), "robots[0]", "valid dictionary"),
     ("key file missing", _edit(_set(("key_file",), "nope.key")), "key_file", "nope.key"),
 ]
 

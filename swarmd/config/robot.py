@@ -30,7 +30,7 @@ from swarmd.keys import KeyFileError, load_key
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 def _int_or_hex(value: Any) -> Any:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,9 +97,19 @@ def parse_source(text: str, name: str = "<string>", path: Path | None = None) ->
 
 
 def _walk(
-    node: yaml.Node, loc: Loc, lines: dict[Loc, int], dups: list[Problem], name: str
+    node: yaml.Node,
+    loc: Loc,
+    lines: dict[Loc, int],
+    dups: list[Problem],
+    name: str,
+    path: frozenset[int] = frozenset(),
 ) -> None:
     lines.setdefault(loc, node.start_mark.line + 1)
+    if id(node) in path:
+        # `&a [*a]`: an alias inside itself would recurse forever in any consumer.
+        raise ConfigError([Problem(name, format_loc(loc), "recursive YAML alias",
+                                   line=node.start_mark.line + 1)])
+    path = path | {id(node)}
     if isinstance(node, yaml.MappingNode):
         seen: set[Any] = set()
         for key_node, value_node in node.value:
@@ -115,10 +126,10 @@ def _walk(
                 )
             seen.add(key)
             lines.setdefault(sub, key_node.start_mark.line + 1)
-            _walk(value_node, sub, lines, dups, name)
+            _walk(value_node, sub, lines, dups, name, path)
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
-            _walk(item, (*loc, i), lines, dups, name)
+            _walk(item, (*loc, i), lines, dups, name, path)
 
 
 # -- pydantic errors -> problems ---------------------------------------------------------
@@ -157,6 +168,7 @@ def validation_problems(
     seen: set[tuple[str, str]] = set()
     for err in exc.errors(include_url=False):
         raw: Loc = tuple(err["loc"])
+        raw = tuple(p for p in raw if p != "[key]")  # pydantic's marker for a dict key
         if err["type"] == "missing" and raw and isinstance(raw[-1], int):
             # A too-short tuple ([x, y] for a position) reports its missing item.
             raw = raw[:-1]
@@ -200,7 +212,7 @@ def _message(err: Any, loc: Loc, known: list[str]) -> str:
         )
     if kind == "union_tag_not_found":
         return f"'kind' is missing; expected one of {_tags_for(loc)}"
-    msg = str(err["msg"]).replace(" after validation", "")
+    msg = re.sub(r" or instance of \w+", "", str(err["msg"]).replace(" after validation", ""))
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
     if kind not in ("value_error", "assertion_error"):

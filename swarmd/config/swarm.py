@@ -41,8 +41,9 @@ MIN_HOME_SPACING = 0.5
 
 class _Model(BaseModel):
     # extra="forbid": a misspelt key (`neighbours`, `t-max`) must fail loudly instead of
-    # silently leaving the default in place.
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # silently leaving the default in place. allow_inf_nan=False: YAML's `.nan` would
+    # pass every comparison in Params' checks and make a watchdog that never fires.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class SwarmInfo(_Model):
