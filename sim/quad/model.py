@@ -107,7 +107,7 @@ def preset(name: str) -> Preset:
 
 
 def _f(v: float) -> str:
-    return f"{v:.6g}"
+    return f"{v:.9g}"
 
 
 def _v(*vs: float) -> str:
