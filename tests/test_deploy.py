@@ -158,6 +158,10 @@ def test_install_sh_lays_down_twice_the_same_then_uninstalls(tmp_path: Path) -> 
     assert (root / "etc/udev/rules.d/99-swarmd-xbee.rules").read_bytes() == (
         DEPLOY / "99-swarmd-xbee.rules"
     ).read_bytes()
+    # The unit's Documentation= points at the installed guide.
+    doc = "usr/local/share/doc/swarmd/operations.md"
+    assert f"Documentation=file:/{doc}" in unit.read_text()
+    assert (root / doc).read_bytes() == (REPO / "docs/operations.md").read_bytes()
     sysusers = (root / "usr/lib/sysusers.d/swarmd.conf").read_text()
     assert "u swarmd" in sysusers and "m swarmd dialout" in sysusers
     config = root / "etc/swarmd/robot.yaml"
@@ -183,6 +187,7 @@ def test_install_sh_lays_down_twice_the_same_then_uninstalls(tmp_path: Path) -> 
     assert not unit.exists()
     assert not (root / "etc/udev/rules.d/99-swarmd-xbee.rules").exists()
     assert not (root / "usr/lib/sysusers.d/swarmd.conf").exists()
+    assert not (root / doc).exists()
     assert config.read_text() == "robot: 7\n"  # kept without --purge
     assert (root / "var/lib/swarmd").is_dir()
     _install("--root", str(root), "--uninstall")  # idempotent too
