@@ -240,3 +240,13 @@ def test_robot_example_is_a_valid_robot_file(tmp_path: Path) -> None:
     assert loaded.robot_id == 1
     assert str(loaded.state_dir) == "/var/lib/swarmd"
     assert os.fspath(loaded.swarm_path) == os.fspath(tmp_path / "swarm.yaml")
+
+
+def test_install_sh_passes_shellcheck() -> None:
+    shellcheck = shutil.which("shellcheck")
+    if shellcheck is None:
+        pytest.skip("shellcheck not installed (apt-get install shellcheck)")
+    result = subprocess.run(
+        [shellcheck, str(DEPLOY / "install.sh")], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0, result.stdout
