@@ -1,0 +1,120 @@
+"""SerialTransport on pseudo-terminals: framed frames out, good frames in, outages."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import random
+import tty
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from swarmd.transport import framing
+from swarmd.transport.serial import SerialTransport
+
+
+class Sink:
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+        self.events: list[str] = []
+
+    def frame(self, data: bytes) -> None:
+        self.frames.append(data)
+
+    def event(self, name: str, fields: Mapping[str, Any]) -> None:
+        self.events.append(name)
+
+
+def _pty(link: Path) -> tuple[int, int]:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    tmp = link.with_suffix(".tmp")
+    tmp.symlink_to(os.ttyname(slave))
+    tmp.replace(link)
+    return master, slave
+
+
+async def _until(cond: Any, timeout: float = 5.0) -> None:
+    async def loop() -> None:
+        while not cond():
+            await asyncio.sleep(0.01)
+    await asyncio.wait_for(loop(), timeout)
+
+
+async def test_noisy_split_stream_yields_exactly_the_good_frames(tmp_path: Path) -> None:
+    link = tmp_path / "radio"
+    master, slave = _pty(link)
+    tr = SerialTransport(port=str(link))
+    sink = Sink()
+    await tr.start(sink.frame, sink.event)
+    try:
+        rng = random.Random(5)
+        frames = [bytes(rng.randrange(256) for _ in range(rng.randrange(1, 64)))
+                  for _ in range(40)]
+        stream = b"".join(bytes(rng.randrange(256) for _ in range(rng.randrange(0, 9)))
+                          + framing.encode(f) for f in frames)
+        i = 0
+        while i < len(stream):  # the radio hands bytes over in odd-sized pieces
+            n = rng.choice((1, 3, 17, 100))
+            os.write(master, stream[i : i + n])
+            i += n
+        await _until(lambda: len(sink.frames) == len(frames))
+        assert sink.frames == frames
+    finally:
+        await tr.close()
+        os.close(master)
+        os.close(slave)
+
+
+async def test_send_writes_framed_bytes_and_refuses_oversize(tmp_path: Path) -> None:
+    link = tmp_path / "radio"
+    master, slave = _pty(link)
+    tr = SerialTransport(port=str(link), max_payload=32)
+    sink = Sink()
+    await tr.start(sink.frame, sink.event)
+    try:
+        tr.send(b"\x00hello\x00")
+        tr.send(b"x" * 33)
+        assert sink.events == ["transport_up", "send_error"]
+        os.set_blocking(master, False)
+        got = b""
+        dec = framing.FrameDecoder()
+        frames: list[bytes] = []
+
+        def more() -> bool:
+            nonlocal got
+            with contextlib.suppress(BlockingIOError):
+                frames.extend(dec.feed(os.read(master, 100)))
+            return bool(frames)
+
+        await _until(more)
+        assert frames == [b"\x00hello\x00"]
+    finally:
+        await tr.close()
+        os.close(master)
+        os.close(slave)
+
+
+async def test_lost_port_is_reported_and_reopened(tmp_path: Path) -> None:
+    link = tmp_path / "radio"
+    master, slave = _pty(link)
+    tr = SerialTransport(port=str(link), reopen_min=0.05, reopen_max=0.1)
+    sink = Sink()
+    await tr.start(sink.frame, sink.event)
+    try:
+        os.close(master)  # the radio is pulled: reads fail
+        os.close(slave)
+        link.unlink()
+        await _until(lambda: "transport_down" in sink.events)
+        tr.send(b"x")
+        assert tr.counters["send_error:radio down"] == 1
+        master, slave = _pty(link)
+        await _until(lambda: sink.events.count("transport_up") == 2)
+        os.write(master, framing.encode(b"back"))
+        await _until(lambda: sink.frames == [b"back"])
+    finally:
+        await tr.close()
+        os.close(master)
+        os.close(slave)

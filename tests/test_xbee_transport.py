@@ -1,0 +1,146 @@
+"""XBeeTransport against emulated radios opened by the real digi-xbee library."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from swarmd.transport.xbee import RadioMismatch, XBeeTransport
+from swarmd.xbee_emu import Medium
+
+NASTY = bytes([0x7E, 0x7D, 0x11, 0x13]) * 25
+
+
+class Sink:
+    """Frames and events one transport handed to the runtime."""
+
+    def __init__(self) -> None:
+        self.frames: list[bytes] = []
+        self.events: list[tuple[str, dict[str, Any]]] = []
+        self.changed = asyncio.Event()
+
+    def frame(self, data: bytes) -> None:
+        self.frames.append(data)
+        self.changed.set()
+
+    def event(self, name: str, fields: Mapping[str, Any]) -> None:
+        self.events.append((name, dict(fields)))
+        self.changed.set()
+
+    def names(self) -> list[str]:
+        return [n for n, _ in self.events]
+
+    async def until(self, cond: Any, timeout: float = 5.0) -> None:
+        async def loop() -> None:
+            while not cond():
+                self.changed.clear()
+                # Counters change without a callback: look again every 20 ms too.
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self.changed.wait(), 0.02)
+        await asyncio.wait_for(loop(), timeout)
+
+
+async def test_api_mode_2_escaping_end_to_end(tmp_path: Path) -> None:
+    with Medium(2, api_mode=2, directory=tmp_path) as medium:
+        tx = XBeeTransport(port=medium.path(1), api_mode=2, pan_id=0x607, role="coordinator")
+        rx = XBeeTransport(port=medium.path(2), api_mode=2, pan_id=0x607, role="router")
+        a, b = Sink(), Sink()
+        await tx.start(a.frame, a.event)
+        await rx.start(b.frame, b.event)
+        try:
+            assert tx.max_payload == 100
+            frames = [NASTY[i:] for i in range(10)]  # 91..100 bytes of escapes
+            for f in frames:
+                tx.send(f)
+            await b.until(lambda: len(b.frames) == len(frames))
+            assert sorted(b.frames) == sorted(frames)  # callbacks may reorder
+            await a.until(lambda: tx.counters["delivered"] == len(frames))
+            # 802.15.4: the transport moved the radio to 64-bit source addressing.
+            assert medium.radios[1].params["MY"] == b"\xff\xfe"
+        finally:
+            await tx.close()
+            await rx.close()
+
+
+async def test_config_mismatch_names_every_difference(tmp_path: Path) -> None:
+    with Medium(1, protocol="zigbee", directory=tmp_path) as medium:
+        tr = XBeeTransport(port=medium.path(1), protocol="802.15.4", api_mode=2,
+                           pan_id=0x1234, channel=0x0F, role="router")
+        with pytest.raises(RadioMismatch) as info:
+            await tr.start(lambda _: None, lambda *_: None)
+        text = str(info.value)
+        for part in ("protocol: radio zigbee, config 802.15.4", "API mode (AP): radio 1",
+                     "PAN id (ID): radio 0x0607, config 0x1234",
+                     "channel (CH): radio 0x0C, config 0x0F",
+                     "role (CE): radio coordinator, config router"):
+            assert part in text
+        assert len(info.value.differences) == 5
+
+
+async def test_oversize_and_in_flight_bound(tmp_path: Path) -> None:
+    with Medium(2, protocol="digimesh", directory=tmp_path, delay=0.05) as medium:
+        tr = XBeeTransport(port=medium.path(1), protocol="digimesh", max_in_flight=2,
+                           send_queue=3)
+        sink = Sink()
+        await tr.start(sink.frame, sink.event)
+        try:
+            tr.send(b"x" * 74)
+            assert ("send_error", {"kind": "xbee", "reason": "oversize", "size": 74,
+                                   "limit": 73}) in sink.events
+            for i in range(10):
+                tr.send(bytes([i]) * 10)
+                assert len(tr._in_flight) <= 2
+            # 2 in flight, 3 queued (the newest), 5 dropped oldest-first.
+            assert tr.counters["send_error:queue full"] == 5
+            await sink.until(lambda: tr.counters["delivered"] == 5)
+        finally:
+            await tr.close()
+
+
+async def test_unplugged_radio_is_reported_and_recovers(tmp_path: Path) -> None:
+    with Medium(2, directory=tmp_path) as medium:
+        tx = XBeeTransport(port=medium.path(1), reopen_min=0.05, reopen_max=0.2,
+                           watchdog_interval=0.05)
+        rx = XBeeTransport(port=medium.path(2), reopen_min=0.05, reopen_max=0.2,
+                           watchdog_interval=0.05)
+        a, b = Sink(), Sink()
+        await tx.start(a.frame, a.event)
+        await rx.start(b.frame, b.event)
+        try:
+            medium.unplug(2)
+            await b.until(lambda: "transport_down" in b.names())
+            assert not rx.up
+            tx.send(b"while down")  # nobody hears it; the sender is fine
+            await asyncio.sleep(0.3)  # several failed reopen attempts (back-off)
+            assert rx.counters["reopen_failed"] >= 1
+            medium.replug(2)  # power-cycled: MY is back to 0 and must be set again
+            await b.until(lambda: b.names().count("transport_up") == 2)
+            tx.send(b"after")
+            await b.until(lambda: b"after" in b.frames)
+            assert b"while down" not in b.frames
+            assert medium.radios[2].params["MY"] == b"\xff\xfe"
+        finally:
+            await tx.close()
+            await rx.close()
+
+
+async def test_missing_radio_at_start_keeps_running_and_retries(tmp_path: Path) -> None:
+    with Medium(1, directory=tmp_path) as medium:
+        medium.unplug(1)
+        tr = XBeeTransport(port=medium.path(1), reopen_min=0.05, reopen_max=0.1)
+        sink = Sink()
+        await tr.start(sink.frame, sink.event)  # does not raise
+        try:
+            assert sink.names() == ["transport_down"]
+            tr.send(b"x")
+            assert tr.counters["send_error:radio down"] == 1
+            medium.replug(1)
+            await sink.until(lambda: "transport_up" in sink.names())
+            assert tr.up
+        finally:
+            await tr.close()
