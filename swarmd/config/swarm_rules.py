@@ -1,0 +1,208 @@
+"""Loading a swarm file and the rules that relate its fields to each other.
+
+pydantic (swarm.py) checks each field's shape; `cross_check` then checks what no single
+field can: neighbours exist and are active, each function has one holder, every
+function has at least `quorum` distinct watchers (DESIGN rule 3), some standby covers
+it (rule 8, a warning), the timing works. All problems are collected, none stops the
+others, so `swarmd check` can print them all at once.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+from swarmd.config.errors import ConfigError, Loc, Problem, has_errors
+from swarmd.config.source import Source, parse_source, read_source, validate
+from swarmd.config.swarm import (
+    FUNCTION_NAME,
+    MIN_HOME_SPACING,
+    RobotEntry,
+    SwarmConfig,
+    Timing,
+)
+from swarmd.core.params import PRESETS, ParamsError
+from swarmd.keys import KeyFileError, load_key
+
+
+def load_swarm(path: str | Path) -> SwarmConfig:
+    """Read, validate and cross-check a swarm file.
+
+    Raises ConfigUnreadable (cannot read), ConfigError (every problem, warnings too).
+    Warnings of a usable file are in `cfg.warnings`.
+    """
+    return _finish(read_source(path))
+
+
+def parse_swarm(text: str, name: str = "<string>", path: Path | None = None) -> SwarmConfig:
+    """Like `load_swarm` for YAML text (tests, `import-launch`); `path`, if given, is
+    where relative paths in the text are resolved from."""
+    return _finish(parse_source(text, name, path))
+
+
+def inspect_swarm(source: Source) -> tuple[SwarmConfig | None, list[Problem]]:
+    """Validate without raising on cross-check errors: the config (None if its shape is
+    invalid) and every problem. `swarmd check` prints a table even for a bad swarm."""
+    try:
+        cfg: SwarmConfig = validate(SwarmConfig, source)
+    except ConfigError as exc:
+        return None, list(exc.problems)
+    cfg._source = source.name
+    cfg._directory = source.directory
+    problems = cross_check(cfg, source)
+    cfg._warnings = tuple(p for p in problems if p.severity == "warning")
+    return cfg, problems
+
+
+def _finish(source: Source) -> SwarmConfig:
+    cfg, problems = inspect_swarm(source)
+    if cfg is None or has_errors(problems):
+        raise ConfigError(problems)
+    return cfg
+
+
+def cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
+    out: list[Problem] = []
+
+    def err(loc: Loc, msg: str) -> None:
+        out.append(src.problem(loc, msg))
+
+    def warn(loc: Loc, msg: str) -> None:
+        out.append(src.problem(loc, msg, "warning"))
+
+    # Functions: names and count (one byte on the wire, swarmd.core.wire).
+    for name in cfg.functions:
+        if not FUNCTION_NAME.match(name):
+            err(("functions", name), f"function name {name!r} must start with a letter or "
+                "'_' and use letters, digits, '_', '.', '-' (at most 32)")
+    if len(cfg.functions) > 255:
+        err(("functions",), f"{len(cfg.functions)} functions; a swarm has at most 255 "
+            "(the slot index is one byte on the wire)")
+
+    # Timing: Params validates itself; name the field its message is about.
+    quorum: int | None = None
+    try:
+        quorum = cfg.params().quorum
+    except (ParamsError, TypeError) as exc:
+        err(("timing", _params_field(str(exc), cfg.timing)), str(exc))
+
+    if cfg.key_file is not None and cfg.key_path is not None:
+        try:
+            load_key(cfg.key_path)
+        except KeyFileError as exc:
+            err(("key_file",), str(exc))
+
+    # Robots, one at a time.
+    by_id: dict[int, RobotEntry] = {}
+    first_index: dict[int, int] = {}
+    for i, r in enumerate(cfg.robots):
+        if r.id in by_id:
+            err(("robots", i, "id"),
+                f"robot id {r.id} is used twice (also robots[{first_index[r.id]}])")
+        else:
+            by_id[r.id] = r
+            first_index[r.id] = i
+    holder_of: dict[str, int] = {}
+    for i, r in enumerate(cfg.robots):
+        here: Loc = ("robots", i)
+        if r.state == "standby":
+            if r.function is not None:
+                err((*here, "function"), f"robot {r.id} is a standby and holds no function "
+                    "(make it active, or drop `function`)")
+            if r.neighbors:
+                err((*here, "neighbors"), f"robot {r.id} is a standby; standbys watch nobody "
+                    "(they count warnings from the active robots, paper Fig. 9)")
+        else:
+            if r.subs:
+                err((*here, "subs"), f"robot {r.id} is active; only standby robots "
+                    "substitute others")
+            f = r.holds
+            assert f is not None
+            if f not in cfg.functions:
+                how = "" if r.function is not None else " (the default for an active robot)"
+                err((*here, "function"), f"function {f!r}{how} is not defined under "
+                    "`functions`")
+            elif f in holder_of:
+                err((*here, "function"), f"function {f} is already held by robot "
+                    f"{holder_of[f]}; each function has one holder at start")
+            else:
+                holder_of[f] = r.id
+        seen: set[int] = set()
+        for n in r.neighbors:
+            if n in seen:
+                err((*here, "neighbors"), f"robot {n} is listed twice")
+            seen.add(n)
+            if n == r.id:
+                err((*here, "neighbors"), f"robot {r.id} lists itself; a robot cannot "
+                    "witness its own failure (DESIGN rule 3)")
+            elif n not in by_id:
+                err((*here, "neighbors"), f"robot {n} is not in the swarm")
+            elif by_id[n].state == "standby" and r.state == "active":
+                err((*here, "neighbors"), f"robot {n} is a standby; neighbours are the "
+                    "robots executing functions (DESIGN rule 1)")
+        seen_subs: set[int | str] = set()
+        for ref in r.subs:
+            if ref in seen_subs:
+                err((*here, "subs"), f"{ref!r} is listed twice")
+            seen_subs.add(ref)
+            if isinstance(ref, int):
+                if ref not in by_id:
+                    err((*here, "subs"), f"robot {ref} is not in the swarm")
+                elif by_id[ref].state != "active":
+                    err((*here, "subs"), f"robot {ref} is a standby and has no function "
+                        "to substitute")
+            elif ref not in cfg.functions:
+                err((*here, "subs"), f"function {ref!r} is not defined under `functions`")
+        if r.state == "standby" and not r.subs:
+            warn((*here, "subs"), f"standby robot {r.id} covers no function; it will "
+                 "never take over")
+
+    # Per function: a holder, enough witnesses (rule 3), some standby (rule 8).
+    for row in cfg.coverage():
+        here = ("functions", row.function)
+        if not row.holders:
+            err(here, f"no active robot holds {row.function} (an active robot holds "
+                "`f<id>` unless it names another function)")
+            continue
+        if quorum is not None and len(row.watchers) < quorum:
+            who = ", ".join(map(str, row.watchers)) or "none"
+            err(here, f"watched by {len(row.watchers)} robot(s) ({who}), fewer than the "
+                f"quorum of {quorum}: its failure could never be confirmed (DESIGN rule 3); "
+                "add its holder to more robots' neighbors")
+        if not row.standbys:
+            warn(here, f"no standby covers {row.function}: if its holder fails the function "
+                 "is lost and an alert is raised (DESIGN rule 8)")
+
+    # Homes: parking spots on the ground, apart from each other (MuJoCo sim).
+    homes = [(i, r) for i, r in enumerate(cfg.robots) if r.home is not None]
+    for a, (i, r) in enumerate(homes):
+        for j, s in homes[:a]:
+            assert r.home is not None and s.home is not None
+            if math.dist(r.home, s.home) < MIN_HOME_SPACING:
+                warn(("robots", i, "home"), f"robot {r.id}'s home is within "
+                     f"{MIN_HOME_SPACING} m of robot {s.id}'s (robots[{j}])")
+    return out
+
+
+def _params_field(message: str, timing: Timing) -> str:
+    """The Params field a ParamsError is about. An override whose removal makes the
+    timing valid is the culprit (`heartbeat_interval: 0.3` breaks the preset's t_max);
+    else the first overridden field the message names, else the first named at all."""
+    overridden = timing.overrides()
+    preset = PRESETS[timing.preset]()
+    for name in overridden:
+        rest = {k: v for k, v in overridden.items() if k != name}
+        try:
+            preset.with_overrides(**rest)
+        except (ParamsError, TypeError):
+            continue
+        return name
+    names = [n for n in Timing.model_fields if n != "preset"]
+    mentioned = sorted(
+        (message.find(n), n) for n in names if re.search(rf"\b{n}\b", message)
+    )
+    for _, n in mentioned:
+        if n in overridden:
+            return n
+    return mentioned[0][1] if mentioned else "preset"
