@@ -1,0 +1,233 @@
+"""`swarmd xbee ...`: configure a radio the paper's way, show what it is, emulate radios.
+
+- `configure --port P --role coordinator|router --pan 0x607 [--channel C] [--write]`
+  applies the paper's settings (notes/xbee.md): PAN id, coordinator CE=1 with DH/DL
+  0x0000/0xFFFF (broadcast), routers CE=0 (SM=0 on Zigbee) with DH/DL 0x0000/0x0000,
+  and on 802.15.4 MY=0xFFFE (64-bit source addresses: the digi-xbee 0x81 stall). It
+  prints every setting before and after; `--write` saves to flash (WR).
+- `info --port P` prints protocol, firmware, address and the settings above.
+- `emulate N` runs N software radios on ptys until Ctrl-C (swarmd.xbee_emu); lines on
+  stdin such as `unplug 2`, `replug 2`, `loss 2 0.3`, `delay 2 0.05` change them live.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import typer
+
+SETTINGS = ("AP", "ID", "CH", "CE", "SM", "MY", "DH", "DL", "NI", "EE")
+PROTOCOL_NAMES = {"ZIGBEE": "zigbee", "RAW_802_15_4": "802.15.4", "DIGI_MESH": "digimesh"}
+
+
+def _int(text: str) -> int:
+    """Accept 0x607 (hex, as the paper types PAN ids) or decimal 1543."""
+    try:
+        return int(text, 0)
+    except ValueError:
+        raise typer.BadParameter(f"not a number: {text!r} (write 0x607 or 1543)") from None
+
+
+def _read(dev: Any) -> dict[str, str]:
+    """Current values of SETTINGS as hex strings ('-' where the firmware has none)."""
+    from digi.xbee.exception import XBeeException
+
+    out: dict[str, str] = {}
+    for name in SETTINGS:
+        try:
+            value = bytes(dev.get_parameter(name))
+        except XBeeException:
+            out[name] = "-"
+            continue
+        out[name] = value.decode(errors="replace") if name == "NI" else (
+            value.hex().upper() or "0")
+    return out
+
+
+def paper_settings(protocol: str, role: str, pan: int, channel: int | None,
+                   api_mode: int | None) -> dict[str, bytes]:
+    """The AT settings `configure` applies (see the module docstring)."""
+    wanted: dict[str, bytes] = {"ID": pan.to_bytes(2, "big")}
+    if role == "coordinator":
+        wanted.update(CE=b"\x01", DH=b"\x00\x00\x00\x00", DL=b"\x00\x00\xff\xff")
+    else:
+        wanted.update(CE=b"\x00", DH=b"\x00\x00\x00\x00", DL=b"\x00\x00\x00\x00")
+        if protocol == "zigbee":
+            wanted["SM"] = b"\x00"
+    if protocol == "802.15.4":
+        wanted["MY"] = b"\xff\xfe"
+    if channel is not None:
+        wanted["CH"] = bytes((channel,))
+    if api_mode is not None:
+        wanted["AP"] = bytes((api_mode,))
+    return wanted
+
+
+def _open(port: str, baud: int) -> Any:
+    from digi.xbee.devices import XBeeDevice
+    from digi.xbee.exception import XBeeException
+    from serial import SerialException
+
+    dev = XBeeDevice(port, baud)
+    try:
+        dev.open()
+    except (XBeeException, SerialException, OSError) as exc:
+        typer.echo(f"cannot open an XBee in API mode on {port} at {baud} baud: {exc}\n"
+                   "digi-xbee needs API mode (AP=1 or 2); check the port, the baud rate "
+                   "(BD) and that no other program holds the port.", err=True)
+        raise typer.Exit(1) from None
+    return dev
+
+
+def _protocol(dev: Any) -> str:
+    name = str(dev.get_protocol().name)
+    return PROTOCOL_NAMES.get(name, name.lower())
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `xbee` command group to the CLI."""
+    xbee = typer.Typer(help="Configure, inspect or emulate XBee radios.",
+                       no_args_is_help=True)
+    app.add_typer(xbee, name="xbee")
+
+    @xbee.command("info")
+    def info(
+        port: Annotated[str, typer.Option(help="Serial device of the radio.")],
+        baud: Annotated[int, typer.Option(help="UART baud rate (BD).")] = 9600,
+    ) -> None:
+        """Print what the radio is: protocol, firmware, address, network settings."""
+        dev = _open(port, baud)
+        try:
+            typer.echo(f"port       {port}")
+            typer.echo(f"protocol   {_protocol(dev)}")
+            typer.echo(f"hardware   {dev.get_hardware_version().description}")
+            typer.echo(f"firmware   {bytes(dev.get_firmware_version()).hex().upper()}")
+            typer.echo(f"address    {dev.get_64bit_addr()}")
+            typer.echo(f"role       {dev.get_role().description}")
+            typer.echo(f"api mode   {dev.operating_mode.description}")
+            for name, value in _read(dev).items():
+                typer.echo(f"{name:<10} {value}")
+        finally:
+            dev.close()
+
+    @xbee.command("configure")
+    def configure(
+        port: Annotated[str, typer.Option(help="Serial device of the radio.")],
+        role: Annotated[str, typer.Option(help="coordinator or router (paper: one "
+                                          "coordinator, the rest routers).")],
+        pan: Annotated[str, typer.Option(help="PAN id; the paper's is 0x607.")] = "0x607",
+        channel: Annotated[str | None, typer.Option(help="Channel (CH), e.g. 0x0C.")] = None,
+        protocol: Annotated[str | None, typer.Option(
+            help="Expected firmware: zigbee, 802.15.4 or digimesh (checked, not "
+                 "changed: that needs a firmware update in XCTU).")] = None,
+        api_mode: Annotated[int | None, typer.Option(help="Set AP to 1 or 2.")] = None,
+        baud: Annotated[int, typer.Option(help="UART baud rate (BD).")] = 9600,
+        write: Annotated[bool, typer.Option("--write", help="Save to flash (WR) so the "
+                                            "settings survive a power cycle.")] = False,
+    ) -> None:
+        """Apply the paper's radio settings and print them before and after."""
+        from digi.xbee.exception import XBeeException
+
+        if role not in ("coordinator", "router"):
+            raise typer.BadParameter("--role must be coordinator or router")
+        if api_mode not in (None, 1, 2):
+            raise typer.BadParameter("--api-mode must be 1 or 2 (digi-xbee needs API mode)")
+        pan_id = _int(pan)
+        ch = _int(channel) if channel is not None else None
+        dev = _open(port, baud)
+        try:
+            actual = _protocol(dev)
+            if protocol is not None and protocol != actual:
+                typer.echo(f"the radio on {port} runs {actual} firmware, not {protocol}; "
+                           "load the firmware with XCTU first", err=True)
+                raise typer.Exit(1)
+            before = _read(dev)
+            wanted = paper_settings(actual, role, pan_id, ch, api_mode)
+            try:
+                for name, value in wanted.items():
+                    dev.set_parameter(name, value, apply=False)  # queued (0x09) ...
+                dev.apply_changes()  # ... and applied together (AC)
+                if write:
+                    dev.write_changes()  # WR
+            except XBeeException as exc:
+                typer.echo(f"the radio refused a setting: {exc}", err=True)
+                raise typer.Exit(1) from None
+            after = _read(dev)
+        finally:
+            dev.close()
+        typer.echo(f"{'':<4} {'before':>18} {'after':>18}")
+        for name in SETTINGS:
+            mark = "  *" if before[name] != after[name] else ""
+            typer.echo(f"{name:<4} {before[name]:>18} {after[name]:>18}{mark}")
+        typer.echo("saved to flash (WR)" if write else
+                   "applied but not saved: add --write to keep it across a power cycle")
+
+    @xbee.command("emulate")
+    def emulate(
+        count: Annotated[int, typer.Argument(help="Number of radios (robot1..robotN).")],
+        protocol: Annotated[str, typer.Option(help="zigbee, 802.15.4 or digimesh.")]
+        = "802.15.4",
+        api_mode: Annotated[int, typer.Option(help="API mode, 1 or 2.")] = 1,
+        loss: Annotated[float, typer.Option(help="Per-radio frame loss, 0..1.")] = 0.0,
+        delay: Annotated[float, typer.Option(help="Per-radio extra delay, s.")] = 0.0,
+        pan: Annotated[str, typer.Option(help="PAN id of every radio.")] = "0x607",
+        channel: Annotated[str, typer.Option(help="Channel of every radio.")] = "0x0C",
+        directory: Annotated[str, typer.Option("--dir", help="Where the device symlinks "
+                                               "go.")] = "/tmp/swarmd-xbee",
+        seed: Annotated[int | None, typer.Option(help="Seed of the loss draws.")] = None,
+    ) -> None:
+        """Run N software XBee radios on pseudo-terminals until Ctrl-C."""
+        import sys
+
+        from swarmd.xbee_emu import PROTOCOLS, Medium
+
+        if protocol not in PROTOCOLS:
+            raise typer.BadParameter(f"--protocol must be one of {', '.join(PROTOCOLS)}")
+        if api_mode not in (1, 2):
+            raise typer.BadParameter("--api-mode must be 1 or 2")
+        if not 0 <= loss <= 1:
+            raise typer.BadParameter("--loss must be between 0 and 1")
+        medium = Medium(count, protocol=protocol, api_mode=api_mode, directory=directory,
+                        pan_id=_int(pan), channel=_int(channel), loss=loss, delay=delay,
+                        seed=seed)
+        medium.start()
+        try:
+            typer.echo(f"{count} emulated {protocol} radios, API mode {api_mode}, PAN "
+                       f"0x{_int(pan):04X}, channel 0x{_int(channel):02X}:")
+            for n in medium.radios:
+                typer.echo(f"  robot{n}: {medium.path(n)}")
+            typer.echo("commands on stdin: unplug N | replug N | loss N P | delay N S; "
+                       "Ctrl-C stops")
+            _command_loop(medium, sys.stdin)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            medium.stop()
+
+
+def _command_loop(medium: Any, stream: Any) -> None:
+    import time
+
+    for line in stream:
+        words = line.split()
+        try:
+            match words:
+                case ["unplug", n]:
+                    medium.unplug(int(n))
+                case ["replug", n]:
+                    medium.replug(int(n))
+                case ["loss", n, p]:
+                    medium.set_loss(int(n), float(p))
+                case ["delay", n, s]:
+                    medium.set_delay(int(n), float(s))
+                case []:
+                    continue
+                case _:
+                    typer.echo(f"unknown command: {line.strip()}", err=True)
+                    continue
+        except (KeyError, ValueError) as exc:
+            typer.echo(f"bad command {line.strip()!r}: {exc}", err=True)
+            continue
+        typer.echo(f"ok: {line.strip()}")
+    while True:  # stdin closed (e.g. run from a script): keep serving until Ctrl-C
+        time.sleep(3600)
