@@ -145,8 +145,8 @@ EOF
     chown root:swarmd "$confdir/robot.yaml" 2>/dev/null || true
     chown swarmd:swarmd "$statedir" "$logdir"
     if [ -d /run/systemd/system ]; then
-      [ "$changed_units" = 1 ] && systemctl daemon-reload
-      [ "$enable" = 1 ] && systemctl enable swarmd.service
+      if [ "$changed_units" = 1 ]; then systemctl daemon-reload; fi
+      if [ "$enable" = 1 ]; then systemctl enable swarmd.service; fi
     fi
     if command -v udevadm >/dev/null && [ -d /run/udev ]; then
       udevadm control --reload-rules

@@ -250,3 +250,61 @@ def test_install_sh_passes_shellcheck() -> None:
         [shellcheck, str(DEPLOY / "install.sh")], capture_output=True, text=True, timeout=60
     )
     assert result.returncode == 0, result.stdout
+
+
+HOST_INSTALL = r"""
+set -euo pipefail
+T="$1"; INSTALL="$2"; BIN="$3"
+# Private copies of everything install.sh writes on a host: writes land in $T, and the
+# mounts vanish with this namespace. Any failed mount stops here, before install.sh.
+for d in etc usr/lib/sysusers.d var/lib var/log usr/local/share; do
+  mkdir -p "$T/up/$d" "$T/work/$d"
+  mount -t overlay overlay \
+    -o "lowerdir=/$d,upperdir=$T/up/$d,workdir=$T/work/$d" "/$d"
+done
+echo NS-READY
+bash "$INSTALL" --bin "$BIN" > "$T/first.out"
+bash "$INSTALL" --bin "$BIN" > "$T/second.out"
+getent passwd swarmd > "$T/passwd"
+id -nG swarmd > "$T/groups"
+stat -c '%n %U:%G %a' /etc/swarmd /etc/swarmd/robot.yaml /var/lib/swarmd /var/log/swarmd \
+  > "$T/stat"
+bash "$INSTALL" --uninstall --purge > "$T/uninstall.out"
+if getent passwd swarmd >/dev/null; then echo "user still there" >&2; exit 1; fi
+test ! -e /etc/swarmd && test ! -e /etc/systemd/system/swarmd.service
+"""
+
+
+def test_install_sh_on_a_host_in_a_private_mount_namespace(tmp_path: Path) -> None:
+    """The host path (root /): user creation, chown, re-run, purge. Run in a private
+    mount namespace over overlay copies of /etc, /var/lib, ..., so the real host is
+    never written."""
+    unshare = shutil.which("unshare")
+    if unshare is None or os.geteuid() != 0:
+        pytest.skip("needs root and unshare(1) for a private mount namespace")
+    script = tmp_path / "host.sh"
+    script.write_text(HOST_INSTALL)
+    host_before = (Path("/etc/passwd").read_bytes(), Path("/etc/swarmd").exists())
+    result = subprocess.run(
+        [unshare, "--mount", "--propagation", "private", "bash", str(script), str(tmp_path),
+         str(DEPLOY / "install.sh"), "/usr/local/bin/swarmd"],
+        capture_output=True, text=True, timeout=60,
+    )
+    if "NS-READY" not in result.stdout:
+        pytest.skip(f"cannot set up a private mount namespace here: {result.stderr[-300:]}")
+    assert result.returncode == 0, result.stderr + result.stdout
+    assert "created system user swarmd" in (tmp_path / "first.out").read_text()
+    second = (tmp_path / "second.out").read_text()
+    assert "wrote" not in second and "created" not in second
+    assert ":/var/lib/swarmd:" in (tmp_path / "passwd").read_text()
+    assert "dialout" in (tmp_path / "groups").read_text().split()
+    stats = (tmp_path / "stat").read_text().splitlines()
+    assert stats == [
+        "/etc/swarmd root:swarmd 750",
+        "/etc/swarmd/robot.yaml root:swarmd 640",
+        "/var/lib/swarmd swarmd:swarmd 700",
+        "/var/log/swarmd swarmd:swarmd 750",
+    ]
+    assert "removed user swarmd" in (tmp_path / "uninstall.out").read_text()
+    # Nothing leaked to the real host.
+    assert (Path("/etc/passwd").read_bytes(), Path("/etc/swarmd").exists()) == host_before
