@@ -1,0 +1,353 @@
+"""The protocol node (swarmd.core.node) driven by hand on virtual time, paper swarm.
+
+Robots 1-4 hold f1-f4 in a ring (f2 is watched by the holders of f1 and f3); standby 5
+covers f1/f4, standby 6 covers f2/f3. Frames from "other robots" are built here with
+the codec, so every rule is exercised through the public API only (sans-IO guide).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import pytest
+from harness import Net
+from hypothesis import given
+from hypothesis import strategies as st
+
+from swarmd.core import wire
+from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.node import Node, Restored, Snapshot
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+from swarmd.core.roles import Health, Role
+
+_seqs: dict[int, int] = {}
+
+
+def frame(plan: SwarmPlan, sender: int, msg: wire.Message, *, seq: int | None = None,
+          swarm: int | None = None) -> bytes:
+    """An unsigned frame from `sender`, with a rising seq per sender unless given."""
+    if seq is None:
+        seq = _seqs[sender] = _seqs.get(sender, 1000) + 1
+    return wire.encode(wire.Frame(plan.swarm_id if swarm is None else swarm, sender, seq, msg))
+
+
+def hb(plan: SwarmPlan, f: str | None, epoch: int = 0, role: Role = Role.ACTIVE) -> wire.Heartbeat:
+    return wire.Heartbeat(plan.slot(f) if f else 0, epoch, int(role), int(Health.OK))
+
+
+def sent(actions: Sequence[Action]) -> list[wire.Message]:
+    return [wire.decode(a.frame).msg for a in actions if isinstance(a, Broadcast)]
+
+
+def events(actions: Sequence[Action], name: str) -> list[Event]:
+    return [a for a in actions if isinstance(a, Event) and a.name == name]
+
+
+class Driven:
+    """A node driven as the runtime drives it (STYLE.md point 8): after every call the
+    driver asks `next_deadline()` to re-arm its timer. The node uses that armed time to
+    notice its own stalls, so tests must keep the same contract."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+
+    def _rearm(self, actions: list[Action]) -> list[Action]:
+        self.node.next_deadline()
+        return actions
+
+    def tick(self, now: float) -> list[Action]:
+        return self._rearm(self.node.tick(now))
+
+    def receive(self, data: bytes, now: float) -> list[Action]:
+        return self._rearm(self.node.receive(data, now))
+
+    def robot_health(self, health: Health, now: float) -> list[Action]:
+        return self._rearm(self.node.robot_health(health, now))
+
+    def next_deadline(self) -> float | None:
+        return self.node.next_deadline()
+
+    def snapshot(self) -> Snapshot:
+        return self.node.snapshot()
+
+    def run_to(self, end: float) -> list[Action]:
+        """Tick at every deadline up to `end` (inclusive); return all actions."""
+        out: list[Action] = []
+        while (d := self.next_deadline()) is not None and d <= end:
+            out += self.tick(d)
+        return out
+
+
+def started(plan: SwarmPlan, params: Params, rid: int,
+            restored: Restored | None = None) -> tuple[Driven, list[Action]]:
+    node = Node(rid, plan, params, 0.0, restored=restored)
+    assert node.next_deadline() == 0.0  # right after construction: tick at once
+    d = Driven(node)
+    return d, d.tick(0.0)
+
+
+# ---------------------------------------------------------------------- start-up
+def test_active_starts_with_assign_and_heartbeat(paper_plan: SwarmPlan,
+                                                 udp_params: Params) -> None:
+    _, actions = started(paper_plan, udp_params, 2)
+    assert Assign("f2", 0) in actions
+    assert events(actions, "started")[0].fields == {"role": "active", "function": "f2"}
+    assert sent(actions) == [hb(paper_plan, "f2")]
+
+
+def test_standby_starts_without_assign(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, actions = started(paper_plan, udp_params, 6)
+    assert not [a for a in actions if isinstance(a, Assign)]
+    assert sent(actions) == [hb(paper_plan, None, role=Role.STANDBY)]
+    assert node.snapshot().role is Role.STANDBY
+
+
+# ---------------------------------------------------------------------- drops
+def test_bad_frames_become_counted_drops(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 1)
+    good = frame(paper_plan, 2, hb(paper_plan, "f2"), seq=5)
+    cases = [
+        (b"\xff\x00garbage-garbage", "version"),
+        (b"", "malformed"),
+        (frame(paper_plan, 2, hb(paper_plan, "f2"), swarm=paper_plan.swarm_id + 1), "swarm"),
+        (frame(paper_plan, 99, hb(paper_plan, "f2")), "unknown_sender"),
+        (frame(paper_plan, 1, hb(paper_plan, "f1")), "own"),
+        (good, None),
+        (good, "replay"),
+        (frame(paper_plan, 2, wire.Warn(4, 9, 0)), "bad_function"),
+        (wire.encode(wire.Frame(paper_plan.swarm_id, 2, 6, hb(paper_plan, "f2")), b"k" * 32),
+         "auth"),
+    ]
+    expected: dict[str, int] = {}
+    for i, (data, reason) in enumerate(cases):
+        actions = node.receive(data, 0.01 * (i + 1))
+        if reason is not None:
+            expected[reason] = expected.get(reason, 0) + 1
+            assert not sent(actions)
+        assert node.snapshot().drops == expected, reason
+
+
+@given(st.lists(st.binary(max_size=40), max_size=20))
+def test_receive_never_raises_on_garbage(paper_plan: SwarmPlan, udp_params: Params,
+                                         blobs: list[bytes]) -> None:
+    node = Node(6, paper_plan, udp_params, 0.0)
+    node.tick(0.0)
+    for i, data in enumerate(blobs):
+        node.receive(data, 0.001 * i)
+    assert sum(node.snapshot().drops.values()) == len(blobs) - node.frames_in
+
+
+@given(st.lists(st.tuples(st.integers(0, 0xFFFF), st.integers(0, 255), st.integers(0, 0xFFFF),
+                          st.integers(1, 4)), max_size=20))
+def test_receive_never_raises_on_well_formed_nonsense(
+        paper_plan: SwarmPlan, udp_params: Params,
+        fields: list[tuple[int, int, int, int]]) -> None:
+    """Valid frames with any field values (ids, slots, epochs) from real senders."""
+    nodes = [Node(r, paper_plan, udp_params, 0.0) for r in (2, 6)]
+    for n in nodes:
+        n.tick(0.0)
+    for i, (a, b, c, kind) in enumerate(fields):
+        choices: list[wire.Message] = [wire.Heartbeat(b, c, a & 0x0F, (a >> 4) & 0x0F),
+                                       wire.Warn(a, b, c), wire.Claim(a, b, c),
+                                       wire.Leave(b, c, a & 0xFF)]
+        msg = choices[kind - 1]
+        data = frame(paper_plan, 1 + i % 6, msg)
+        for n in nodes:
+            n.receive(data, 0.01 * i)
+            n.tick(0.01 * i)
+
+
+# ---------------------------------------------------------------------- refutation
+def test_active_answers_a_warning_about_itself(paper_plan: SwarmPlan,
+                                               udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 2)
+    actions = node.receive(frame(paper_plan, 1, wire.Warn(2, paper_plan.slot("f2"), 0)), 0.05)
+    assert sent(actions) == [hb(paper_plan, "f2")]  # at once, not at the next period
+    assert events(actions, "refute")
+
+
+def test_standby_counts_only_witnesses(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 6)
+    warn = wire.Warn(2, paper_plan.slot("f2"), 0)
+    # 4 holds f4, which does not watch f2; 2 is the suspect itself (DESIGN rule 3)
+    for t, sender in ((0.1, 4), (0.2, 2), (0.3, 4)):
+        actions = node.receive(frame(paper_plan, sender, warn), t)
+        assert not events(actions, "vote") and not events(actions, "claim")
+    assert node.snapshot().drops.get("not_witness") == 3
+    assert node.snapshot().role is Role.STANDBY
+    # control: the two real witnesses (holders of f1 and f3) do make it claim
+    node.receive(frame(paper_plan, 1, warn), 0.4)
+    actions = node.receive(frame(paper_plan, 3, warn), 0.45)
+    assert events(actions, "claim")[0].fields == {"subject": 2, "function": "f2", "epoch": 1}
+    assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
+
+
+def test_suspect_heartbeat_refutes_a_claim(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 6)
+    warn = wire.Warn(2, paper_plan.slot("f2"), 0)
+    node.receive(frame(paper_plan, 1, warn), 0.1)
+    node.receive(frame(paper_plan, 3, warn), 0.12)
+    assert node.snapshot().role is Role.CLAIMING
+    actions = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2")), 0.15)
+    assert events(actions, "refute")
+    assert node.snapshot().role is Role.STANDBY
+    later = node.tick(1.0)
+    assert not [a for a in later if isinstance(a, Assign)]
+
+
+# ---------------------------------------------------------------------- health, leave
+def test_faulty_robot_leaves_and_goes_silent(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 2)
+    actions = node.robot_health(Health.FAULTY, 0.05)
+    assert sent(actions) == [wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.FAULT))]
+    assert Release("f2") in actions
+    assert events(actions, "leave")[0].fields == {"function": "f2", "reason": "fault"}
+    assert node.snapshot().function is None
+    later = node.run_to(5.0)
+    for t in (1.0, 2.5, 5.0):
+        later += node.tick(t)
+    assert not [m for m in sent(later) if isinstance(m, wire.Heartbeat)]
+
+
+def test_leave_heard_makes_the_covering_standby_claim_at_once(
+        paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 6)
+    leave = wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.SHUTDOWN))
+    actions = node.receive(frame(paper_plan, 2, leave), 0.3)
+    assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
+    assert node.snapshot().role is Role.CLAIMING
+    actions = node.tick(0.3 + udp_params.claim_hold)
+    assert Assign("f2", 1) in actions
+    assert events(actions, "takeover")[0].fields == {"function": "f2", "epoch": 1, "replaced": 2}
+
+
+def test_leave_from_a_non_holder_is_ignored(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 6)
+    leave = wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.SHUTDOWN))
+    actions = node.receive(frame(paper_plan, 3, leave), 0.3)
+    assert not sent(actions)
+    assert node.snapshot().role is Role.STANDBY
+
+
+# ---------------------------------------------------------------------- epochs
+def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
+        paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 2)
+    actions = node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), 0.05)
+    assert events(actions, "fenced")[0].fields == {"function": "f2", "epoch": 1}
+    assert Release("f2") in actions
+    assert node.snapshot().role is Role.FENCED
+    node.tick(0.05 + udp_params.heartbeat_interval)
+    snap = node.snapshot()
+    assert (snap.role, snap.function, snap.known["f2"]) == (Role.STANDBY, None, (6, 1))
+
+
+def test_older_epoch_does_not_fence_but_gets_an_answer(
+        paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 6)
+    node.receive(frame(paper_plan, 2, wire.Leave(2, 0, 0)), 0.1)
+    node.tick(0.1 + udp_params.claim_hold)
+    assert node.snapshot().function == "f2"
+    # the old holder (2) heartbeats f2 at epoch 0: the new holder answers at once
+    actions = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2", epoch=0)), 0.6)
+    assert sent(actions) == [hb(paper_plan, "f2", epoch=1)]
+    assert node.snapshot().role is Role.ACTIVE
+
+
+def _restored(plan: SwarmPlan) -> Restored:
+    return Restored(known={f: (plan.initial_holder(f) or 0, 0) for f in plan.functions},
+                    held=("f2", 0))
+
+
+def test_rejoin_superseded_stays_standby(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, actions = started(paper_plan, udp_params, 2, restored=_restored(paper_plan))
+    assert not events(actions, "started")  # the outcome is told after the hold
+    outputs = list(actions)
+    outputs += node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), 0.1)
+    outputs += node.run_to(3.0)
+    assert not [a for a in outputs if isinstance(a, Assign)]
+    assert [e.fields for e in events(outputs, "started")] == [{"role": "standby",
+                                                               "function": None}]
+    assert node.snapshot().role is Role.STANDBY
+
+
+def test_rejoin_with_no_newer_holder_resumes(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, actions = started(paper_plan, udp_params, 2, restored=_restored(paper_plan))
+    assert not [a for a in actions if isinstance(a, Assign)]
+    early = node.run_to(udp_params.rejoin_hold - 0.01)
+    assert not [a for a in early if isinstance(a, Assign)]
+    assert node.next_deadline() == pytest.approx(udp_params.rejoin_hold)
+    actions = node.tick(udp_params.rejoin_hold)
+    assert Assign("f2", 0) in actions
+    assert events(actions, "started")[0].fields == {"role": "active", "function": "f2"}
+
+
+# ---------------------------------------------------------------------- timing
+def _feed_neighbours(node: Driven, plan: SwarmPlan, t: float) -> None:
+    for sender, f in ((2, "f2"), (4, "f4")):
+        node.receive(frame(plan, sender, hb(plan, f)), t)
+
+
+def test_stalled_node_does_not_blame_its_neighbours(paper_plan: SwarmPlan,
+                                                    udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 1)
+    t = 0.0
+    while t < 1.0:
+        _feed_neighbours(node, paper_plan, t)
+        node.tick(t)
+        t += 0.1
+    # the process froze for 10 s (SIGSTOP): neighbours kept heartbeating, we heard none
+    actions = node.tick(11.0)
+    assert not events(actions, "suspect") and not events(actions, "warn")
+    assert not [m for m in sent(actions) if isinstance(m, wire.Warn)]
+    # control: real silence after the stall is still detected, one t_max later
+    out = node.run_to(11.0 + 2 * udp_params.t_max)
+    assert {e.fields["subject"] for e in events(out, "suspect")} == {2, 4}
+
+
+def test_next_deadline_is_heartbeat_or_watch(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 1)
+    # watches are WAITING (grace 2 s): the next heartbeat comes first
+    assert node.next_deadline() == pytest.approx(udp_params.heartbeat_interval)
+    _feed_neighbours(node, paper_plan, 0.01)
+    node.tick(0.1)
+    _feed_neighbours(node, paper_plan, 0.15)
+    assert node.next_deadline() == pytest.approx(0.2)
+    # neighbours silent from 0.15: with t_max = 2 heartbeats the watch comes first
+    tight = udp_params.with_overrides(t_max=0.2)
+    node2, _ = started(paper_plan, tight, 1)
+    node2.tick(0.1)
+    _feed_neighbours(node2, paper_plan, 0.15)
+    node2.run_to(0.34)  # heartbeats at 0.2 and 0.3
+    assert node2.next_deadline() == pytest.approx(0.35)
+    assert not events(node2.tick(0.349), "suspect")
+    assert len(events(node2.tick(0.35), "suspect")) == 2
+
+
+def test_heartbeat_period_does_not_drift(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node, _ = started(paper_plan, udp_params, 1)
+    late = 0.004  # every tick arrives 4 ms after its deadline (a busy event loop)
+    beats: list[float] = [0.0]
+    while len(beats) < 1001:
+        d = node.next_deadline()
+        assert d is not None
+        t = d + late
+        _feed_neighbours(node, paper_plan, t)
+        if any(isinstance(m, wire.Heartbeat) for m in sent(node.tick(t))):
+            beats.append(t)
+    period = udp_params.heartbeat_interval
+    assert beats[1000] == pytest.approx(1000 * period + late, abs=1e-6)
+
+
+# ---------------------------------------------------------------------- a small network
+def test_harness_crash_takeover(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    net = Net(paper_plan, udp_params)
+    net.run_until(3.0)
+    assert not net.named("suspect")
+    net.crash(3)
+    net.run_until(5.0)
+    assert [e["function"] for e in net.named("takeover", 6)] == ["f3"]
+    assert Assign("f3", 1) in net.outputs[6]
+    assert {e["robot"] for e in net.named("suspect")} == {2, 4}
+    assert net.nodes[5].snapshot().known["f3"] == (6, 1)
