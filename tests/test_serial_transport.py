@@ -118,3 +118,22 @@ async def test_lost_port_is_reported_and_reopened(tmp_path: Path) -> None:
         await tr.close()
         os.close(master)
         os.close(slave)
+
+
+async def test_serial_transports_over_transparent_emulated_radios(tmp_path: Path) -> None:
+    from swarmd.xbee_emu import Medium
+
+    with Medium(3, directory=tmp_path, transparent=True) as medium:
+        sinks = {n: Sink() for n in (1, 2, 3)}
+        trs = {n: SerialTransport(port=medium.path(n)) for n in (1, 2, 3)}
+        for n, tr in trs.items():
+            await tr.start(sinks[n].frame, sinks[n].event)
+        try:
+            trs[1].send(b"from one\x00")
+            trs[3].send(b"from three")
+            await _until(lambda: len(sinks[2].frames) == 2)
+            assert sorted(sinks[2].frames) == [b"from one\x00", b"from three"]
+            assert sinks[1].frames == [b"from three"]
+        finally:
+            for tr in trs.values():
+                await tr.close()

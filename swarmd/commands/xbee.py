@@ -175,6 +175,9 @@ def register(app: typer.Typer) -> None:
         directory: Annotated[str, typer.Option("--dir", help="Where the device symlinks "
                                                "go.")] = "/tmp/swarmd-xbee",
         seed: Annotated[int | None, typer.Option(help="Seed of the loss draws.")] = None,
+        transparent: Annotated[bool, typer.Option(
+            "--transparent", help="AP=0 radios (raw byte stream, for `kind: serial`) "
+            "instead of API mode.")] = False,
     ) -> None:
         """Run N software XBee radios on pseudo-terminals until Ctrl-C."""
         import sys
@@ -189,10 +192,11 @@ def register(app: typer.Typer) -> None:
             raise typer.BadParameter("--loss must be between 0 and 1")
         medium = Medium(count, protocol=protocol, api_mode=api_mode, directory=directory,
                         pan_id=_int(pan), channel=_int(channel), loss=loss, delay=delay,
-                        seed=seed)
+                        seed=seed, transparent=transparent)
         medium.start()
         try:
-            typer.echo(f"{count} emulated {protocol} radios, API mode {api_mode}, PAN "
+            mode = "transparent (AP=0)" if transparent else f"API mode {api_mode}"
+            typer.echo(f"{count} emulated {protocol} radios, {mode}, PAN "
                        f"0x{_int(pan):04X}, channel 0x{_int(channel):02X}:")
             for n in medium.radios:
                 typer.echo(f"  robot{n}: {medium.path(n)}")

@@ -85,11 +85,16 @@ class Medium:
         delay: float = 0.0,
         seed: int | None = None,
         reply_delay: float = REPLY_DELAY,
+        transparent: bool = False,
     ) -> None:
         if count < 1:
             raise ValueError("need at least one radio")
         self.directory = Path(directory)
         self.reply_delay = reply_delay
+        self.transparent = transparent
+        """AP=0 radios: UART bytes go on the air as they come (one read = one RF packet)
+        and come out of every other radio's UART raw; no API frames. This is what the
+        serial transport is for (the paper's DH/DL broadcast setting)."""
         self.radios: dict[int, EmulatedRadio] = {
             n: EmulatedRadio(n, protocol, api_mode=api_mode, pan_id=pan_id, channel=channel,
                              coordinator=n == 1, loss=loss, delay=delay)
@@ -257,6 +262,9 @@ class Medium:
                 return  # no client attached right now
             raise
         radio = self.radios[n]
+        if self.transparent:
+            self._transparent(radio, data)
+            return
         port.parser.api_mode = radio.current_api_mode
         for frame in port.parser.feed(data):
             for out in radio.handle(frame):
@@ -266,6 +274,34 @@ class Medium:
                     case Transmit():
                         self._transmit(radio, out)
             port.parser.api_mode = radio.current_api_mode
+
+    def _transparent(self, radio: EmulatedRadio, data: bytes) -> None:
+        for start in range(0, len(data), radio.max_payload):
+            packet = data[start : start + radio.max_payload]  # the radio packetises
+            now = time.monotonic()
+            net = radio.network
+            begin = max(now, self._busy_until.get(net, 0.0))
+            end = begin + airtime(radio.protocol, len(packet))
+            self._busy_until[net] = end
+            for m, peer in self.radios.items():
+                if m == radio.number or m not in self._ports or peer.network != net:
+                    continue
+                if self._rng.random() < radio.loss or self._rng.random() < peer.loss:
+                    self.lost += 1
+                    continue
+                self.delivered += 1
+                self._at(end - now + radio.delay, functools.partial(self._write_raw, m, packet))
+
+    def _write_raw(self, n: int, data: bytes) -> None:
+        port = self._ports.get(n)
+        if port is None:
+            return
+        try:
+            written = os.write(port.master, data)
+        except (BlockingIOError, OSError):
+            written = 0
+        if written < len(data):
+            self.uart_overflows += 1
 
     def _transmit(self, radio: EmulatedRadio, request: Transmit) -> None:
         n = radio.number
