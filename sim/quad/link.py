@@ -151,6 +151,8 @@ class QuadLink:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
+        self._catch_up()
+        self.robot.sample_now()
         self._flush()
         if self._file is not None:
             self._file.close()

@@ -196,6 +196,11 @@ class QuadRobot:
             if self.record and self.t >= self._next_sample - 1e-9:
                 self._sample()
 
+    def sample_now(self) -> None:
+        """Record the present state now (the last sample before a flush at the end)."""
+        if not self.samples or self.samples[-1].t < self.t:
+            self._sample()
+
     def _sample(self) -> None:
         q = self.data.qpos
         self.samples.append(

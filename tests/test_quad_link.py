@@ -1,0 +1,87 @@
+"""QuadLink: the simulated robot behind the robot-link interface (paper Fig. 4).
+
+Real-time but short: the link's own task steps physics on the loop's clock; the tests
+wait for conditions (bounded), never for fixed protocol delays.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from sim.quad.link import QuadLink, default_home
+from sim.quad.robot import Mode, load_trajectory
+from swarmd.core.roles import Health
+from swarmd.link.base import RobotLink
+
+
+async def _until(cond: Callable[[], bool], timeout: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        assert time.monotonic() < deadline, "condition not met in time"
+        await asyncio.sleep(0.02)
+
+
+async def test_reports_health_and_flies_what_it_is_assigned(tmp_path: Path) -> None:
+    link = QuadLink(4, (0.5, -3.5, 0.0), traj_path=tmp_path / "traj-4.jsonl", wake=0.02,
+                    health_period=0.1)
+    _: RobotLink = link  # it is a RobotLink
+    seen: list[Health] = []
+    t0 = time.time()
+    await link.start(seen.append)
+    try:
+        assert seen == [Health.OK]  # at once
+        await _until(lambda: len(seen) >= 3)  # and periodically (health_period)
+        link.assign("f4", 1, {"kind": "slot", "position": [0.5, -3.5, 1.0], "t0": t0})
+        await _until(lambda: link.robot.position[2] > 0.3)
+        assert link.robot.function == "f4"
+        link.fail_motor()
+        assert seen[-1] is Health.FAULTY  # reported at once, the daemon still runs
+        await _until(lambda: link.robot.mode is Mode.CRASHED)
+    finally:
+        await link.close()
+    assert max(link.lateness) < 0.5
+    tr = load_trajectory(tmp_path / "traj-4.jsonl", t0=t0)
+    assert tr.robot == 4 and len(tr.t) > 5
+    assert tr.modes[-1] == "crashed" and tr.pos[:, 2].max() > 0.3
+    assert -1e-3 <= tr.t[0] < 1.0  # run time, from each sample's Unix time (0.1 ms)
+
+
+async def test_bad_assignment_is_counted_not_raised(caplog: pytest.LogCaptureFixture) -> None:
+    link = QuadLink(1)
+    await link.start(lambda h: None)
+    try:
+        link.assign("f1", 1, {"kind": "warp"})
+        link.assign("f1", 1, {"kind": "slot", "position": [0, 0, 1], "t0": "soon"})
+        assert link.errors == 2 and link.robot.mode is Mode.PARKED
+        assert "cannot fly f1" in caplog.text
+        link.release("f9")  # never assigned: harmless
+    finally:
+        await link.close()
+
+
+async def test_forced_unhealthy_is_reported() -> None:
+    seen: list[Health] = []
+    link = QuadLink(1)
+    await link.start(seen.append)
+    try:
+        link.set_health(Health.FAULTY)
+        assert seen[-1] is Health.FAULTY and link.health() is Health.FAULTY
+    finally:
+        await link.close()
+
+
+def test_for_robot_takes_home_and_state_dir(tmp_path: Path) -> None:
+    cfg = SimpleNamespace(robot_id=6, entry=SimpleNamespace(home=(2.5, -3.5)),
+                          state_dir=tmp_path / "state" / "6")
+    link = QuadLink.for_robot(cfg)
+    assert link.home == (2.5, -3.5, 0.0)
+    assert link.traj_path == tmp_path / "state" / "6" / "traj-6.jsonl"
+    no_home = QuadLink.for_robot(SimpleNamespace(robot_id=3, entry=SimpleNamespace(home=None),
+                                                 state_dir=tmp_path))
+    assert no_home.home == default_home(3)

@@ -1,0 +1,60 @@
+"""Rendering the swarm from recorded trajectories (sim/render.py).
+
+Skips with the reason where no headless GL backend loads (CI installs libegl1,
+libegl-mesa0, libgl1-mesa-dri and libosmesa6: scripts/system-deps.sh)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import imageio.v3 as iio
+import pytest
+from PIL import Image
+
+from sim.quad.robot import QuadRobot, trajectory_of
+from sim.render import gl_available, key_times, render_swarm
+
+EVENTS = [
+    {"t": 0.0, "robot": 1, "event": "started", "role": "active", "function": "f1"},
+    {"t": 0.0, "robot": 2, "event": "started", "role": "standby", "function": None},
+    {"t": 1.0, "robot": 1, "event": "fault", "kind": "motor"},
+    {"t": 1.5, "robot": 2, "event": "takeover", "function": "f1", "epoch": 1, "replaced": 1},
+]
+
+
+def test_key_times_are_faults_and_takeovers() -> None:
+    assert key_times(EVENTS) == [(1.0, "fault-motor-r1"), (1.5, "takeover-f1-r2")]
+
+
+def test_render_writes_a_video_and_keyframes(tmp_path: Path) -> None:
+    ok, why = gl_available()
+    if not ok:
+        pytest.skip(why)
+    a, b = QuadRobot(1, (0.0, 0.0, 0.0)), QuadRobot(2, (1.5, 0.0, 0.0))
+    a.assign("f1", {"kind": "slot", "position": [0.0, 1.0, 1.0]})
+    a.step_until(1.0)
+    a.fail_motor(0)
+    b.step_until(1.5)
+    b.assign("f1", {"kind": "slot", "position": [0.0, 1.0, 1.0]})
+    a.step_until(2.5)
+    b.step_until(2.5)
+    res = render_swarm([trajectory_of(a), trajectory_of(b)], EVENTS, tmp_path, fps=10)
+    assert res.error is None, res.error
+    assert res.frames == 26  # 2.5 s at 10 fps, both ends
+    assert res.video is not None and res.video.stat().st_size > 1000
+    frames = iio.imread(res.video, index=None)
+    assert frames.shape[1:] == (480, 640, 3)
+    assert len(res.keyframes) == 4  # start, fault, takeover, end
+    for p in res.keyframes:
+        with Image.open(p) as im:
+            assert im.size == (640, 480)
+            # not a blank frame: the floor's checker and the crafts give contrast
+            lo, hi = im.convert("L").getextrema()
+            assert isinstance(lo, int) and isinstance(hi, int) and hi - lo > 50
+
+
+def test_no_backend_is_an_error_not_an_exception(tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("sim.render.gl_available", lambda: (False, "no GL here"))
+    res = render_swarm([], [], tmp_path)
+    assert res.error == "no GL here" and res.video is None
