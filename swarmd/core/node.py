@@ -369,6 +369,14 @@ class Node:
         if fresh:  # repeated warnings refresh a vote; only a new witness is an event
             self._emit("vote", subject=w.suspect, function=f, **{"from": sender}, count=count)
         if count >= self.params.quorum:
+            # Rule 4 from our own ears: the channel is a broadcast, so the standby hears
+            # the suspect too. Heard within T_max/2, the suspect is alive whatever the
+            # witnesses missed (loss); after a real crash this is silent by the time
+            # warnings come (they come T_max after the last heartbeat), so it costs no
+            # latency. The next warning re-checks.
+            last = self.heard_at.get(w.suspect)
+            if last is not None and now - last < self.params.t_max / 2:
+                return
             self._start_claim(f, w.suspect, epoch, now)
 
     def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
