@@ -156,7 +156,47 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
     )
 
 
-SECTIONS: list[SectionBuilder] = [coverage_section, timing_section]
+def budget_section(cfg: SwarmConfig) -> Section | None:
+    """Channel budget on every medium swarmd speaks (issue 5, point 6): frames and
+    bytes per second on the air, airtime at 250 kbps, whether a heartbeat fits."""
+    from swarmd.budget import MEDIA, channel_budget
+
+    params = _params(cfg)
+    if params is None:
+        return None
+    try:
+        plan = cfg.to_plan()
+    except ConfigError:
+        return None
+    signed = cfg.key_file is not None
+    rows = []
+    data = []
+    notes: list[str] = []
+    for medium in MEDIA:
+        b = channel_budget(plan, params, medium=medium, signed=signed)
+        rows.append((
+            medium,
+            f"{b.frames_per_s:.1f}",
+            f"{b.bytes_per_s:.0f}",
+            "-" if b.airtime_share is None else f"{b.airtime_share:.1%}",
+            "-" if b.peak_airtime_share is None else f"{b.peak_airtime_share:.1%}",
+            f"{b.heartbeat_bytes}/{b.max_payload} B " + ("fits" if b.heartbeat_fits else
+                                                        "DOES NOT FIT"),
+        ))
+        data.append(b.as_dict())
+        notes += [f"{medium}: {w}" for w in b.warnings]
+    return Section(
+        key="channel_budget",
+        title=f"Channel budget ({'signed' if signed else 'unsigned'} frames)",
+        columns=("medium", "frames/s", "bytes/s", "airtime", "airtime in failover",
+                 "heartbeat"),
+        rows=tuple(rows),
+        data=data,
+        notes=tuple(notes),
+    )
+
+
+SECTIONS: list[SectionBuilder] = [coverage_section, timing_section, budget_section]
 """Report sections in order; append a builder to add one (e.g. the channel budget)."""
 
 
