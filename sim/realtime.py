@@ -417,6 +417,9 @@ class Orchestrator:
     def _resume(self, proc: _Proc) -> None:
         if proc.alive and proc.process.pid is not None:
             _kill(proc.process.pid, signal.SIGCONT)
+            view = self.view.robots.get(proc.robot_id)
+            if view is not None:
+                view.process = "running"
 
     # -- the run ----------------------------------------------------------------------------
     async def run(self) -> RealtimeResult:
