@@ -165,6 +165,69 @@ def render_swarm(
     )
 
 
+def trajectory_files(report_dir: Path) -> list[Path]:
+    """The robots' trajectory files a real-time run left under `report_dir`
+    (`realtime/state/<id>/traj-<id>.jsonl`, written by `sim.quad.link.QuadLink`)."""
+    return sorted(report_dir.glob("realtime/state/*/traj-*.jsonl"))
+
+
+def run_origin(paths: Sequence[Path]) -> float | None:
+    """The run's t0 (Unix time) as the trajectory headers tell it: every robot's link
+    starts when its daemon does, at t0, so the earliest header `wall0` is t0 to within
+    the start-up jitter (milliseconds). None if no header says."""
+    origins = []
+    for path in paths:
+        try:
+            with path.open() as f:
+                head = json.loads(f.readline())
+        except (OSError, ValueError):
+            continue
+        if isinstance(head, dict) and head.get("wall0") is not None:
+            origins.append(float(head["wall0"]))
+    return min(origins) if origins else None
+
+
+def report_pictures(
+    report_dir: Path,
+    events: Sequence[Mapping[str, Any]],
+    functions: Mapping[str, Mapping[str, Any]] | None = None,
+    *,
+    t0: float | None = None,
+    end: float | None = None,
+    video: bool = True,
+    fps: int = 20,
+    speed: float = 1.0,
+) -> dict[str, Any]:
+    """The physics pictures of `swarmd sim --report DIR` (issue 4 item 5), from the
+    trajectory files the robots wrote: `trajectories.png` always, and where a GL backend
+    loads `swarm.mp4` (or `.gif`) and `key-*.png`. Returns what was written, and why
+    not (`"video_error"`); never raises for a robot's broken trajectory file."""
+    from sim.plots import trajectory_png
+    from sim.quad.robot import load_trajectory
+
+    paths = trajectory_files(report_dir)
+    origin = t0 if t0 is not None else run_origin(paths)
+    trajs = []
+    out: dict[str, Any] = {"trajectories": len(paths)}
+    for path in paths:
+        try:
+            trajs.append(load_trajectory(path, t0=origin))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            out.setdefault("skipped", []).append(f"{path.name}: {exc}")
+    if not trajs:
+        out["video_error"] = "no trajectories (run without physics?)"
+        return out
+    out["trajectory_png"] = trajectory_png(trajs, report_dir / "trajectories.png", functions)
+    if video:
+        res = render_swarm(trajs, events, report_dir, fps=fps, speed=speed,
+                           start=0.0, end=end)
+        out.update(video=res.video, keyframes=res.keyframes, frames=res.frames,
+                   backend=res.backend)
+        if res.error:
+            out["video_error"] = res.error
+    return out
+
+
 # -- the child ----------------------------------------------------------------------------
 
 

@@ -37,6 +37,8 @@ def test_motor_failure_is_faulty_and_the_craft_falls() -> None:
     assert r.health() is Health.OK and r.position[2] > 1.4
     r.fail_motor(2)
     assert r.health() is Health.FAULTY  # at once: the daemon leaves (rule 7)
+    r.step_until(5.1)
+    r.release("f2")  # what the daemon does after LEAVE: the craft cannot land, it falls
     r.step_until(8.0)
     assert r.position[2] < 0.3  # fell
     assert r.mode is Mode.CRASHED and r.crashed_at is not None

@@ -228,10 +228,13 @@ class QuadRobot:
             self.battery
             - thrust / (self.preset.mass * GRAVITY) * CONTROL_DT / self.battery_s,
         )
-        if self.mode in (Mode.TAKEOFF, Mode.FLYING):
+        # A craft with a motor out is falling whatever it was told (the daemon releases
+        # it after LEAVE, rule 7): touching the ground then is a crash, never a landing.
+        falling = bool(self.failed_motors) and self.mode is not Mode.PARKED
+        if self.mode in (Mode.TAKEOFF, Mode.FLYING) or falling:
             if pos[2] > z_home + ARM_HEIGHT:
                 self.armed = True
-            if self.armed and self._on_ground():
+            if (self.armed or falling) and self._on_ground():
                 self.mode = Mode.CRASHED
                 self.crashed_at = self.t
         if self.mode in (Mode.PARKED, Mode.CRASHED):
