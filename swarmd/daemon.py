@@ -217,7 +217,8 @@ class Daemon:
             receive_filter=self.receive_filter,
             state_writer=self.state_file.write_snapshot,
             persist_after=now + params.rejoin_hold if holding else now,
-            metrics=self.metrics,
+            # Without an endpoint nobody reads the counters: spare the per-frame cost.
+            metrics=self.metrics if cfg.metrics is not None else None,
             notifier=self.notifier,
             time_origin=self.time_origin,
         )

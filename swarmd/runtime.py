@@ -264,7 +264,8 @@ class Runtime:
         due = self._armed_at
         self._armed_at = None
         now = self.loop.time()
-        if due is not None:
+        if due is not None and self.counters["ticks"] > 0:
+            # (The first tick is due at construction time; start-up is not lateness.)
             lateness = max(0.0, now - due)
             self.max_lateness = max(self.max_lateness, lateness)
             if self.metrics is not None:
@@ -352,7 +353,6 @@ class Runtime:
             if last is not None and now - last < _RATE_LIMIT_S:
                 return  # counted; reported at most once a second
             self._reported[name] = now
-        log.info("transport: %s", name, extra={"transport_event": name, **fields})
         t = round(self.wall_clock() - self.time_origin, 6)
         self._emit_record({"t": t, "robot": self.robot_id, "event": name, **fields})
 

@@ -77,8 +77,8 @@ async def test_udp_socket_options_default_to_loopback_ttl_1() -> None:
     sink = Sink()
     await t.start(sink.frame, sink.event)
     try:
-        assert t._transport is not None
-        sock = t._transport.get_extra_info("socket")
+        sock = t._sock
+        assert sock is not None
         assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 1
         assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP) == 1
         iface = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)

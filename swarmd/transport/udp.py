@@ -33,19 +33,10 @@ DEFAULT_INTERFACE = "127.0.0.1"
 MAX_PAYLOAD = 1472
 
 
-class _Protocol(asyncio.DatagramProtocol):
-    def __init__(self, owner: UdpTransport) -> None:
-        self._owner = owner
-
-    def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
-        self._owner._received(data)
-
-    def error_received(self, exc: Exception) -> None:
-        self._owner._error("receive", exc)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if exc is not None:
-            self._owner._error("connection_lost", exc)
+# Datagrams read per readiness event: under a flood this bounds how long one read keeps
+# the loop (the runtime's queue absorbs the batch); when idle it is one read.
+READ_BATCH = 32
+RECV_SIZE = 2048  # > MAX_PAYLOAD; a larger datagram is truncated and fails to decode
 
 
 class UdpTransport:
@@ -84,7 +75,8 @@ class UdpTransport:
         self.loopback = loopback
         self.counters: dict[str, int] = {"sent": 0, "received": 0, "send_errors": 0,
                                          "receive_errors": 0}
-        self._transport: asyncio.DatagramTransport | None = None
+        self._sock: socket.socket | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
         self._on_event: EventCallback | None = None
 
@@ -125,24 +117,45 @@ class UdpTransport:
         """Open the socket, join the group, deliver datagrams to `on_frame`."""
         self._on_frame = on_frame
         self._on_event = on_event
-        loop = asyncio.get_running_loop()
-        sock = self._socket()
-        transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(self), sock=sock)
-        self._transport = transport
+        self._loop = asyncio.get_running_loop()
+        self._sock = self._socket()
+        # A plain reader rather than asyncio's datagram transport: that one allocates a
+        # 256 KiB buffer per datagram, which dominates an idle daemon's CPU time
+        # (bench/bench_daemon.py); our frames are tens of bytes.
+        self._loop.add_reader(self._sock.fileno(), self._read_ready)
         on_event("transport_up", {"kind": "udp", "group": self.group, "port": self.port,
                                   "interface": self.interface})
 
+    def _read_ready(self) -> None:
+        sock = self._sock
+        if sock is None:
+            return
+        for _ in range(READ_BATCH):
+            try:
+                data = sock.recv(RECV_SIZE)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # e.g. ICMP errors reported on the socket
+                self._error("receive", exc)
+                return
+            self._received(data)
+
     def send(self, frame: bytes) -> None:
         """Broadcast one frame to the group; errors are counted and reported, never raised."""
-        if self._transport is None or self._transport.is_closing():
+        if self._sock is None:
             self._fail_send("transport not open")
             return
         if len(frame) > MAX_PAYLOAD:
             self._fail_send(f"frame of {len(frame)} bytes exceeds {MAX_PAYLOAD}")
             return
         try:
-            self._transport.sendto(frame, (self.group, self.port))
-        except OSError as exc:  # asyncio raises only on a closed transport; be safe
+            self._sock.sendto(frame, (self.group, self.port))
+        except BlockingIOError:
+            # Socket buffer full: drop rather than queue. A heartbeat is only worth
+            # sending now; the next one follows within a period.
+            self._fail_send("socket buffer full")
+            return
+        except OSError as exc:
             self._fail_send(str(exc))
             return
         self.counters["sent"] += 1
@@ -158,8 +171,8 @@ class UdpTransport:
             self._on_frame(data)
 
     def _error(self, where: str, exc: Exception) -> None:
-        # ICMP errors and the like arrive here; they never stop the socket (asyncio keeps
-        # reading), so count them and tell the event log (transport contract).
+        # ICMP errors and the like arrive here; they never stop the socket, so count
+        # them and tell the event log (transport contract).
         self.counters["receive_errors"] += 1
         if self._on_event is not None:
             fields: Mapping[str, Any] = {"where": where, "reason": str(exc)}
@@ -167,8 +180,8 @@ class UdpTransport:
 
     async def close(self) -> None:
         """Leave the group and close the socket."""
-        if self._transport is not None:
-            self._transport.close()
-            self._transport = None
-            # Let the loop run the close callbacks (connection_lost) before returning.
-            await asyncio.sleep(0)
+        if self._sock is not None:
+            if self._loop is not None:
+                self._loop.remove_reader(self._sock.fileno())
+            self._sock.close()
+            self._sock = None
