@@ -109,6 +109,31 @@ async def test_realtime_single_liar_gets_nobody_replaced(tmp_path: Path) -> None
     assert votes and all(e["from"] == 1 and e["count"] == 1 for e in votes), votes
 
 
+async def test_realtime_leave_and_unhealthy_hand_over_without_a_timeout(tmp_path: Path) -> None:
+    result = await run(4.5, "unhealthy:4@1.5", "leave:3@3", tmp_path=tmp_path)
+    takeovers = {e["function"]: e for e in named(result, "takeover")}
+    assert set(takeovers) == {"f3", "f4"}
+    assert (takeovers["f4"]["robot"], takeovers["f4"]["replaced"]) == (5, 4)
+    assert (takeovers["f3"]["robot"], takeovers["f3"]["replaced"]) == (6, 3)
+    assert [e["function"] for e in named(result, "leave", robot=4)] == ["f4"]
+    assert [e["function"] for e in named(result, "leave", robot=3)] == ["f3"]
+    # The LEAVE path, not the watchdog: nobody suspected the leavers (DESIGN rule 7).
+    assert [e for e in named(result, "suspect") if e["subject"] in (3, 4)] == []
+    assert holders_at_end(result) == {"f1": 1, "f2": 2, "f3": 6, "f4": 5}
+
+
+async def test_realtime_partition_without_a_quorum_replaces_nobody(tmp_path: Path) -> None:
+    # {1,2} | {3,4,5,6}: every slot keeps one watcher on each side, so each standby
+    # hears one witness only, never the quorum of two (paper section III-B, rule 3).
+    result = await run(4.5, "partition:1,2|3,4,5,6@1+1.5", tmp_path=tmp_path, loss=0.02,
+                       seed=3)
+    assert named(result, "takeover") == []
+    suspected = {(e["robot"], e["subject"]) for e in named(result, "suspect")}
+    assert {(4, 1), (3, 2)} <= suspected  # the partition was real
+    votes = named(result, "vote")
+    assert votes and max(e["count"] for e in votes) == 1
+
+
 def _alive(pid: int) -> bool:
     try:
         with open(f"/proc/{pid}/stat") as f:
