@@ -14,7 +14,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from sim.quad.link import QuadLink, default_home
+from sim.quad.link import QuadLink, default_home, read_stats
 from sim.quad.robot import Mode, load_trajectory
 from swarmd.core.roles import Health
 from swarmd.link.base import RobotLink
@@ -27,7 +27,10 @@ async def _until(cond: Callable[[], bool], timeout: float = 5.0) -> None:
         await asyncio.sleep(0.02)
 
 
-async def test_reports_health_and_flies_what_it_is_assigned(tmp_path: Path) -> None:
+async def test_reports_health_and_flies_what_it_is_assigned(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("sim.quad.link.STATS_PERIOD", 0.2)
     link = QuadLink(4, (0.5, -3.5, 0.0), traj_path=tmp_path / "traj-4.jsonl", wake=0.02,
                     health_period=0.1)
     _: RobotLink = link  # it is a RobotLink
@@ -49,6 +52,8 @@ async def test_reports_health_and_flies_what_it_is_assigned(tmp_path: Path) -> N
     tr = load_trajectory(tmp_path / "traj-4.jsonl", t0=t0)
     assert tr.robot == 4 and len(tr.t) > 5
     assert tr.modes[-1] == "crashed" and tr.pos[:, 2].max() > 0.3
+    stats = read_stats(tmp_path / "traj-4.jsonl")
+    assert stats and all(s["wakes"] > 0 and s["late_p99_ms"] <= s["late_max_ms"] for s in stats)
     assert -1e-3 <= tr.t[0] < 1.0  # run time, from each sample's Unix time (0.1 ms)
 
 

@@ -44,6 +44,8 @@ WAKE = 0.04
 """s between physics catch-ups (see the module docstring)."""
 HEALTH_PERIOD = 0.5
 """s: longest time between two health reports."""
+STATS_PERIOD = 2.0
+"""s between two lateness lines in the trajectory file."""
 
 
 def default_home(robot_id: int) -> Vec3:
@@ -87,6 +89,8 @@ class QuadLink:
         """Bad assignments and physics exceptions: counted and logged, never raised."""
         self.lateness: collections.deque[float] = collections.deque(maxlen=20000)
         """How late each wake-up was, s (the benchmark's real-time measure)."""
+        self._window: list[float] = []
+        self._last_stats = 0.0
 
     @classmethod
     def for_robot(cls, cfg: Any) -> QuadLink:
@@ -109,6 +113,7 @@ class QuadLink:
         self._on_health = on_health
         self.wall0 = self._wall()
         self._mono0 = loop.time()
+        self._last_stats = self._mono0
         if self.traj_path is not None:
             try:
                 self.traj_path.parent.mkdir(parents=True, exist_ok=True)
@@ -202,11 +207,38 @@ class QuadLink:
             await asyncio.sleep(max(0.0, due - loop.time()))
             now = loop.time()
             self.lateness.append(now - due)
+            self._window.append(now - due)
             if now - due > 1.0:  # stalled (SIGSTOP, overload): resynchronise, don't burst
                 due = now
             self._step(now - self._mono0)
             self._report()
             self._flush()
+            if now - self._last_stats >= STATS_PERIOD:
+                self._write_stats(now)
+
+    def _write_stats(self, now: float) -> None:
+        # How late the physics wake-ups were since the last line: the benchmark reads
+        # these from the trajectory file of every robot of a `swarmd sim` run.
+        late, self._window = sorted(self._window), []
+        self._last_stats = now
+        if self._file is None or not late:
+            return
+        row = {
+            "stats": {
+                "wakes": len(late),
+                "late_p50_ms": round(1000 * late[len(late) // 2], 3),
+                "late_p99_ms": round(1000 * late[min(len(late) - 1, int(0.99 * len(late)))], 3),
+                "late_max_ms": round(1000 * late[-1], 3),
+                "cpu_s": round(time.process_time(), 3),
+            },
+            "w": round(self._wall(), 4),
+        }
+        try:
+            self._file.write(json.dumps(row, separators=(",", ":")) + "\n")
+            self._file.flush()
+        except OSError as exc:
+            self.errors += 1
+            log.error("robot %d: trajectory write failed: %s", self.robot_id, exc)
 
     def _report(self, *, force: bool = False) -> None:
         if self._on_health is None:
@@ -237,3 +269,20 @@ class QuadLink:
         except OSError as exc:
             self.errors += 1
             log.error("robot %d: trajectory write failed: %s", self.robot_id, exc)
+
+
+def read_stats(path: Path) -> list[dict[str, Any]]:
+    """The lateness lines (`{"stats": {...}, "w": unix}`) of a trajectory file, in order;
+    lines that do not parse (a SIGKILL can cut the last one) are skipped."""
+    out: list[dict[str, Any]] = []
+    with path.open() as f:
+        for line in f:
+            if '"stats"' not in line:
+                continue
+            try:
+                row = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(row, dict) and isinstance(row.get("stats"), dict):
+                out.append({**row["stats"], "w": row.get("w")})
+    return out
