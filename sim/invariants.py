@@ -70,6 +70,7 @@ class _Expect:
     robot: int
     function: str
     kind: str
+    standbys: tuple[int, ...] = ()
 
 
 @dataclass(slots=True)
@@ -221,7 +222,7 @@ class Checker:
                     and r not in running and r not in self.executing and r not in self.unhealthy]
         needs_watchers = kind in ("crash", "pause")  # leave / fault hand over by LEAVE
         if standbys and (len(watchers) >= q or not needs_watchers) and not self.in_partition:
-            self.expects.append(_Expect(t, robot, f, kind))
+            self.expects.append(_Expect(t, robot, f, kind, tuple(standbys)))
 
     def _takeover(self, t: float, r: int, f: str, replaced: int) -> None:
         rec = {"t": t, "robot": r, "function": f, "replaced": replaced}
@@ -263,6 +264,15 @@ class Checker:
             later_fault = any(e.t < ft <= e.t + self.bounds.takeover for ft in self.last_fault_at)
             if later_fault or duration - e.t < self.bounds.takeover:
                 continue  # another fault interfered, or the run ended too soon to tell
+            # A standby takes one slot: if every standby that could have come was taken
+            # by another failure at about the same time, the slot is rightly left (and
+            # alerted, rule 8) — two faults at once are beyond "whenever a live standby
+            # covers it".
+            busy = {tk["robot"] for tk in self.takeovers
+                    if tk["function"] != e.function
+                    and abs(tk["t"] - e.t) <= self.bounds.takeover}
+            if e.standbys and set(e.standbys) <= busy:
+                continue
             self.violations.append(Violation(
                 e.t, "no_takeover", e.robot,
                 f"{e.kind} of robot {e.robot} holding {e.function}: no takeover within "

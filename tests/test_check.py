@@ -92,10 +92,11 @@ def test_check_robot_file_checks_its_swarm() -> None:
 
 
 def test_sections_can_be_appended(monkeypatch: pytest.MonkeyPatch) -> None:
-    def budget(cfg: SwarmConfig) -> Section:
-        return Section("budget", "Budget", ("robots",), ((str(len(cfg.robots)),),), {"n": 6})
+    def extra(cfg: SwarmConfig) -> Section:
+        return Section("extra", "Extra", ("robots",), ((str(len(cfg.robots)),),), {"n": 6})
 
-    monkeypatch.setattr(check_mod, "SECTIONS", [*check_mod.SECTIONS, budget])
+    monkeypatch.setattr(check_mod, "SECTIONS", [*check_mod.SECTIONS, extra])
     report = run_check(CONFIGS / "paper.yaml")
-    assert [s.key for s in report.sections] == ["coverage", "timing", "budget"]
-    assert report.as_json()["budget"] == {"n": 6}
+    assert [s.key for s in report.sections] == ["coverage", "timing", "channel_budget",
+                                                "extra"]
+    assert report.as_json()["extra"] == {"n": 6}
