@@ -26,10 +26,10 @@ test: setup
 
 demo: setup
 	$(PY) -m swarmd.cli sim configs/paper.yaml --virtual --duration 20 --seed 1 \
-	  --fault crash:2@5 --events out/demo-events.jsonl
+	  --fault crash:2@5 --report out/demo
 
 bench: setup
-	$(PY) bench/run.py
+	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 clean:
 	rm -rf $(STAMP) out .pytest_cache .mypy_cache .ruff_cache
