@@ -99,7 +99,8 @@ async def bench_takeover(cycles: int) -> dict[str, Any]:
 
 def grid_swarm(n: int, directory: Path) -> Path:
     """A grid swarm of n robots: rows x cols active + one standby per row."""
-    shapes = {10: (2, 4), 20: (2, 9), 30: (3, 7), 40: (4, 9), 50: (5, 9), 60: (6, 9)}
+    shapes = {10: (2, 4), 20: (2, 9), 30: (3, 7), 40: (4, 9), 50: (5, 9), 60: (6, 9),
+              80: (8, 9), 100: (10, 9)}
     if n not in shapes:
         raise SystemExit(f"size {n} not in {sorted(shapes)}")
     spec = importlib.util.spec_from_file_location("make_grid", ROOT / "configs" / "make_grid.py")
