@@ -28,6 +28,11 @@ Events from every robot arrive over pipes and are merged by t into one log.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from swarmd.xbee_emu.medium import Medium
+
 import asyncio
 import contextlib
 import json
@@ -176,14 +181,15 @@ def robot_ids(swarm_path: Path) -> tuple[int, ...]:
 
 def write_robot_file(
     run_dir: Path, swarm_path: Path, robot: int, *, group: str, port: int,
-    interface: str = "127.0.0.1",
+    interface: str = "127.0.0.1", transport: dict[str, Any] | None = None,
 ) -> Path:
-    """The robot file of one simulated robot: literally what `swarmd start` would take."""
+    """The robot file of one simulated robot: literally what `swarmd start` would take.
+    `transport` replaces the default UDP multicast section (emulated radios)."""
     doc = {
         "robot": robot,
         "swarm": str(swarm_path.resolve()),
-        "transport": {"kind": "udp", "group": group, "port": port, "interface": interface,
-                      "ttl": 1, "loopback": True},
+        "transport": transport or {"kind": "udp", "group": group, "port": port,
+                                   "interface": interface, "ttl": 1, "loopback": True},
         "link": {"kind": "none"},
         "event_log": None,
         "state_dir": str(run_dir / "state" / str(robot)),
@@ -253,8 +259,10 @@ class Orchestrator:
         report_dir: Path | None,
         group: str = "239.255.77.7",
         port: int | None = None,
+        transport: str = "udp",
     ) -> None:
         self.swarm_path = swarm_path
+        self.transport = transport
         self.duration = duration
         self.faults = sorted(faults, key=lambda f: f.at)
         self.loss = loss
@@ -282,13 +290,36 @@ class Orchestrator:
         self.t0 = 0.0
         self._ready = asyncio.Event()
         self._ctx = _context()
+        # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
+        # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
+        # same radios in transparent mode, AP=0, under the serial transport).
+        self.medium: Medium | None = None
+        self.radio_of = {r: i + 1 for i, r in enumerate(self.robots)}
+        if transport in ("xbee", "serial"):
+            from swarmd.xbee_emu.medium import Medium
+
+            self.medium = Medium(len(self.robots), protocol="802.15.4",
+                                 directory=self.run_dir / "radios", seed=seed,
+                                 transparent=transport == "serial").start()
+        elif transport != "udp":
+            raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
+
+    def _transport_doc(self, robot: int) -> dict[str, Any] | None:
+        if self.medium is None:
+            return None
+        port = self.medium.path(self.radio_of[robot])
+        if self.transport == "serial":
+            return {"kind": "serial", "port": port}
+        role = "coordinator" if self.radio_of[robot] == 1 else "router"
+        return {"kind": "xbee", "port": port, "protocol": "802.15.4", "api_mode": 1,
+                "role": role}
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, robot: int, t0: float | None) -> _Proc:
         from sim.robot_proc import RobotSpec, child_main
 
         cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
-                               port=self.port)
+                               port=self.port, transport=self._transport_doc(robot))
         spec = RobotSpec(
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
@@ -496,6 +527,9 @@ class Orchestrator:
             return "(no log)"
 
     def cleanup(self) -> None:
+        if self.medium is not None:
+            self.medium.stop()
+            self.medium = None
         if self.report_dir is None:
             shutil.rmtree(self.run_dir, ignore_errors=True)
 
@@ -515,8 +549,6 @@ async def run_realtime_async(
     port: int | None = None,
 ) -> RealtimeResult:
     """Run the swarm in real time (see the module docstring); awaitable form for tests."""
-    if transport != "udp":
-        raise ValueError(f"transport {transport!r} is not available in real time yet (udp)")
     if physics:
         from sim.robot_proc import LINK_FACTORIES
 
@@ -526,7 +558,8 @@ async def run_realtime_async(
             raise RuntimeError("physics is not available yet: run with --no-physics") from None
         assert "quad" in LINK_FACTORIES
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
-                        physics=physics, live=live, report_dir=report_dir, port=port)
+                        physics=physics, live=live, report_dir=report_dir, port=port,
+                        transport=transport)
     try:
         result = await orch.run()
     finally:

@@ -193,3 +193,15 @@ def test_realtime_interrupt_leaves_no_process_behind(tmp_path: Path, sig: int) -
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.parametrize("transport", ["xbee", "serial"])
+async def test_realtime_over_emulated_radios_fails_over(tmp_path: Path, transport: str) -> None:
+    """Issue 5 point 5: `swarmd sim --transport xbee|serial` runs the swarm over
+    emulated radios on ptys (digi-xbee in API mode, or transparent mode + COBS/CRC)."""
+    result = await run(5.0, "crash:2@3", tmp_path=tmp_path, transport=transport)
+    takeover = named(result, "takeover", function="f2")
+    assert [(e["robot"], e["replaced"]) for e in takeover] == [(6, 2)]
+    assert holders_at_end(result) == {"f1": 1, "f2": 6, "f3": 3, "f4": 4}
+    robot_file = (tmp_path / "realtime" / "robots" / "robot1.yaml").read_text()
+    assert f"kind: {transport}" in robot_file
