@@ -120,3 +120,14 @@ def test_trajectory_round_trip(tmp_path: Path) -> None:
     pos, _quat = tr.at(2.0)
     assert pos == pytest.approx(trajectory_of(r).at(1.0)[0])
     assert json.loads(path.read_text().splitlines()[0])["robot"] == 3
+
+
+def test_assigning_the_same_function_again_keeps_the_flight() -> None:
+    r = QuadRobot(1, (0.0, -4.0, 0.0))
+    r.assign("p", PATROL)
+    r.step_until(6.0)
+    flight = r.flight
+    assert r.assign("p", PATROL)  # a new epoch of the same function
+    assert r.flight is flight
+    r.assign("f1", SLOT)
+    assert r.flight is not flight and r.function == "f1"

@@ -154,6 +154,10 @@ class QuadRobot:
             spec = parse_function(function, spec)
         if self.mode is Mode.CRASHED or self.failed_motors:
             return False
+        if function == self.function and self.mode in (Mode.TAKEOFF, Mode.FLYING):
+            # The same function again (a new epoch after a rejoin): keep flying it; a
+            # patrol must not restart its approach from the present waypoint.
+            return True
         self.function = function
         self.t0 = t0
         self.flight = flight_for(spec, self.t - t0)
