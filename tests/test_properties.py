@@ -14,10 +14,8 @@ HYPOTHESIS_PROFILE=bench runs thousands.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -132,9 +130,6 @@ def test_spaced_random_faults_never_break_an_invariant(case: Case) -> None:
     check(case)
 
 
-@pytest.mark.skipif(os.environ.get("HYPOTHESIS_PROFILE") != "bench", reason=(
-    "overlapping faults hit the known problems pinned below (reported); run with "
-    "HYPOTHESIS_PROFILE=bench"))
 @settings(max_examples=200)
 @given(cases())
 def test_random_faults_never_break_an_invariant(case: Case) -> None:
@@ -142,7 +137,7 @@ def test_random_faults_never_break_an_invariant(case: Case) -> None:
     check(case)
 
 
-# ---------------------------------------------------------------- known problems
+# ------------------------------------------- regressions: core bugs the properties found
 def _full_mesh(n: int) -> SwarmPlan:
     fs = tuple(f"f{i + 1}" for i in range(n))
     robots = {i + 1: RobotPlan(i + 1, f) for i, f in enumerate(fs)}
@@ -150,9 +145,6 @@ def _full_mesh(n: int) -> SwarmPlan:
     return SwarmPlan(1000 + n, fs, robots, {f: tuple(g for g in fs if g != f) for f in fs})
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core bug (reported): the standby's 'heard the suspect within T_max/2' veto counts any "
-    "frame, so a faulty robot's WARNs (liar) block its replacement once its LEAVE is lost"))
 def test_faulty_liar_cannot_block_its_own_replacement(
         paper: tuple[SwarmPlan, Params]) -> None:
     plan, params = paper
@@ -162,10 +154,6 @@ def test_faulty_liar_cannot_block_its_own_replacement(
     assert res.violations == []
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core bug (reported): a standby that missed a takeover (partitioned) ignores warnings "
-    "about the new holder at the newer epoch ('heartbeats will tell us'), but the new "
-    "holder is dead: the slot is never taken over although standby 8 covers it"))
 def test_standby_behind_on_epoch_still_replaces_a_dead_new_holder() -> None:
     fs = tuple(f"f{i + 1}" for i in range(5))
     robots = {i + 1: RobotPlan(i + 1, f) for i, f in enumerate(fs)}

@@ -119,6 +119,10 @@ class Node:
         self.fenced_until: float | None = None
         self.rejoin: tuple[str, int, float] | None = None
         self.heard_at: dict[int, float] = {}  # robot -> last frame accepted from it
+        # function -> (holder, epoch, time) of the last heartbeat heard *for that slot*:
+        # a robot that stopped heartbeating but still sends other frames (a faulty
+        # liar) must not look alive to the standby that would replace it.
+        self.slot_heard: dict[str, tuple[int, int, float]] = {}
         self.standby_at: dict[int, float] = {}  # standby robot -> last standby heartbeat
         self.replay = ReplayFilter()
         self.start_time = now
@@ -315,6 +319,7 @@ class Node:
                 self._heartbeat_now(now)
             return
         self.known[f] = (sender, hb.epoch)
+        self.slot_heard[f] = (sender, hb.epoch, now)
         # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
         if f == self.function and self.role == Role.ACTIVE and sender != self.robot_id:
             self._fence(hb.epoch, now)
@@ -354,8 +359,12 @@ class Node:
             self._rejoin_superseded(f)
         if f not in self.covers or self.role != Role.STANDBY or self.health == Health.FAULTY:
             return
-        if (w.suspect, w.epoch) != (holder, epoch):
-            return  # about an older holder, or we are behind: heartbeats will tell us
+        if w.epoch < epoch or (w.epoch == epoch and w.suspect != holder):
+            return  # about an older holder: stale
+        # A warning at a newer epoch than we know means we missed a takeover (we were
+        # partitioned, or lost its heartbeats) and the new holder may be dead already:
+        # count it, keyed by (suspect, epoch), without believing it into `known` — a
+        # single liar cannot reach the quorum, and the holder's heartbeat refutes it.
         # Rule 3: only the holders of the slots that watch f are witnesses; never the
         # suspect itself.
         witnesses = {self.known[g][0] for g in self.plan.watched_by(f)}
@@ -374,10 +383,11 @@ class Node:
             # witnesses missed (loss); after a real crash this is silent by the time
             # warnings come (they come T_max after the last heartbeat), so it costs no
             # latency. The next warning re-checks.
-            last = self.heard_at.get(w.suspect)
-            if last is not None and now - last < self.params.t_max / 2:
+            heard = self.slot_heard.get(f)
+            if heard is not None and heard[:2] == (w.suspect, w.epoch) \
+                    and now - heard[2] < self.params.t_max / 2:
                 return
-            self._start_claim(f, w.suspect, epoch, now)
+            self._start_claim(f, w.suspect, w.epoch, now)
 
     def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
         f = self.plan.function_at(c.function)
