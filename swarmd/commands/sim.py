@@ -94,10 +94,18 @@ def register(app: typer.Typer) -> None:
                                     loss=loss, report=report, physics=not no_physics,
                                     transport=transport, live=not json_out)
         events_list: list[dict[str, Any]] = summary.extra.pop("_events")
+        t0: float | None = summary.extra.pop("_t0", None)
         if events is not None:
             _write_events(events, events_list)
         if report is not None:
             _write_report(report, events_list, summary, duration)
+            if not virtual and not no_physics:
+                # Trajectory plot, video and key frames from the robots' trajectory files.
+                from sim.render import report_pictures
+
+                report_pictures(report, events_list,
+                                {n: cfg.function_spec(n) for n in plan.functions},
+                                t0=t0, end=duration)
         if json_out:
             typer.echo(summary.to_json())
         else:
@@ -146,6 +154,7 @@ def _run_realtime(swarm: Path, plan: Any, params: Any, faults: list[Any], *, dur
     if result.problems:
         summary.extra["process problems"] = result.problems
     summary.extra["startup_s"] = round(result.startup_s, 2)
+    summary.extra["_t0"] = result.t0
     summary.extra["_events"] = result.events
     return summary
 
