@@ -201,11 +201,14 @@ def write_robot_file(
     return path
 
 
-def _context() -> Any:
+def _context(physics: bool) -> Any:
     ctx = multiprocessing.get_context("forkserver")
     # Preloading swarmd in the forkserver makes each robot a cheap fork (~20 ms instead
-    # of a ~0.5 s interpreter start-up): 50 robots start within about a second.
-    ctx.set_forkserver_preload(["sim.robot_proc"])
+    # of a ~0.5 s interpreter start-up): 50 robots start within about a second. With
+    # physics, MuJoCo and the quadrotor link are preloaded too, or every robot imports
+    # them after the fork (notes/mujoco.md: 50 robots ready in 1.6 s preloaded, 8 s not).
+    # The forkserver is one per parent process and keeps the list it started with.
+    ctx.set_forkserver_preload(["sim.robot_proc"] + (["sim.quad.link"] if physics else []))
     return ctx
 
 
@@ -289,7 +292,7 @@ class Orchestrator:
         self.view = SwarmView(self.robots)
         self.t0 = 0.0
         self._ready = asyncio.Event()
-        self._ctx = _context()
+        self._ctx = _context(physics)
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
         # same radios in transparent mode, AP=0, under the serial transport).
@@ -549,14 +552,6 @@ async def run_realtime_async(
     port: int | None = None,
 ) -> RealtimeResult:
     """Run the swarm in real time (see the module docstring); awaitable form for tests."""
-    if physics:
-        from sim.robot_proc import LINK_FACTORIES
-
-        try:
-            import sim.quad.link  # type: ignore[import-not-found,unused-ignore]  # noqa: F401
-        except ImportError:
-            raise RuntimeError("physics is not available yet: run with --no-physics") from None
-        assert "quad" in LINK_FACTORIES
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
                         physics=physics, live=live, report_dir=report_dir, port=port,
                         transport=transport)

@@ -78,12 +78,8 @@ def _none_link(spec: RobotSpec, cfg: Any) -> RobotLink:
 
 
 def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
-    try:
-        from sim.quad.link import QuadLink  # type: ignore[import-not-found,unused-ignore]
-    except ImportError as exc:
-        raise RuntimeError(
-            f"physics is not available yet ({exc}); run with --no-physics"
-        ) from exc
+    from sim.quad.link import QuadLink
+
     link: RobotLink = QuadLink.for_robot(cfg)
     return link
 
