@@ -8,6 +8,7 @@ the codec, so every rule is exercised through the public API only (sans-IO guide
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import pytest
 from harness import Net
@@ -16,7 +17,7 @@ from hypothesis import strategies as st
 
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
-from swarmd.core.node import Node, Restored, Snapshot
+from swarmd.core.node import KEY_LEN, Node, NodeError, Restored, Snapshot
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
@@ -351,3 +352,78 @@ def test_harness_crash_takeover(paper_plan: SwarmPlan, udp_params: Params) -> No
     assert Assign("f3", 1) in net.outputs[6]
     assert {e["robot"] for e in net.named("suspect")} == {2, 4}
     assert net.nodes[5].snapshot().known["f3"] == (6, 1)
+
+
+# ---------------------------------------------------------------------- key reload
+OLD_KEY, NEW_KEY = b"\x01" * KEY_LEN, b"\x02" * KEY_LEN
+
+
+def signed(plan: SwarmPlan, sender: int, key: bytes) -> bytes:
+    seq = _seqs[sender] = _seqs.get(sender, 1000) + 1
+    return wire.encode(wire.Frame(plan.swarm_id, sender, seq, hb(plan, "f2")), key)
+
+
+def test_set_keys_signs_with_the_first_and_accepts_only_the_listed(
+        paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node = Node(1, paper_plan, udp_params, 0.0, keys=[OLD_KEY])
+    node.tick(0.0)
+    node.set_keys([NEW_KEY, OLD_KEY])  # step 2 of the rotation: sign new, accept both
+    for i, key in enumerate((OLD_KEY, NEW_KEY)):
+        node.receive(signed(paper_plan, 2, key), 0.01 * (i + 1))
+    assert node.snapshot().drops == {}
+    beat = next(a.frame for a in node.tick(node.next_heartbeat) if isinstance(a, Broadcast))
+    assert wire.decode(beat, [NEW_KEY]).sender == 1
+    with pytest.raises(wire.CodecError):
+        wire.decode(beat, [OLD_KEY])
+    node.set_keys([NEW_KEY])  # step 3: the old key is no longer accepted
+    node.receive(signed(paper_plan, 2, OLD_KEY), node.next_heartbeat)
+    assert node.snapshot().drops == {"auth": 1}
+    node.receive(signed(paper_plan, 2, NEW_KEY), node.next_heartbeat)
+    assert node.snapshot().drops == {"auth": 1}
+
+
+@pytest.mark.parametrize(("start", "keys", "says"), [
+    ([OLD_KEY], [], "needs a restart"),
+    ([OLD_KEY], [NEW_KEY, b"short"], "key 1 is 5 bytes"),
+    ([], [b"x" * (KEY_LEN + 1)], f"is {KEY_LEN + 1} bytes"),
+    ([OLD_KEY], ["0" * KEY_LEN], "not bytes"),
+])
+def test_set_keys_refuses_bad_keys_and_keeps_the_old(
+        paper_plan: SwarmPlan, udp_params: Params, start: list[bytes], keys: list[Any],
+        says: str) -> None:
+    node = Node(1, paper_plan, udp_params, 0.0, keys=start)
+    with pytest.raises(NodeError, match=says):
+        node.set_keys(keys)
+    assert node.keys == tuple(start)
+
+
+def test_set_keys_can_turn_signing_on(paper_plan: SwarmPlan, udp_params: Params) -> None:
+    node = Node(1, paper_plan, udp_params, 0.0)
+    node.set_keys([NEW_KEY])
+    assert node.keys == (NEW_KEY,)
+    node.set_keys([NEW_KEY, NEW_KEY])  # a duplicate is harmless (load_keys drops them)
+    assert node.keys[0] == NEW_KEY
+
+
+@pytest.mark.parametrize(("stages", "cut_off"), [
+    (([OLD_KEY, NEW_KEY], [NEW_KEY, OLD_KEY], [NEW_KEY]), False),  # docs/operations.md
+    (([NEW_KEY],), True),  # step 1 and 2 skipped: the reloaded robot is cut off
+])
+def test_live_rotation_on_a_running_swarm(paper_plan: SwarmPlan, udp_params: Params,
+                                          stages: tuple[list[bytes], ...],
+                                          cut_off: bool) -> None:
+    net = Net(paper_plan, udp_params, keys=[OLD_KEY])
+    net.run_until(1.0)
+    for keys in stages:
+        for rid in sorted(net.nodes):  # SIGHUP robot by robot, no restart
+            net.nodes[rid].set_keys(keys)
+            net.run_until(net.now + (3.0 if cut_off else 0.5))
+            if cut_off:
+                break
+    auth = sum(n.snapshot().drops.get("auth", 0) for n in net.nodes.values())
+    if cut_off:
+        assert auth > 0
+        assert {e["subject"] for e in net.named("suspect") if e["robot"] != 1} == {1}
+    else:
+        assert auth == 0 and not net.named("suspect")
+        assert all(n.keys == (NEW_KEY,) for n in net.nodes.values())

@@ -70,6 +70,11 @@ class _Claim:
     resend: float
 
 
+KEY_LEN = 32
+"""bytes. A swarm key's size (the same as `swarmd.keys.KEY_LEN`, which the core may not
+import: layering rule). HMAC takes any length; checking it catches a wrong file."""
+
+
 class NodeError(RuntimeError):
     """Misuse of the node API (a bug in the driver), never caused by peer frames."""
 
@@ -266,6 +271,31 @@ class Node:
         self._advance(now)
         self._send(msg)
         return self._drain()
+
+    def set_keys(self, keys: Sequence[bytes]) -> None:
+        """Replace the swarm keys live (SIGHUP reload; docs/operations.md "Rotating the
+        swarm key"): from the next frame on, `keys[0]` signs and a frame tagged with any
+        of them is accepted; one tagged only with a key no longer listed is dropped as
+        `auth`. An empty list means unsigned, allowed only if the node is unsigned now.
+
+        Raises `NodeError` (and changes nothing) for a key that is not `KEY_LEN` bytes,
+        or for an empty list while signing: a config that lost its key lines would
+        otherwise turn authentication off on a running robot, which then sends frames
+        every keyed robot drops and accepts forged ones (DESIGN section 2). Turning
+        signing off takes a restart. Going from unsigned to signed is allowed: that
+        cut-over has no window whichever way it is done (an unsigned frame cannot be
+        verified)."""
+        new = tuple(keys)
+        for i, key in enumerate(new):
+            if not isinstance(key, bytes):
+                raise NodeError(f"swarm key {i} is a {type(key).__name__}, not bytes")
+            if len(key) != KEY_LEN:
+                raise NodeError(f"swarm key {i} is {len(key)} bytes; a swarm key is "
+                                f"exactly {KEY_LEN} bytes")
+        if not new and self.keys:
+            raise NodeError("no swarm key given while frames are signed; turning signing "
+                            "off needs a restart, not a key reload")
+        self.keys = new
 
     def next_deadline(self) -> float | None:
         """When `tick` must be called next (absolute, same clock as `now`)."""
