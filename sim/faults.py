@@ -16,8 +16,12 @@ Times are seconds since the run's start.
 
 from __future__ import annotations
 
+import difflib
+import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
+from decimal import Decimal
 
 KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor")
 _DURATION_KINDS = {"pause", "partition"}
@@ -46,9 +50,11 @@ class Fault:
 
     @property
     def end(self) -> float | None:
+        """When a pause or partition is over (None for the other kinds)."""
         return None if self.duration is None else self.at + self.duration
 
     def spec(self) -> str:
+        """The SPEC text: `parse_fault(f.spec()) == f`."""
         if self.kind == "partition":
             groups = "|".join(",".join(map(str, g)) for g in self.groups)
             return f"partition:{groups}@{_num(self.at)}+{_num(self.duration or 0.0)}"
@@ -57,12 +63,21 @@ class Fault:
 
 
 def _num(x: float | None) -> str:
-    return f"{x:g}" if x is not None else ""
+    """A time as `parse_fault` reads it back exactly: the shortest round-tripping
+    decimal, never an exponent (`1e-05` would not parse)."""
+    if x is None:
+        return ""
+    text = repr(float(x))
+    if "e" in text or "E" in text:
+        text = format(Decimal(text), "f")
+    return text[:-2] if text.endswith(".0") else text
 
 
-_SPEC = re.compile(
-    r"^(?P<kind>[a-z]+):(?P<who>[0-9,| ]+)@(?P<at>[0-9]*\.?[0-9]+)(?:\+(?P<dur>[0-9]*\.?[0-9]+))?$"
-)
+ROBOT_IDS = range(1, 0x10000)
+"""Robot ids a swarm file accepts (docs/config.md: `robots[i].id` is 1..65535)."""
+
+_SECONDS = re.compile(r"[0-9]+(?:\.[0-9]*)?|\.[0-9]+")
+_ROBOT = re.compile(r"[0-9]+")
 
 _FORMS = {
     "crash": "crash:R@T",
@@ -77,51 +92,105 @@ _FORMS = {
 
 
 def parse_fault(spec: str) -> Fault:
-    """Parse one SPEC. Raises FaultSpecError naming the expected form."""
+    """Parse one SPEC. Raises FaultSpecError naming what is wrong and the expected form.
+
+    Blanks around the parts are ignored (`crash : 2 @ 3`); blanks inside a number are
+    not (`crash:2 3@3` is an error, never robot 23).
+    """
     text = spec.strip()
-    kind = text.split(":", 1)[0]
+    head, colon, rest = text.partition(":")
+    kind = head.strip()
     if kind not in KINDS:
+        close = difflib.get_close_matches(kind.lower(), KINDS, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise FaultSpecError(
-            f"unknown fault kind {kind!r} in {spec!r}; kinds: {', '.join(KINDS)}"
+            f"fault {spec!r}: unknown kind {kind!r}{hint}; kinds: {', '.join(KINDS)}"
         )
     form = _FORMS[kind]
-    m = _SPEC.match(text.replace(" ", ""))
-    if not m:
-        raise FaultSpecError(f"cannot parse fault {spec!r}; expected {form}")
-    at = float(m["at"])
-    dur = float(m["dur"]) if m["dur"] is not None else None
-    if kind in _DURATION_KINDS and (dur is None or dur <= 0):
-        raise FaultSpecError(f"fault {spec!r} needs a positive duration: {form}")
+
+    def bad(what: str) -> FaultSpecError:
+        return FaultSpecError(f"fault {spec!r}: {what}; expected {form}")
+
+    if not colon:
+        raise bad("no ':' after the kind")
+    who, at_sign, when = rest.partition("@")
+    if not at_sign:
+        raise bad("no '@T' (the time the fault starts)")
+    at_text, plus, dur_text = when.partition("+")
+    at = _seconds(at_text, "time T", bad)
+    dur = _seconds(dur_text, "duration D", bad) if plus else None
+    if kind in _DURATION_KINDS and dur is None:
+        raise bad("missing '+D' (how long it lasts, in seconds)")
+    if kind in _DURATION_KINDS and dur is not None and dur <= 0:
+        raise bad(f"duration D must be positive, got {dur_text.strip()!r}")
     if kind not in _DURATION_KINDS and dur is not None:
-        raise FaultSpecError(f"fault {spec!r} takes no duration: {form}")
-    who = m["who"]
-    try:
-        if kind == "partition":
-            groups = tuple(
-                tuple(int(r) for r in g.split(",") if r) for g in who.split("|")
-            )
-            if len(groups) < 2 or any(not g for g in groups):
-                raise FaultSpecError(f"partition {spec!r} needs two or more groups: {form}")
-            named = [r for g in groups for r in g]
-            if len(set(named)) != len(named):
-                raise FaultSpecError(f"partition {spec!r} names a robot twice")
-            return Fault(kind, at, tuple(named), dur, groups)
+        raise bad(f"a {kind} takes no duration '+{dur_text.strip()}'")
+    if kind != "partition":
         if "," in who or "|" in who:
-            raise FaultSpecError(f"fault {spec!r} targets one robot: {form}")
-        return Fault(kind, at, (int(who),), dur)
-    except ValueError as exc:
-        if isinstance(exc, FaultSpecError):
-            raise
-        raise FaultSpecError(f"bad robot id in {spec!r}: {form}") from None
+            raise bad(f"a {kind} targets one robot, got {who.strip()!r}")
+        return Fault(kind, at, (_robot(who, bad),), dur)
+    groups = tuple(tuple(_robot(r, bad) for r in g.split(",")) for g in who.split("|"))
+    if len(groups) < 2:
+        raise bad("a partition needs two or more groups separated by '|'")
+    named = [r for g in groups for r in g]
+    twice = sorted({r for r in named if named.count(r) > 1})
+    if twice:
+        raise bad(f"robot {twice[0]} is named twice")
+    return Fault(kind, at, tuple(named), dur, groups)
 
 
-def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool) -> list[str]:
-    """Problems with a fault list against a swarm: unknown robots, motor without physics."""
+def _seconds(text: str, what: str, bad: Callable[[str], FaultSpecError]) -> float:
+    """A non-negative decimal number of seconds (`3`, `2.5`, `.5`, `3.`)."""
+    t = text.strip()
+    if not t:
+        raise bad(f"{what} is missing")
+    if t.startswith("-"):
+        raise bad(f"{what} must not be negative, got {t!r}")
+    if not _SECONDS.fullmatch(t):
+        raise bad(f"{what} must be a number of seconds like 3 or 2.5, got {t!r}")
+    value = float(t)
+    if not math.isfinite(value):
+        raise bad(f"{what} {t!r} is too large")
+    return value
+
+
+def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
+    """One robot id (1..65535), as a swarm file allows."""
+    t = text.strip()
+    if not t:
+        raise bad("a robot id is missing")
+    if not _ROBOT.fullmatch(t):
+        raise bad(f"{t!r} is not a robot id (1..65535)")
+    rid = int(t)
+    if rid not in ROBOT_IDS:
+        raise bad(f"robot id {rid} is out of range 1..65535")
+    return rid
+
+
+def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
+                 duration: float | None = None) -> list[str]:
+    """Problems with a fault list against a swarm: unknown robots, motor without
+    physics, and (given the run's `duration`) a fault that would start after the end."""
     problems = []
     for f in faults:
         unknown = [r for r in f.robots if r not in robot_ids]
         if unknown:
-            problems.append(f"{f.spec()}: robot {unknown[0]} is not in the swarm")
+            problems.append(f"{f.spec()}: robot {unknown[0]} is not in the swarm "
+                            f"(robots: {_ranges(robot_ids)})")
         if f.kind == "motor" and not physics:
             problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics/--virtual)")
+        if duration is not None and f.at >= duration:
+            problems.append(f"{f.spec()}: starts at {_num(f.at)} s, not before the end of the "
+                            f"run (--duration {_num(duration)})")
     return problems
+
+
+def _ranges(ids: set[int]) -> str:
+    """`1-4, 10, 20-22`: a swarm's robot ids, short enough for a message."""
+    out: list[tuple[int, int]] = []
+    for r in sorted(ids):
+        if out and out[-1][1] == r - 1:
+            out[-1] = (out[-1][0], r)
+        else:
+            out.append((r, r))
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in out)

@@ -1,0 +1,159 @@
+"""`sim.faults`: the --fault SPEC grammar of DESIGN section 3 (CLI) and its checks."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sim.faults import KINDS, Fault, FaultSpecError, check_faults, parse_fault
+
+PAPER_IDS = {1, 2, 3, 4, 5, 6}
+
+
+@pytest.mark.parametrize(("spec", "fault"), [
+    ("crash:2@3", Fault("crash", 3.0, (2,))),
+    ("restart:2@7.5", Fault("restart", 7.5, (2,))),
+    ("pause:3@2+1.5", Fault("pause", 2.0, (3,), 1.5)),
+    ("partition:1,2|3,4@2+3", Fault("partition", 2.0, (1, 2, 3, 4), 3.0, ((1, 2), (3, 4)))),
+    ("partition:1|2|3,4@0+1", Fault("partition", 0.0, (1, 2, 3, 4), 1.0, ((1,), (2,), (3, 4)))),
+    ("liar:4@0", Fault("liar", 0.0, (4,))),
+    ("leave:1@5", Fault("leave", 5.0, (1,))),
+    ("unhealthy:6@4", Fault("unhealthy", 4.0, (6,))),
+    ("motor:2@5", Fault("motor", 5.0, (2,))),
+    ("crash:35@.5", Fault("crash", 0.5, (35,))),
+    ("crash:2@3.", Fault("crash", 3.0, (2,))),
+    ("crash:65535@1", Fault("crash", 1.0, (65535,))),
+])
+def test_parse_fault_every_kind(spec: str, fault: Fault) -> None:
+    assert parse_fault(spec) == fault
+
+
+def test_parse_fault_covers_every_kind_of_the_cli() -> None:
+    assert set(KINDS) == {"crash", "restart", "pause", "partition", "liar", "leave",
+                          "unhealthy", "motor"}
+
+
+@pytest.mark.parametrize("spec", [
+    " crash : 2 @ 3 ", "crash:2@3\n", "\tcrash:2 @3", "partition: 1, 2 | 3 ,4 @ 2 + 3",
+])
+def test_parse_fault_ignores_blanks_around_parts(spec: str) -> None:
+    assert parse_fault(spec) == parse_fault(spec.replace(" ", "").strip())
+
+
+@pytest.mark.parametrize(("spec", "what"), [
+    ("", "unknown kind ''"),
+    ("bogus:2@3", "unknown kind 'bogus'"),
+    ("CRASH:2@3", "did you mean 'crash'"),
+    ("crsh:2@3", "did you mean 'crash'"),
+    ("crash", "no ':'"),
+    ("crash:2", "no '@T'"),
+    ("crash:@3", "robot id is missing"),
+    ("crash:2@", "time T is missing"),
+    ("crash:2@-3", "must not be negative"),
+    ("crash:2@abc", "must be a number of seconds"),
+    ("crash:2@1e3", "must be a number of seconds"),
+    ("crash:2@nan", "must be a number of seconds"),
+    ("crash:2@3@4", "must be a number of seconds"),
+    ("crash:2@1" + "0" * 400, "too large"),
+    # blanks inside a number are an error, never robot 23 or 12
+    ("crash:2 3@3", "'2 3' is not a robot id"),
+    ("partition:1 2|3@2+1", "'1 2' is not a robot id"),
+    ("crash:x@3", "'x' is not a robot id"),
+    ("crash:-1@3", "'-1' is not a robot id"),
+    ("crash:0@3", "robot id 0 is out of range"),
+    ("crash:65536@3", "out of range"),
+    ("crash:2,3@3", "targets one robot"),
+    ("crash:2@3+1", "takes no duration"),
+    ("pause:2@3", "missing '+D'"),
+    ("pause:2@3+0", "must be positive"),
+    ("pause:2@3+", "duration D is missing"),
+    ("partition:1,2|3,4@2", "missing '+D'"),
+    ("partition:1,2@2+3", "two or more groups"),
+    ("partition:1,,2|3@2+3", "robot id is missing"),
+    ("partition:1,2|@1+1", "robot id is missing"),
+    ("partition:1|1@2+3", "robot 1 is named twice"),
+])
+def test_parse_fault_names_what_is_wrong(spec: str, what: str) -> None:
+    with pytest.raises(FaultSpecError) as info:
+        parse_fault(spec)
+    message = str(info.value)
+    assert what in message
+    assert repr(spec) in message  # the user sees which of several --fault it was
+
+
+def test_parse_fault_error_shows_the_expected_form() -> None:
+    with pytest.raises(FaultSpecError, match=r"expected pause:R@T\+D"):
+        parse_fault("pause:2@3")
+    with pytest.raises(FaultSpecError, match="kinds: crash, restart"):
+        parse_fault("boom:2@3")
+
+
+def test_check_faults_rejects_unknown_robots() -> None:
+    faults = [parse_fault("crash:7@1"), parse_fault("partition:1,2|3,9@1+1"),
+              parse_fault("crash:2@1")]
+    problems = check_faults(faults, PAPER_IDS, physics=False)
+    assert problems == [
+        "crash:7@1: robot 7 is not in the swarm (robots: 1-6)",
+        "partition:1,2|3,9@1+1: robot 9 is not in the swarm (robots: 1-6)",
+    ]
+
+
+def test_check_faults_lists_non_contiguous_ids() -> None:
+    problems = check_faults([parse_fault("crash:1@1")], {10, 20, 21, 22, 35}, physics=True)
+    assert problems == ["crash:1@1: robot 1 is not in the swarm (robots: 10, 20-22, 35)"]
+
+
+def test_check_faults_motor_needs_physics() -> None:
+    motor = [parse_fault("motor:2@5")]
+    assert check_faults(motor, PAPER_IDS, physics=True) == []
+    assert "need physics" in check_faults(motor, PAPER_IDS, physics=False)[0]
+
+
+def test_check_faults_after_the_end_of_the_run() -> None:
+    faults = [parse_fault("crash:2@3"), parse_fault("crash:1@10"), parse_fault("crash:3@12")]
+    problems = check_faults(faults, PAPER_IDS, physics=False, duration=10)
+    assert problems == [
+        "crash:1@10: starts at 10 s, not before the end of the run (--duration 10)",
+        "crash:3@12: starts at 12 s, not before the end of the run (--duration 10)",
+    ]
+    assert check_faults(faults, PAPER_IDS, physics=False) == []  # no duration, no check
+
+
+def test_fault_robot_of_a_partition_is_an_error() -> None:
+    with pytest.raises(ValueError, match="groups"):
+        _ = parse_fault("partition:1|2@1+1").robot
+    assert parse_fault("pause:2@1+2").end == 3.0
+    assert parse_fault("crash:2@1").end is None
+
+
+_times = st.floats(min_value=0.0, max_value=1e7, allow_nan=False, allow_infinity=False)
+_ids = st.integers(min_value=1, max_value=0xFFFF)
+
+
+@st.composite
+def _faults(draw: st.DrawFn) -> Fault:
+    kind = draw(st.sampled_from(KINDS))
+    at = draw(_times)
+    if kind == "partition":
+        named = draw(st.lists(_ids, min_size=2, max_size=8, unique=True))
+        cut = sorted(draw(st.sets(st.integers(1, len(named) - 1), min_size=1)))
+        bounds = [0, *cut, len(named)]
+        groups = tuple(tuple(named[a:b]) for a, b in zip(bounds, bounds[1:], strict=False))
+        dur = draw(_times.filter(lambda d: d > 0))
+        return Fault(kind, at, tuple(named), dur, groups)
+    dur = draw(_times.filter(lambda d: d > 0)) if kind == "pause" else None
+    return Fault(kind, at, (draw(_ids),), dur)
+
+
+@given(_faults())
+def test_spec_round_trips(fault: Fault) -> None:
+    """`spec()` is what the summary and the event log show; it must parse back exactly
+    (tiny and large times included: no exponent, no rounding)."""
+    assert parse_fault(fault.spec()) == fault
+
+
+def test_spec_keeps_small_and_precise_times() -> None:
+    assert Fault("crash", 1e-05, (2,)).spec() == "crash:2@0.00001"
+    assert Fault("crash", 1234567.5, (2,)).spec() == "crash:2@1234567.5"
+    assert Fault("crash", 0.123456789, (2,)).spec() == "crash:2@0.123456789"
