@@ -83,7 +83,7 @@ def register(app: typer.Typer) -> None:
                 err.print(f"--fault: {p}")
             raise typer.Exit(2)
         if report is not None:
-            report.mkdir(parents=True, exist_ok=True)
+            _clear_report(report)
         out = Console(highlight=False, stderr=json_out)
 
         if virtual:
@@ -97,21 +97,24 @@ def register(app: typer.Typer) -> None:
         t0: float | None = summary.extra.pop("_t0", None)
         if events is not None:
             _write_events(events, events_list)
+        pictures: dict[str, Any] = {}
         if report is not None:
             _write_report(report, events_list, summary, duration)
             if not virtual and not no_physics:
                 # Trajectory plot, video and key frames from the robots' trajectory files.
                 from sim.render import report_pictures
 
-                report_pictures(report, events_list,
-                                {n: cfg.function_spec(n) for n in plan.functions},
-                                t0=t0, end=duration)
+                pictures = report_pictures(report, events_list,
+                                           {n: cfg.function_spec(n) for n in plan.functions},
+                                           t0=t0, end=duration)
         if json_out:
             typer.echo(summary.to_json())
         else:
             from sim.summary import render_summary
 
             render_summary(summary, out)
+        if report is not None:
+            _say_report(out, report, pictures, physics=not virtual and not no_physics)
         raise typer.Exit(0 if summary.ok else 1)
 
 
@@ -157,6 +160,42 @@ def _run_realtime(swarm: Path, plan: Any, params: Any, faults: list[Any], *, dur
     summary.extra["_t0"] = result.t0
     summary.extra["_events"] = result.events
     return summary
+
+
+REPORT_FILES = ("events.jsonl", "summary.json", "timeline.png", "trajectories.png",
+                "swarm.mp4", "swarm.gif", "key-*.png")
+"""What `--report DIR` writes at its top level (plus `realtime/`, the robots' files)."""
+
+
+def _clear_report(report: Path) -> None:
+    """Remove what an earlier run wrote into `report`, and nothing else. A reused report
+    directory must not mix runs: the robots' persisted state under `realtime/state`
+    would make them restore the old run's roles (DESIGN rule 2), and old trajectory
+    files and key frames would be drawn with the new ones."""
+    import shutil
+
+    if report.exists() and not report.is_dir():
+        raise typer.BadParameter(f"{report} exists and is not a directory", param_hint="--report")
+    report.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(report / "realtime", ignore_errors=True)
+    for pattern in REPORT_FILES:
+        for path in report.glob(pattern):
+            path.unlink(missing_ok=True)
+
+
+def _say_report(out: Any, report: Path, pictures: dict[str, Any], *, physics: bool) -> None:
+    """Tell the user what `--report` wrote and, when a picture is missing, why: a
+    missing GL backend must not look like a silent success (issue 4 item 5)."""
+    names = sorted(p.name for p in report.iterdir() if p.is_file())
+    out.print(f"report: {report}/ — {', '.join(names)}")
+    if not physics:
+        out.print("report: trajectories and video need physics (not with --virtual or "
+                  "--no-physics)")
+    for problem in pictures.get("skipped", []):
+        out.print(f"report: trajectory file skipped: {problem}")
+    if pictures.get("video_error"):
+        out.print(f"report: no video or key frames: {pictures['video_error']} "
+                  "(scripts/system-deps.sh installs a headless GL backend)")
 
 
 def _write_events(path: Path, events: list[dict[str, Any]]) -> None:
