@@ -36,7 +36,6 @@ from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.node import Node
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
-from swarmd.keys import load_keys
 from swarmd.link.base import RobotLink
 from swarmd.link.factory import make_link
 from swarmd.metrics import Metrics, MetricsServer
@@ -77,17 +76,6 @@ def make_transport(cfg: Any) -> Transport:
     return transport
 
 
-def load_swarm_keys(cfg: RobotConfig) -> list[bytes]:
-    """Signing key first, then the keys also accepted (rotation window). The swarm's
-    key_file signs; without one, the first of the robot's key_files does (A.md schema).
-    Key files readable by others are refused (swarmd/keys.py says why)."""
-    signing = cfg.swarm.key_path
-    extra = list(cfg.key_files)
-    if signing is None and extra:
-        signing = extra.pop(0)
-    return load_keys(signing, extra)
-
-
 class Daemon:
     """The pieces of one running daemon; `run_daemon` drives it."""
 
@@ -122,6 +110,8 @@ class Daemon:
             state_mod.state_path(cfg.state_dir, self.swarm_id, cfg.robot),
             robot=cfg.robot, swarm=self.swarm_id)
         self.state_errors = 0
+        self.reload_errors = 0
+        """SIGHUPs whose config or keys were refused (logged; the old ones stay)."""
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
@@ -192,7 +182,7 @@ class Daemon:
         failure (the caller turns it into an exit code)."""
         cfg = self.cfg
         loop = asyncio.get_running_loop()
-        keys = load_swarm_keys(cfg)
+        keys = cfg.keys()  # signing key first, then those also accepted (rotation)
         persisted = self._load_state()
         seq_start = state_mod.initial_seq(seq_seed(time.time()), persisted)
         params = cfg.swarm.params()
@@ -264,18 +254,22 @@ class Daemon:
         try:
             new = load_robot(self.config_path)
         except ConfigError as exc:
+            self.reload_errors += 1
             log.error("SIGHUP: config not reloaded", extra={
                 "problems": [str(p) for p in exc.problems]})
             return
         old = self.cfg
+        keys: tuple[bytes, ...] | None = None
         try:
-            keys = load_swarm_keys(new)
-        except Exception as exc:
-            log.error("SIGHUP: keys not reloaded", extra={"error": str(exc)})
+            keys = new.keys()
+            if self.runtime is not None:
+                # The node signs with keys[0] and accepts any: the rotation window.
+                self.runtime.set_keys(keys)
+        except Exception as exc:  # KeyFileError, NodeError, or an OSError reading
+            self.reload_errors += 1
+            log.error("SIGHUP: keys not reloaded; the old ones stay in use",
+                      extra={"error": str(exc)})
             keys = None
-        if keys is not None and self.runtime is not None:
-            # The node signs with keys[0] and accepts any: the rotation window.
-            self.runtime.node.keys = tuple(keys)
         if new.event_log != old.event_log or self.event_log is not None:
             if self.event_log is not None and new.event_log is not None:
                 self.event_log.reopen(new.event_log)

@@ -32,7 +32,7 @@ import asyncio
 import logging
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from swarmd.core import wire
@@ -163,6 +163,12 @@ class Runtime:
     def inject(self, msg: wire.Message) -> None:
         """Broadcast an arbitrary message as this robot (fault injection: `liar:R@T`)."""
         self._step(lambda now: self.node.send_message(msg, now))
+
+    def set_keys(self, keys: Sequence[bytes]) -> None:
+        """New swarm keys (SIGHUP): `keys[0]` signs from the next frame on, any of them
+        verifies; frames already queued are checked against the new list. Raises
+        `NodeError` and keeps the old keys if the node refuses them (`Node.set_keys`)."""
+        self.node.set_keys(keys)
 
     # ---------------------------------------------------------------- the step path
     def _step(self, call: Callable[[float], list[Action]]) -> None:

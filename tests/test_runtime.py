@@ -7,7 +7,9 @@ on conditions with a deadline (never a sleep standing in for protocol logic).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
+import re
 import socket
 import subprocess
 import sys
@@ -17,11 +19,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from swarmd.config import RobotConfig, parse_robot
+from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node
 from swarmd.core.roles import Health, Role
 from swarmd.daemon import Daemon, run_daemon
+from swarmd.keys import generate_key
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
 from swarmd.link.socket import SocketLink
@@ -81,7 +84,9 @@ class Running:
         return await asyncio.wait_for(self.task, 10.0)
 
 
-async def launch(cfg: RobotConfig, *, link: RobotLink | None = None) -> Running:
+async def launch(cfg: RobotConfig, *, link: RobotLink | None = None,
+                 keep: list[bytes] | None = None) -> Running:
+    """Run a daemon as a task until ready; `keep` collects every frame it receives."""
     stop = asyncio.Event()
     holder: list[Running] = []
 
@@ -92,6 +97,8 @@ async def launch(cfg: RobotConfig, *, link: RobotLink | None = None) -> Running:
         # A pass-through filter that notes who we hear (sender id from the header).
         if len(data) >= wire.HEADER_LEN:
             holder[0].heard.add(wire.HEADER.unpack_from(data)[2])
+        if keep is not None:
+            keep.append(data)
         return True
 
     def ready(d: Daemon) -> None:
@@ -339,3 +346,62 @@ async def test_restarted_daemon_does_not_resume_a_function_taken_over(tmp_path: 
     finally:
         for r in others:
             await r.finish()
+
+
+async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> None:
+    # docs/operations.md "Rotating the swarm key", steps 1-3, by Daemon.reload (what
+    # SIGHUP calls) on a running daemon; the keys reach the node through set_keys.
+    old, new = tmp_path / "old.key", tmp_path / "new.key"
+    k_old, k_new = generate_key(old), generate_key(new)
+    port = free_port()
+    swarm, robot = tmp_path / "swarm.yaml", tmp_path / "robot.yaml"
+
+    def write(signing: Path | None, accepted: list[Path]) -> None:
+        key_file = "null" if signing is None else str(signing)
+        swarm.write_text(re.sub(r"(?m)^key_file:.*$", f"key_file: {key_file}",
+                                PAPER.read_text()))
+        robot.write_text(
+            f"robot: 1\nswarm: {swarm}\ntransport: {{kind: udp, port: {port}}}\n"
+            f"link: {{kind: none}}\nstate_dir: {tmp_path / 'state'}\n"
+            f"key_files: [{', '.join(str(p) for p in accepted)}]\n")
+
+    write(old, [])
+    frames: list[bytes] = []
+    a = await launch(load_robot(robot), keep=frames)
+    assert a.daemon is not None
+    daemon, node = a.daemon, runtime_of(a).node
+
+    def keys() -> tuple[bytes, ...]:
+        return node.keys
+    daemon.config_path = robot
+
+    async def signs_with(key: bytes) -> None:
+        # Our own heartbeats come back over multicast loopback.
+        mark = len(frames)
+
+        def seen() -> bool:
+            for data in frames[mark:]:
+                with contextlib.suppress(wire.CodecError):
+                    if wire.decode(data, [key]).sender == 1:
+                        return True
+            return False
+        await wait_until(seen, 3.0, "a heartbeat signed with the new signing key")
+
+    try:
+        write(old, [new])
+        daemon.reload()
+        assert keys() == (k_old, k_new)
+        write(new, [old])
+        daemon.reload()
+        assert keys() == (k_new, k_old)
+        await signs_with(k_new)
+        write(new, [])
+        daemon.reload()
+        assert keys() == (k_new,) and daemon.reload_errors == 0
+        write(None, [])  # key lines lost: refused, signing goes on with the new key
+        daemon.reload()
+        assert keys() == (k_new,) and daemon.reload_errors == 1
+        await signs_with(k_new)
+        assert node.drops["auth"] == 0
+    finally:
+        assert await a.finish() == 0

@@ -90,7 +90,7 @@ def test_start_logs_json_reloads_and_leaves_on_sigterm(tmp_path: Path) -> None:
         assert ready["level"] == "info" and isinstance(ready["ts"], float)
         proc.send_signal(signal.SIGHUP)
         reloaded = wait_line(q, seen, "SIGHUP: config reloaded")
-        assert reloaded["restart_needed_for"] == []
+        assert reloaded["restart_needed_for"] == [] and reloaded["keys"] == 0  # unsigned
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
         wait_line(q, seen, "stopped", timeout=2)
