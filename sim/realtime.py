@@ -276,8 +276,12 @@ class Orchestrator:
         self.group = group
         self.port = port or free_udp_port()
         self.robots = robot_ids(swarm_path)
+        # Absolute: the robot files written below name their state_dir, and a relative
+        # path in a robot file is read relative to that file (docs/config.md), so
+        # `--report out/demo` put the trajectories under out/demo/realtime/robots/out/...
         self.run_dir = (
-            report_dir / "realtime" if report_dir else Path(tempfile.mkdtemp(prefix="swarmd-"))
+            report_dir.resolve() / "realtime" if report_dir
+            else Path(tempfile.mkdtemp(prefix="swarmd-"))
         )
         self.run_dir.mkdir(parents=True, exist_ok=True)
         (self.run_dir / "logs").mkdir(exist_ok=True)
