@@ -7,13 +7,13 @@ the radios. Frames are therefore COBS-delimited and CRC-checked (`framing.py`), 
 receiver yields exactly the good frames and counts the rest.
 
 The port is opened on the event loop by pyserial-asyncio (non-blocking fd, no thread).
-A lost port (USB pulled) is reported as `transport_down` and reopened with back-off.
+A lost port (USB pulled) is reported as `transport_down` and reopened with back-off
+(`reopen.py`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections import Counter
 from collections.abc import Mapping
@@ -21,6 +21,7 @@ from typing import Any
 
 from swarmd.transport import framing
 from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.reopen import Reopener
 
 log = logging.getLogger(__name__)
 
@@ -68,8 +69,7 @@ class SerialTransport:
         self._on_frame: FrameCallback | None = None
         self._on_event: EventCallback | None = None
         self._closing = False
-        self._lost = asyncio.Event()
-        self._supervisor: asyncio.Task[None] | None = None
+        self._reopener: Reopener | None = None
 
     @classmethod
     def from_config(cls, cfg: Any) -> SerialTransport:
@@ -88,14 +88,16 @@ class SerialTransport:
         """Open the port. A missing port is reported and retried, not raised: the
         daemon keeps running until the radio is plugged in."""
         self._on_frame, self._on_event = on_frame, on_event
-        self._lost = asyncio.Event()
+        self._reopener = Reopener(f"serial {self.port}", self._open, self.counters,
+                                  minimum=self.reopen_min, maximum=self.reopen_max,
+                                  logger=log)
         try:
             await self._open()
         except Exception as exc:
             self._event("transport_down", {"kind": "serial", "port": self.port,
                                            "reason": f"cannot open: {exc}"})
-            self._lost.set()
-        self._supervisor = asyncio.create_task(self._supervise(), name="serial-reopen")
+            self._reopener.lost()
+        self._reopener.start()
 
     async def _open(self) -> None:
         import serial_asyncio
@@ -108,30 +110,10 @@ class SerialTransport:
         self._event("transport_up", {"kind": "serial", "port": self.port, "baud": self.baud,
                                      "max_payload": self._max_payload})
 
-    async def _supervise(self) -> None:
-        backoff = self.reopen_min
-        while not self._closing:
-            await self._lost.wait()
-            if self._closing:
-                return
-            try:
-                await self._open()
-            except Exception as exc:
-                self.counters["reopen_failed"] += 1
-                log.info("serial %s still down (%s); retry in %.1f s", self.port, exc, backoff)
-                await asyncio.sleep(backoff)
-                backoff = min(self.reopen_max, backoff * 2)
-            else:
-                backoff = self.reopen_min
-                self._lost.clear()
-
     async def close(self) -> None:
         self._closing = True
-        self._lost.set()
-        if self._supervisor is not None:
-            self._supervisor.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._supervisor
+        if self._reopener is not None:
+            await self._reopener.close()
         transport, self._transport = self._transport, None
         if transport is not None:
             transport.close()
@@ -178,7 +160,8 @@ class SerialTransport:
         reason = str(exc) if exc else "port closed"
         log.warning("serial %s down: %s", self.port, reason)
         self._event("transport_down", {"kind": "serial", "port": self.port, "reason": reason})
-        self._lost.set()
+        if self._reopener is not None:
+            self._reopener.lost()
 
     def _send_error(self, reason: str, **fields: Any) -> None:
         self.counters[f"send_error:{reason}"] += 1

@@ -19,7 +19,8 @@ arm's length from the event loop (STYLE.md point 8):
 - at start the radio's protocol, API mode, PAN id, channel and role (CE) are compared
   with the config and every difference is named (TransportError);
 - a radio that is pulled or stops answering is reported (`transport_down`) and reopened
-  with exponential back-off while the daemon keeps running (`transport_up` when back).
+  with exponential back-off (`reopen.py`) while the daemon keeps running (`transport_up`
+  when back).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.reopen import Reopener
 
 log = logging.getLogger(__name__)
 
@@ -125,8 +127,7 @@ class XBeeTransport:
         self._up = False
         self._closing = False
         self._down_since = 0.0
-        self._reopen_wakeup = asyncio.Event()
-        self._supervisor: asyncio.Task[None] | None = None
+        self._reopener: Reopener | None = None
         self._watchdog: asyncio.TimerHandle | None = None
         # Outgoing: frames waiting for a slot, and frame id -> status deadline timer.
         self._queue: deque[bytes] = deque(maxlen=send_queue)
@@ -162,7 +163,10 @@ class XBeeTransport:
         self._loop = asyncio.get_running_loop()
         self._on_frame, self._on_event = on_frame, on_event
         self._executor = ThreadPoolExecutor(1, thread_name_prefix=f"xbee-{self.port}")
-        self._reopen_wakeup = asyncio.Event()
+        self._reopener = Reopener(f"XBee {self.port}", self._open, self.counters,
+                                  minimum=self.reopen_min, maximum=self.reopen_max,
+                                  describe=_describe, on_failure=self._reopen_failed,
+                                  on_success=self._reopened, logger=log)
         try:
             await self._open()
         except RadioMismatch:
@@ -170,17 +174,15 @@ class XBeeTransport:
             raise
         except Exception as exc:  # no device, timeout, wrong mode: keep running, retry
             self._went_down(f"cannot open {self.port}: {_describe(exc)}")
-        self._supervisor = asyncio.create_task(self._supervise(), name="xbee-reopen")
+        self._reopener.start()
         self._arm_watchdog()
 
     async def close(self) -> None:
         self._closing = True
         if self._watchdog is not None:
             self._watchdog.cancel()
-        if self._supervisor is not None:
-            self._supervisor.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._supervisor
+        if self._reopener is not None:
+            await self._reopener.close()
         self._drop_in_flight("closed")
         self._up = False
         if self._executor is not None:
@@ -205,28 +207,12 @@ class XBeeTransport:
             "address": f"{info.address64:016X}", "max_payload": info.max_payload,
         })
 
-    async def _supervise(self) -> None:
-        """Reopen a lost radio with exponential back-off until it answers again."""
-        backoff = self.reopen_min
-        while not self._closing:
-            if self._up:
-                backoff = self.reopen_min
-                self._reopen_wakeup.clear()
-                await self._reopen_wakeup.wait()
-                continue
-            try:
-                await self._open()
-            except Exception as exc:
-                self.counters["reopen_failed"] += 1
-                if isinstance(exc, RadioMismatch):
-                    self._event("transport_error", {"kind": "xbee", "reason": str(exc)})
-                log.info("XBee %s still down (%s); retry in %.1f s", self.port,
-                         _describe(exc), backoff)
-                await asyncio.sleep(backoff)
-                backoff = min(self.reopen_max, backoff * 2)
-            else:
-                log.warning("XBee %s back after %.1f s", self.port,
-                            time.monotonic() - self._down_since)
+    def _reopen_failed(self, exc: Exception) -> None:
+        if isinstance(exc, RadioMismatch):
+            self._event("transport_error", {"kind": "xbee", "reason": str(exc)})
+
+    def _reopened(self) -> None:
+        log.warning("XBee %s back after %.1f s", self.port, time.monotonic() - self._down_since)
 
     def _went_down(self, reason: str) -> None:
         if not self._up and self._down_since:
@@ -240,7 +226,8 @@ class XBeeTransport:
         self._queue.clear()
         if self._executor is not None and self._loop is not None:
             self._loop.run_in_executor(self._executor, self._close_device)
-        self._reopen_wakeup.set()
+        if self._reopener is not None:
+            self._reopener.lost()
 
     def _arm_watchdog(self) -> None:
         assert self._loop is not None
