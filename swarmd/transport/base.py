@@ -21,6 +21,8 @@ Rules:
 
 from __future__ import annotations
 
+import logging
+from collections import Counter
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -41,3 +43,31 @@ class Transport(Protocol):
     def send(self, frame: bytes) -> None: ...
 
     async def close(self) -> None: ...
+
+
+class ChannelEvents:
+    """A transport's side of `on_event` (the rules above): `emit` passes an event on,
+    `send_error` also counts it as `send_error:<reason>` and names the transport's
+    `kind`. A callback that raises is logged, never propagated: it would otherwise
+    surface in the transport's I/O path (a send, a status callback) and break it."""
+
+    def __init__(self, kind: str, counters: Counter[str], logger: logging.Logger) -> None:
+        self.kind = kind
+        self.counters = counters
+        self.logger = logger
+        self.callback: EventCallback | None = None
+        """Set by the transport's `start`; events before it are dropped."""
+
+    def emit(self, name: str, fields: Mapping[str, Any]) -> None:
+        """Report one channel condition, e.g. ("transport_down", {"reason": ...})."""
+        if self.callback is None:
+            return
+        try:
+            self.callback(name, fields)
+        except Exception:
+            self.logger.exception("on_event raised")
+
+    def send_error(self, reason: str, **fields: Any) -> None:
+        """A frame that could not go out: counted and reported, never raised (rules)."""
+        self.counters[f"send_error:{reason}"] += 1
+        self.emit("send_error", {"kind": self.kind, "reason": reason, **fields})

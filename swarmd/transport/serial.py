@@ -16,11 +16,15 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections import Counter
-from collections.abc import Mapping
 from typing import Any
 
 from swarmd.transport import framing
-from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.base import (
+    ChannelEvents,
+    EventCallback,
+    FrameCallback,
+    TransportError,
+)
 from swarmd.transport.reopen import Reopener
 
 log = logging.getLogger(__name__)
@@ -64,10 +68,10 @@ class SerialTransport:
         self.reopen_min = reopen_min
         self.reopen_max = reopen_max
         self.counters: Counter[str] = Counter()
+        self._events = ChannelEvents("serial", self.counters, log)
         self.decoder = framing.FrameDecoder(max_frame=max(max_payload, 255))
         self._transport: asyncio.Transport | None = None
         self._on_frame: FrameCallback | None = None
-        self._on_event: EventCallback | None = None
         self._closing = False
         self._reopener: Reopener | None = None
 
@@ -87,15 +91,15 @@ class SerialTransport:
     async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
         """Open the port. A missing port is reported and retried, not raised: the
         daemon keeps running until the radio is plugged in."""
-        self._on_frame, self._on_event = on_frame, on_event
+        self._on_frame, self._events.callback = on_frame, on_event
         self._reopener = Reopener(f"serial {self.port}", self._open, self.counters,
                                   minimum=self.reopen_min, maximum=self.reopen_max,
                                   logger=log)
         try:
             await self._open()
         except Exception as exc:
-            self._event("transport_down", {"kind": "serial", "port": self.port,
-                                           "reason": f"cannot open: {exc}"})
+            self._events.emit("transport_down", {"kind": "serial", "port": self.port,
+                                                 "reason": f"cannot open: {exc}"})
             self._reopener.lost()
         self._reopener.start()
 
@@ -107,8 +111,8 @@ class SerialTransport:
             loop, lambda: _Protocol(self), self.port, baudrate=self.baud)
         self._transport = transport
         self.decoder = framing.FrameDecoder(max_frame=max(self._max_payload, 255))
-        self._event("transport_up", {"kind": "serial", "port": self.port, "baud": self.baud,
-                                     "max_payload": self._max_payload})
+        self._events.emit("transport_up", {"kind": "serial", "port": self.port, "baud": self.baud,
+                                           "max_payload": self._max_payload})
 
     async def close(self) -> None:
         self._closing = True
@@ -122,21 +126,21 @@ class SerialTransport:
     def send(self, frame: bytes) -> None:
         """Write one framed broadcast; never blocks and never raises (base.py)."""
         if len(frame) > self._max_payload:
-            self._send_error("oversize", size=len(frame), limit=self._max_payload)
+            self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
             return
         transport = self._transport
         if transport is None:
-            self._send_error("radio down")
+            self._events.send_error("radio down")
             return
         if transport.get_write_buffer_size() > self.write_buffer_limit:
             # The radio's flow control or baud rate cannot keep up: shed load rather
             # than queue stale heartbeats without bound.
-            self._send_error("write buffer full")
+            self._events.send_error("write buffer full")
             return
         try:
             transport.write(framing.encode(frame))
         except Exception as exc:
-            self._send_error(f"write failed: {exc}")
+            self._events.send_error(f"write failed: {exc}")
             return
         self.counters["sent"] += 1
 
@@ -159,18 +163,7 @@ class SerialTransport:
             return
         reason = str(exc) if exc else "port closed"
         log.warning("serial %s down: %s", self.port, reason)
-        self._event("transport_down", {"kind": "serial", "port": self.port, "reason": reason})
+        self._events.emit("transport_down", {"kind": "serial", "port": self.port, "reason": reason})
         if self._reopener is not None:
             self._reopener.lost()
 
-    def _send_error(self, reason: str, **fields: Any) -> None:
-        self.counters[f"send_error:{reason}"] += 1
-        self._event("send_error", {"kind": "serial", "reason": reason, **fields})
-
-    def _event(self, name: str, fields: Mapping[str, Any]) -> None:
-        if self._on_event is None:
-            return
-        try:
-            self._on_event(name, fields)
-        except Exception:
-            log.exception("on_event raised")

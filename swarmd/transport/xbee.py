@@ -32,12 +32,16 @@ import os
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
-from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.base import (
+    ChannelEvents,
+    EventCallback,
+    FrameCallback,
+    TransportError,
+)
 from swarmd.transport.reopen import Reopener
 
 log = logging.getLogger(__name__)
@@ -117,11 +121,11 @@ class XBeeTransport:
         self.watchdog_interval = watchdog_interval
         self.info: RadioInfo | None = None
         self.counters: Counter[str] = Counter()
+        self._events = ChannelEvents("xbee", self.counters, log)
         self._max_payload = MAX_PAYLOAD[protocol]
         self._executor: ThreadPoolExecutor | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
-        self._on_event: EventCallback | None = None
         self._device: Any = None
         self._device_node = ""
         self._up = False
@@ -161,7 +165,7 @@ class XBeeTransport:
         differ raises `RadioMismatch`; a missing or silent one is reported as
         `transport_down` and retried in the background (the daemon keeps running)."""
         self._loop = asyncio.get_running_loop()
-        self._on_frame, self._on_event = on_frame, on_event
+        self._on_frame, self._events.callback = on_frame, on_event
         self._executor = ThreadPoolExecutor(1, thread_name_prefix=f"xbee-{self.port}")
         self._reopener = Reopener(f"XBee {self.port}", self._open, self.counters,
                                   minimum=self.reopen_min, maximum=self.reopen_max,
@@ -201,7 +205,7 @@ class XBeeTransport:
         self._max_payload = info.max_payload
         self._up = True
         self._timeouts_in_row = 0
-        self._event("transport_up", {
+        self._events.emit("transport_up", {
             "kind": "xbee", "port": self.port, "protocol": info.protocol,
             "pan_id": f"0x{info.pan_id:04X}", "channel": f"0x{info.channel:02X}",
             "address": f"{info.address64:016X}", "max_payload": info.max_payload,
@@ -209,7 +213,7 @@ class XBeeTransport:
 
     def _reopen_failed(self, exc: Exception) -> None:
         if isinstance(exc, RadioMismatch):
-            self._event("transport_error", {"kind": "xbee", "reason": str(exc)})
+            self._events.emit("transport_error", {"kind": "xbee", "reason": str(exc)})
 
     def _reopened(self) -> None:
         log.warning("XBee %s back after %.1f s", self.port, time.monotonic() - self._down_since)
@@ -221,7 +225,7 @@ class XBeeTransport:
         self._down_since = time.monotonic()
         self.counters["outages"] += 1
         log.warning("XBee %s down: %s", self.port, reason)
-        self._event("transport_down", {"kind": "xbee", "port": self.port, "reason": reason})
+        self._events.emit("transport_down", {"kind": "xbee", "port": self.port, "reason": reason})
         self._drop_in_flight("radio down")
         self._queue.clear()
         if self._executor is not None and self._loop is not None:
@@ -381,13 +385,13 @@ class XBeeTransport:
     def send(self, frame: bytes) -> None:
         """Queue one broadcast; never blocks and never raises (base.py)."""
         if len(frame) > self._max_payload:
-            self._send_error("oversize", size=len(frame), limit=self._max_payload)
+            self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
             return
         if not self._up:
-            self._send_error("radio down")
+            self._events.send_error("radio down")
             return
         if len(self._queue) == self._queue.maxlen:
-            self._send_error("queue full")  # deque drops the oldest on append
+            self._events.send_error("queue full")  # deque drops the oldest on append
         self._queue.append(frame)
         self._pump()
 
@@ -424,7 +428,7 @@ class XBeeTransport:
         if status == 0:
             self.counters["delivered"] += 1
         else:
-            self._send_error(_STATUS_TEXT.get(status, f"transmit status 0x{status:02X}"),
+            self._events.send_error(_STATUS_TEXT.get(status, f"transmit status 0x{status:02X}"),
                              status=status)
         self._pump()
 
@@ -432,7 +436,7 @@ class XBeeTransport:
         if self._in_flight.pop(frame_id, None) is None:
             return
         self._timeouts_in_row += 1
-        self._send_error("no transmit status")
+        self._events.send_error("no transmit status")
         if self._timeouts_in_row >= 3:
             self._went_down("radio stopped answering (no transmit status 3 times)")
         else:
@@ -443,19 +447,6 @@ class XBeeTransport:
             timer.cancel()
             self.counters[f"lost ({reason})"] += 1
         self._in_flight.clear()
-
-    # -- events -------------------------------------------------------------------------
-    def _send_error(self, reason: str, **fields: Any) -> None:
-        self.counters[f"send_error:{reason}"] += 1
-        self._event("send_error", {"kind": "xbee", "reason": reason, **fields})
-
-    def _event(self, name: str, fields: Mapping[str, Any]) -> None:
-        if self._on_event is None:
-            return
-        try:
-            self._on_event(name, fields)
-        except Exception:
-            log.exception("on_event raised")
 
 
 _STATUS_TEXT = {
