@@ -24,9 +24,12 @@ lint: $(STAMP)/python
 test: setup
 	$(PY) -m pytest -q
 
+# The paper's swarm flown in MuJoCo, one process per robot; robot 2 crashes at 5 s and
+# standby 6 flies over to f2's slot. out/demo/: summary, event log, timeline.png,
+# trajectories.png, swarm.mp4 and key frames (a headless GL backend: system-deps).
 demo: setup
-	$(PY) -m swarmd.cli sim configs/paper.yaml --virtual --duration 20 --seed 1 \
-	  --fault crash:2@5 --report out/demo
+	$(PY) -m swarmd.cli sim configs/paper.yaml --fault crash:2@5 --duration 15 --seed 1 \
+	  --report out/demo
 
 bench: setup
 	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

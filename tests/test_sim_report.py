@@ -29,16 +29,19 @@ DURATION = 8.0
 pytestmark = pytest.mark.slow
 
 
-def _sim(*args: str, timeout: float) -> subprocess.CompletedProcess[str]:
+def _sim(*args: str, timeout: float, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "swarmd.cli", "sim", str(PAPER), *args],
-                          cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+                          cwd=cwd, capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
 def flown(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, object], str]:
-    report = tmp_path_factory.mktemp("report")
-    proc = _sim("--fault", "crash:2@3", "--duration", str(DURATION), "--report", str(report),
-                "--json", timeout=DURATION + 150)
+    # A relative --report, as `make demo` gives it: the robots must still write their
+    # trajectories into it (they once went under realtime/robots/<report>/).
+    here = tmp_path_factory.mktemp("cwd")
+    report = here / "out" / "demo"
+    proc = _sim("--fault", "crash:2@3", "--duration", str(DURATION), "--report", "out/demo",
+                "--json", timeout=DURATION + 150, cwd=here)
     assert proc.returncode == 0, proc.stderr[-2000:]
     return report, json.loads(proc.stdout), proc.stderr
 
