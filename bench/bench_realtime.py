@@ -99,10 +99,12 @@ async def bench_takeover(cycles: int) -> dict[str, Any]:
 
 def grid_swarm(n: int, directory: Path) -> Path:
     """A grid swarm of n robots: rows x cols active + one standby per row."""
-    shapes = {10: (2, 4), 20: (2, 9), 30: (3, 7), 40: (4, 9), 50: (5, 9), 60: (6, 9),
+    # rows x (cols + 1) robots: cols active and one standby in each row.
+    shapes = {10: (2, 4), 20: (2, 9), 30: (3, 9), 40: (4, 9), 50: (5, 9), 60: (6, 9),
               80: (8, 9), 100: (10, 9)}
     if n not in shapes:
         raise SystemExit(f"size {n} not in {sorted(shapes)}")
+    assert shapes[n][0] * (shapes[n][1] + 1) == n, shapes[n]
     spec = importlib.util.spec_from_file_location("make_grid", ROOT / "configs" / "make_grid.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
