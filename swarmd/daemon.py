@@ -24,7 +24,6 @@ import asyncio
 import contextlib
 import importlib
 import logging
-import os
 import signal
 import time
 from collections.abc import Callable, Mapping
@@ -37,6 +36,7 @@ from swarmd.core.node import Node
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
 from swarmd.link.base import RobotLink
+from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
 from swarmd.metrics import Metrics, MetricsServer
 from swarmd.notify import Notifier
@@ -55,6 +55,9 @@ EXIT_CONFIG = 2
 READY_TIMEOUT = 3.0
 """s. READY is sent after the first heartbeat; a robot that reports itself faulty at
 start never heartbeats, so READY goes out anyway after this long (it is running)."""
+ALERT_HOOK_TIMEOUT = 30.0
+"""s. An alert hook still running after this is killed (a page or a mail takes
+seconds; a hung one must not pile up, one per alert)."""
 
 
 def make_transport(cfg: Any) -> Transport:
@@ -143,23 +146,21 @@ class Daemon:
         background, with the alert in its environment."""
         hook = self._alert_hook
         assert hook is not None
-        env = {**os.environ, "SWARMD_ROBOT": str(self.robot_id),
+        env = {"SWARMD_ROBOT": str(self.robot_id),
                "SWARMD_FUNCTION": str(record.get("function", "")),
                "SWARMD_REASON": str(record.get("reason", ""))}
 
         async def run() -> None:
             try:
-                if isinstance(hook, str):
-                    proc = await asyncio.create_subprocess_shell(
-                        hook, env=env, stdin=asyncio.subprocess.DEVNULL)
-                else:
-                    proc = await asyncio.create_subprocess_exec(
-                        *hook, env=env, stdin=asyncio.subprocess.DEVNULL)
-                status = await asyncio.wait_for(proc.wait(), 30.0)
+                status = await run_command(hook, env, ALERT_HOOK_TIMEOUT)
+            except TimeoutError:  # first: TimeoutError is an OSError
+                log.error("alert hook timed out; killed",
+                          extra={"timeout_s": ALERT_HOOK_TIMEOUT})
+            except OSError as exc:
+                log.error("alert hook could not run", extra={"error": str(exc)})
+            else:
                 if status != 0:
                     log.error("alert hook failed", extra={"status": status})
-            except (OSError, TimeoutError) as exc:
-                log.error("alert hook could not run", extra={"error": str(exc)})
 
         task = asyncio.get_running_loop().create_task(run())
         self._hook_tasks.add(task)

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from swarmd.core.roles import Health
-from swarmd.link.exec import ExecLink
+from swarmd.link.exec import ExecLink, run_command
 from swarmd.link.factory import LinkConfigError, make_link
 from swarmd.link.none import NoneLink
 from swarmd.link.socket import SocketLink, SocketLinkError
@@ -168,3 +168,19 @@ async def test_none_link_records_and_factory_builds_kinds(tmp_path: Path) -> Non
     Cfg.kind = "teleport"
     with pytest.raises(LinkConfigError, match="teleport"):
         make_link(Cfg())
+
+
+async def test_run_command_list_without_shell_string_with_one(tmp_path: Path) -> None:
+    # A list is argv as is: "$X" stays literal; a string goes through /bin/sh.
+    out = tmp_path / "out"
+    argv = [sys.executable, "-c",
+            f"import os, sys; open({str(out)!r}, 'w').write(sys.argv[1] + os.environ['X'])",
+            "$X"]
+    assert await run_command(argv, {"X": "1"}, 10.0) == 0
+    assert out.read_text() == "$X1"
+    assert await run_command(f'printf "%s" "$X" > {out}; exit 4', {"X": "2"}, 10.0) == 4
+    assert out.read_text() == "2"
+    with pytest.raises(OSError):
+        await run_command([str(tmp_path / "no-such-program")], {}, 10.0)
+    with pytest.raises(TimeoutError):
+        await run_command("sleep 30", {}, 0.1)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import re
 import socket
 import subprocess
@@ -19,6 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import pytest
+
+import swarmd.daemon as daemon_mod
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node
@@ -405,3 +409,26 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> No
         assert node.drops["auth"] == 0
     finally:
         assert await a.finish() == 0
+
+
+async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    # DESIGN rule 8; the hook runs through the exec link's run_command.
+    out = tmp_path / "alert.txt"
+    daemon = Daemon(robot_cfg(tmp_path, 1, free_port()))
+    daemon._alert_hook = ["sh", "-c", f'echo "$SWARMD_ROBOT $SWARMD_FUNCTION '
+                                      f'$SWARMD_REASON" > {out}; exit 3']
+    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
+                     "reason": "no standby"})
+    await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
+    assert out.read_text() == "1 f2 no standby\n"
+    monkeypatch.setattr(daemon_mod, "ALERT_HOOK_TIMEOUT", 0.2)
+    daemon._alert_hook = f"echo $$ > {out}; exec sleep 30"
+    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2"})
+    await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
+    pid = int(out.read_text())
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)  # killed and reaped, not left running
+    assert [r.getMessage() for r in caplog.records if r.name == "swarmd.daemon"
+            and r.levelname == "ERROR"] == ["alert hook failed", "alert hook timed out; killed"]

@@ -37,6 +37,29 @@ log = logging.getLogger(__name__)
 Command = str | Sequence[str]
 
 
+async def run_command(cmd: Command, env: Mapping[str, str], timeout: float) -> int:
+    """Run a configured command (a string through `/bin/sh -c`, a list without a shell)
+    with `env` added to the daemon's environment and stdin closed; return its exit
+    status. Raises `OSError` if it cannot start, and `TimeoutError` once a command that
+    overran `timeout` has been killed and reaped: a hung command must not stay behind
+    (nor keep the robot healthy, DESIGN rule 7). The exec link and the alert hook
+    (swarmd/daemon.py) both run their commands through it."""
+    full_env = {**os.environ, **env}
+    if isinstance(cmd, str):
+        proc = await asyncio.create_subprocess_shell(
+            cmd, env=full_env, stdin=asyncio.subprocess.DEVNULL)
+    else:
+        proc = await asyncio.create_subprocess_exec(
+            *cmd, env=full_env, stdin=asyncio.subprocess.DEVNULL)
+    try:
+        return await asyncio.wait_for(proc.wait(), timeout)
+    except TimeoutError:
+        with contextlib.suppress(ProcessLookupError):
+            proc.kill()
+        await proc.wait()
+        raise
+
+
 class ExecLink:
     """Run commands on assign / release; optional periodic health command."""
 
@@ -92,29 +115,18 @@ class ExecLink:
 
     async def _run(self, cmd: Command, env: Mapping[str, str]) -> int | None:
         """Run one command; its exit status, or None when it could not run / timed out."""
-        full_env = {**os.environ, **env}
         self.counters["runs"] += 1
         try:
-            if isinstance(cmd, str):
-                proc = await asyncio.create_subprocess_shell(
-                    cmd, env=full_env, stdin=asyncio.subprocess.DEVNULL)
-            else:
-                proc = await asyncio.create_subprocess_exec(
-                    *cmd, env=full_env, stdin=asyncio.subprocess.DEVNULL)
+            return await run_command(cmd, env, self.timeout)
+        except TimeoutError:  # first: TimeoutError is an OSError
+            self.counters["timeouts"] += 1
+            log.error("robot link command timed out; killed",
+                      extra={"command": str(cmd), "timeout_s": self.timeout})
+            return None
         except OSError as exc:
             self.counters["failures"] += 1
             log.error("robot link command cannot run", extra={"command": str(cmd),
                                                               "error": str(exc)})
-            return None
-        try:
-            return await asyncio.wait_for(proc.wait(), self.timeout)
-        except TimeoutError:
-            self.counters["timeouts"] += 1
-            with contextlib.suppress(ProcessLookupError):
-                proc.kill()
-            await proc.wait()
-            log.error("robot link command timed out; killed",
-                      extra={"command": str(cmd), "timeout_s": self.timeout})
             return None
 
     async def _worker(self) -> None:
