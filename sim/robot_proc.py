@@ -80,7 +80,9 @@ def _none_link(spec: RobotSpec, cfg: Any) -> RobotLink:
 def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
     from sim.quad.link import QuadLink
 
-    link: RobotLink = QuadLink.for_robot(cfg)
+    # spec.t0 set: this process restarts a robot of a running swarm; its craft resumes
+    # where the killed process left it instead of reappearing parked at home.
+    link: RobotLink = QuadLink.for_robot(cfg, restart_of=spec.t0)
     return link
 
 

@@ -84,6 +84,18 @@ def test_holds_a_slot_within_5cm(p: Preset) -> None:
     assert worst < 0.05, f"{p.name} wandered {worst:.3f} m from its slot"
 
 
+def test_a_long_move_climbs_while_it_cruises() -> None:
+    # Regression: one 3-D error saturation gave a 20 m move a 0.1 m/s climb, so a
+    # standby crossed the field at take-off height and climbed at the far end.
+    r = QuadRobot(1, (0.0, 0.0, 0.0), x2(), record=False)
+    r.assign("far", {"kind": "slot", "position": [20.0, 0.0, 3.0]})
+    t = 0.0
+    while r.position[0] < 5.0 and t < 10.0:
+        t += 0.1
+        r.step_until(t)
+    assert r.position[2] > 2.5, f"at x = {r.position[0]:.1f} m still at z = {r.position[2]:.2f}"
+
+
 @pytest.mark.parametrize("p", PRESETS, ids=lambda p: p.name)
 def test_reaches_a_3m_setpoint_within_5s(p: Preset) -> None:
     r = QuadRobot(1, (0.0, 0.0, 0.0), p, record=False)

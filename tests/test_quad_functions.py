@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 from hypothesis import given
@@ -15,6 +16,7 @@ from sim.quad.functions import (
     SlotFlight,
     SlotSpec,
     flight_for,
+    flight_problems,
     next_waypoint,
     parse_function,
     parse_functions,
@@ -52,12 +54,34 @@ def test_parse_ignores_runtime_extras() -> None:
         ({"kind": "patrol", "waypoints": [[0, 0, 1], [0, 0, 1]]}, "coincide"),
         ({"kind": "patrol", "waypoints": [[0, 0, 1], [1, 0, 1]], "speed": 0}, "speed"),
         ({"kind": "patrol", "waypoints": [[0, 0, 1], [1, 0, 1], [1, 1]]}, "waypoints[2]"),
+        ({"kind": "slot", "position": [0, 0, -0.5]}, "position z = -0.5 m is under the ground"),
+        ({"kind": "slot", "position": [0, 0, 0.1]}, "too close to the ground"),
+        ({"kind": "patrol", "waypoints": [[0, 0, 1], [2, 0, -1]]}, "waypoints[1] z = -1"),
+        # the loop closes: a last waypoint equal to the first is a zero-length leg
+        ({"kind": "patrol", "waypoints": [[0, 0, 1], [1, 0, 1], [0, 0, 1]]},
+         "waypoints[0] coincide with waypoints[2]"),
+        ({"kind": "patrol", "waypoints": [[0, 0, 1], [1, 0, 1]], "speed": True}, "speed"),
     ],
 )
 def test_parse_rejects_with_the_field_named(spec: dict[str, object], words: str) -> None:
     with pytest.raises(FunctionSpecError) as err:
         parse_function("f7", spec)
     assert "f7" in str(err.value) and words in str(err.value)
+
+
+def test_flight_problems_name_the_swarm_file_field() -> None:
+    # What `swarmd sim` prints before starting any robot (issue 4 item 4).
+    functions: dict[str, Any] = {
+        "f1": {"kind": "slot", "position": [0, 0, 1.5]},
+        "p1": {"kind": "patrol", "waypoints": [[0, 0, 1.5], [2, 0, -1.0]], "speed": 1.0},
+        "p2": {"kind": "patrol", "waypoints": [[0, 0, 1.5]]},
+        "p3": SQUARE,
+    }
+    problems = flight_problems(functions)
+    assert len(problems) == 2
+    assert problems[0].startswith("functions.p1.waypoints[1]: z = -1.0 m is under the ground")
+    assert problems[1].startswith("functions.p2.waypoints: must list at least 2 points")
+    assert flight_problems({"f1": functions["f1"], "p3": SQUARE}) == []
 
 
 @pytest.mark.parametrize(

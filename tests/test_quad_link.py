@@ -7,6 +7,7 @@ wait for conditions (bounded), never for fixed protocol delays.
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -15,7 +16,7 @@ from types import SimpleNamespace
 import pytest
 
 from sim.quad.link import QuadLink, default_home, read_stats
-from sim.quad.robot import Mode, load_trajectory
+from sim.quad.robot import Mode, QuadRobot, load_trajectory
 from swarmd.core.roles import Health
 from swarmd.link.base import RobotLink
 
@@ -90,3 +91,34 @@ def test_for_robot_takes_home_and_state_dir(tmp_path: Path) -> None:
     no_home = QuadLink.for_robot(SimpleNamespace(robot_id=3, entry=SimpleNamespace(home=None),
                                                  state_dir=tmp_path))
     assert no_home.home == default_home(3)
+
+
+async def test_restart_resumes_this_runs_craft_and_a_new_run_starts_afresh(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "traj-5.jsonl"
+    t0 = time.time()
+    first = QuadRobot(5, (0.0, 0.0, 0.0))
+    first.assign("f1", {"kind": "slot", "position": [1.0, 0.0, 1.5]})
+    first.step_until(4.0)
+    first.write_trajectory(path, wall0=t0 - 1.0)
+    rows = [json.loads(line) for line in path.read_text().splitlines()]
+    with path.open("w") as f:  # as QuadLink writes them: each sample with its Unix time
+        for row in rows:
+            if "t" in row:
+                row["w"] = t0 - 1.0 + row["t"]
+            f.write(json.dumps(row) + "\n")
+        f.write('{"t": 4.1, "p": [0.0, ')  # cut by the SIGKILL
+    # Restarted within the same run: the craft is where the killed process left it.
+    again = QuadLink(5, (0.0, 0.0, 0.0), traj_path=path, restart_of=t0 - 1.0)
+    assert again.robot.position == pytest.approx(first.position, abs=1e-3)
+    assert again.robot.mode is Mode.LANDING
+    # A new run into the same directory (its t0 later than every sample): parked at
+    # home, and the stale file is replaced so the report shows this run only.
+    fresh = QuadLink(5, (0.0, 0.0, 0.0), traj_path=path, restart_of=t0 + 10.0)
+    assert fresh.robot.mode is Mode.PARKED
+    new_run = QuadLink(5, (0.0, 0.0, 0.0), traj_path=path)
+    await new_run.start(lambda h: None)
+    await new_run.close()
+    assert load_trajectory(path).t[0] == 0.0
+    assert sum('"robot"' in line for line in path.read_text().splitlines()) == 1

@@ -131,3 +131,31 @@ def test_assigning_the_same_function_again_keeps_the_flight() -> None:
     assert r.flight is flight
     r.assign("f1", SLOT)
     assert r.flight is not flight and r.function == "f1"
+
+
+def test_a_restarted_robot_resumes_in_the_air_and_lands_at_home() -> None:
+    # restart:R@T kills the robot's process; the new one must not show the craft
+    # teleported home: it comes back where it was, holds no function, and lands.
+    home = (2.0, -4.0, 0.0)
+    r = QuadRobot(44, home)
+    r.resume((1.0, -2.0, 0.6), (1.0, 0.0, 0.0, 0.0), "flying")
+    assert mode_of(r) is Mode.LANDING and r.function is None
+    assert r.samples[0].pos == pytest.approx((1.0, -2.0, 0.6))
+    lowest = 1.0
+    while r.t < 1.0:
+        r.step_until(r.t + 0.05)
+        if math.dist(r.position[:2], home[:2]) > 0.3:
+            lowest = min(lowest, r.position[2])
+    assert lowest > 0.5  # motors already spinning: no drop, no scrape on the way home
+    r.step_until(12.0)
+    assert mode_of(r) is Mode.PARKED and r.health() is Health.OK
+    assert math.dist(r.position[:2], home[:2]) < 0.1
+
+
+def test_a_restarted_crashed_robot_stays_crashed() -> None:
+    r = QuadRobot(2, (0.0, 0.0, 0.0))
+    r.resume((3.0, 1.0, 0.04), (1.0, 0.0, 0.0, 0.0), "crashed")
+    assert r.health() is Health.FAULTY
+    r.step_until(0.5)
+    assert r.position == pytest.approx((3.0, 1.0, 0.04), abs=0.02)
+    assert not r.assign("f1", SLOT)

@@ -45,9 +45,13 @@ class Gains:
     int_bw: float = 1.0
     """Integral gain ki = m * int_bw * w^2 / 3 (a third of the position stiffness a second)."""
     err_sat: float = 1.5
-    """Position error saturation, m: cruise speed ~ w * err_sat / (2 zeta) = 2.25 m/s.
-    1.5 m moves 3 m in 2.6 s (notes/mujoco.md) and a standby 7 m to its slot in ~4 s
-    (1 m: 5 s), with the same ~1 cm overshoot."""
+    """Horizontal position error saturation, m: cruise speed ~ w * err_sat / (2 zeta) =
+    2.25 m/s. 1.5 m moves 3 m in 2.6 s (notes/mujoco.md) and a standby 7 m to its slot
+    in ~4 s (1 m: 5 s), with the same ~1 cm overshoot."""
+    err_sat_z: float = 1.0
+    """Vertical position error saturation, m (climb ~1.5 m/s). Saturated apart from the
+    horizontal error: one 3-D saturation let a 20 m move crawl up at 0.1 m/s, so a
+    standby crossed the field at take-off height (0.6 m) and climbed at the end."""
     int_radius: float = 0.2
     """Integrate only within this distance of the target, m ..."""
     int_speed: float = 0.2
@@ -113,8 +117,12 @@ class SE3Controller:
         m = self.p.mass
         ex = pos - cmd.position
         dist = math.sqrt(float(ex @ ex))
-        if dist > g.err_sat:
-            ex = ex * (g.err_sat / dist)
+        horiz_err = math.hypot(ex[0], ex[1])
+        if horiz_err > g.err_sat:
+            ex[0] *= g.err_sat / horiz_err
+            ex[1] *= g.err_sat / horiz_err
+        if abs(ex[2]) > g.err_sat_z:
+            ex[2] = math.copysign(g.err_sat_z, ex[2])
         ev = vel - cmd.velocity
         if dist < g.int_radius and float(ev @ ev) < g.int_speed**2:
             self.integral += self.ki * ex * dt

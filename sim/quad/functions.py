@@ -28,8 +28,23 @@ from typing import Any, Protocol
 Vec3 = tuple[float, float, float]
 
 
+MIN_ALTITUDE = 0.2
+"""Lowest height a function may ask for, m. A parked X2 rests with its centre 4 cm up
+and a move overshoots by a few cm; ground contact after take-off is a crash
+(`sim.quad.robot`), so a slot or waypoint lower than this (or under the ground) would
+fly the craft into the ground: refused before the run, not found out in a robot."""
+MAX_SPEED = 50.0
+"""Patrol speed bound, m/s (exclusive): far above what the presets fly (~2-4 m/s)."""
+
+
 class FunctionSpecError(ValueError):
-    """A function entry the craft cannot fly (names the function and the field)."""
+    """A function entry the craft cannot fly: `loc` is the swarm-file field
+    (`functions.p1.waypoints[2]`), `reason` what is wrong with it."""
+
+    def __init__(self, name: str, key: str, reason: str) -> None:
+        self.loc = f"functions.{name}" + (f".{key}" if key else "")
+        self.reason = reason
+        super().__init__(f"function {name}: {key + ' ' if key else ''}{reason}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,33 +124,58 @@ def _vec3(name: str, key: str, value: Any) -> Vec3:
         or len(value) != 3
         or not all(isinstance(v, int | float) and math.isfinite(v) for v in value)
     ):
-        raise FunctionSpecError(f"function {name}: {key} must be [x, y, z] numbers, got {value!r}")
+        raise FunctionSpecError(name, key, f"must be [x, y, z] finite numbers, got {value!r}")
+    if value[2] < MIN_ALTITUDE:
+        where = "under the ground" if value[2] < 0 else "too close to the ground"
+        raise FunctionSpecError(
+            name, key, f"z = {value[2]} m is {where}: a craft flies at z >= {MIN_ALTITUDE} m"
+        )
     return (float(value[0]), float(value[1]), float(value[2]))
 
 
 def parse_function(name: str, spec: Mapping[str, Any]) -> FunctionSpec:
     """One entry of the swarm file's `functions:` mapping. Extra keys (the runtime adds
-    `t0`) are ignored."""
+    `t0`) are ignored. Raises FunctionSpecError naming the field."""
     kind = spec.get("kind", "slot" if "position" in spec else None)
     if kind == "slot":
         return SlotSpec(_vec3(name, "position", spec.get("position")))
     if kind == "patrol":
         raw = spec.get("waypoints")
         if not isinstance(raw, list | tuple) or len(raw) < 2:
-            raise FunctionSpecError(f"function {name}: waypoints must list at least 2 points")
+            raise FunctionSpecError(name, "waypoints", "must list at least 2 points")
         wps = tuple(_vec3(name, f"waypoints[{i}]", w) for i, w in enumerate(raw))
-        if any(_dist(wps[i], wps[(i + 1) % len(wps)]) < 1e-6 for i in range(len(wps))):
-            raise FunctionSpecError(f"function {name}: consecutive waypoints coincide")
+        for i in range(len(wps)):
+            j = (i + 1) % len(wps)
+            if _dist(wps[i], wps[j]) < 1e-6:
+                # A zero-length leg has no direction: the setpoint would divide by zero.
+                raise FunctionSpecError(
+                    name, f"waypoints[{j}]", f"coincide with waypoints[{i}] (a closed loop: "
+                    "the last one is followed by the first)")
         speed = spec.get("speed", 1.0)
-        if not isinstance(speed, int | float) or not 0 < speed < 50:
-            raise FunctionSpecError(f"function {name}: speed must be in (0, 50) m/s: {speed!r}")
+        if (not isinstance(speed, int | float) or isinstance(speed, bool)
+                or not 0 < speed < MAX_SPEED):
+            raise FunctionSpecError(name, "speed", f"must be in (0, {MAX_SPEED:g}) m/s: {speed!r}")
         return PatrolSpec(wps, float(speed))
-    raise FunctionSpecError(f"function {name}: kind must be 'slot' or 'patrol', got {kind!r}")
+    raise FunctionSpecError(name, "kind", f"must be 'slot' or 'patrol', got {kind!r}")
 
 
 def parse_functions(functions: Mapping[str, Mapping[str, Any]]) -> dict[str, FunctionSpec]:
     """The whole `functions:` mapping."""
     return {name: parse_function(name, spec) for name, spec in functions.items()}
+
+
+def flight_problems(functions: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """What a craft could not fly in a swarm file's `functions:` mapping, one
+    `"functions.<name>.<field>: <reason>"` per bad function (empty: all flyable). For
+    `swarmd sim` with physics to refuse a swarm up front, before any robot process
+    starts, instead of a robot logging that it cannot fly its function."""
+    problems = []
+    for name, spec in functions.items():
+        try:
+            parse_function(name, spec)
+        except FunctionSpecError as exc:
+            problems.append(f"{exc.loc}: {exc.reason}")
+    return problems
 
 
 def next_waypoint(spec: PatrolSpec, t: float) -> int:

@@ -34,7 +34,7 @@ from typing import IO, Any
 
 from sim.quad.functions import FunctionSpecError, parse_function
 from sim.quad.model import Preset, Vec3, preset, x2
-from sim.quad.robot import QuadRobot
+from sim.quad.robot import QuadRobot, last_state
 from swarmd.core.roles import Health
 from swarmd.link.base import HealthCallback
 
@@ -68,11 +68,20 @@ class QuadLink:
         health_period: float = HEALTH_PERIOD,
         battery_s: float = 1200.0,
         wall: Callable[[], float] = time.time,
+        restart_of: float | None = None,
     ) -> None:
         self.robot_id = robot_id
         self.home = home if home is not None else default_home(robot_id)
         self.robot = QuadRobot(robot_id, self.home, craft or x2(), battery_s=battery_s)
         self.traj_path = traj_path
+        self.restart_of = restart_of
+        """The run's t0 (Unix time) if this process restarts a robot of that run: the
+        craft resumes where the last one left it and the trajectory file is appended;
+        otherwise a stale file (an earlier run into the same directory) is replaced."""
+        if restart_of is not None and traj_path is not None:
+            state = last_state(traj_path, since=restart_of)
+            if state is not None:
+                self.robot.resume(*state)
         self.wake = wake
         self.health_period = health_period
         self._wall = wall
@@ -93,10 +102,11 @@ class QuadLink:
         self._last_stats = 0.0
 
     @classmethod
-    def for_robot(cls, cfg: Any) -> QuadLink:
+    def for_robot(cls, cfg: Any, restart_of: float | None = None) -> QuadLink:
         """Build from a loaded robot file (`swarmd.config.RobotConfig`): home from the
         swarm entry, trajectory next to the robot's state (`<state_dir>/traj-<id>.jsonl`).
-        The craft is the X2 unless `SWARMD_QUAD_PRESET` names another preset."""
+        The craft is the X2 unless `SWARMD_QUAD_PRESET` names another preset.
+        `restart_of`: the run's t0 when this process restarts the robot (see __init__)."""
         import os
 
         rid = int(cfg.robot_id)
@@ -104,7 +114,7 @@ class QuadLink:
         home = (float(home2[0]), float(home2[1]), 0.0) if home2 is not None else None
         craft = preset(os.environ.get("SWARMD_QUAD_PRESET", "x2"))
         traj = Path(cfg.state_dir) / f"traj-{rid}.jsonl"
-        return cls(rid, home, craft=craft, traj_path=traj)
+        return cls(rid, home, craft=craft, traj_path=traj, restart_of=restart_of)
 
     # -- RobotLink -----------------------------------------------------------------------
     async def start(self, on_health: HealthCallback) -> None:
@@ -117,7 +127,7 @@ class QuadLink:
         if self.traj_path is not None:
             try:
                 self.traj_path.parent.mkdir(parents=True, exist_ok=True)
-                self._file = self.traj_path.open("a")
+                self._file = self.traj_path.open("a" if self.restart_of is not None else "w")
                 header = {"robot": self.robot_id, "preset": self.robot.preset.name,
                           "home": list(self.home), "wall0": self.wall0}
                 self._file.write(json.dumps(header) + "\n")

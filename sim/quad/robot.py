@@ -186,6 +186,34 @@ class QuadRobot:
         self.failed_motors.add(index % len(self.preset.rotors))
         self.model.actuator_gainprm[index % len(self.preset.rotors), 0] = 0.0
 
+    def resume(self, pos: Vec3, quat: tuple[float, float, float, float], mode: str) -> None:
+        """Put the craft where its previous process left it (a `restart`: the daemon
+        process died and came back; the craft did not vanish). A craft that was in the
+        air comes back LANDING from there: the new daemon holds no function yet (rule 2,
+        its old one was taken over), and a real autopilot holds position meanwhile. A
+        crashed craft stays crashed (its health says FAULTY at once)."""
+        d = self.data
+        d.qpos[0:3] = pos
+        d.qpos[3:7] = quat
+        d.qvel[:] = 0.0
+        self.function, self.flight = None, None
+        if mode == Mode.CRASHED.value:
+            self.mode = Mode.CRASHED
+            self.crashed_at = self.t
+        elif mode == Mode.PARKED.value or pos[2] < self.home[2] + self.preset.rest_height + 0.05:
+            self.mode = Mode.PARKED
+        else:
+            self.mode = Mode.LANDING
+            self._land_from = None
+            self.armed = True
+            # Motors already at hover thrust (their lag state too): no drop on resume.
+            d.ctrl[:] = self.preset.hover_thrust
+            d.act[:] = self.preset.hover_thrust
+        mujoco.mj_forward(self.model, d)
+        self.samples = []
+        self._next_sample = self.t
+        self._sample()
+
     # -- stepping ------------------------------------------------------------------------
     def step_until(self, t: float) -> None:
         """Advance physics to robot time `t` (500 Hz physics, 100 Hz control)."""
@@ -341,6 +369,30 @@ def _trajectory(
         tuple(r.get("function") for r in rows),
         home,
     )
+
+
+def last_state(
+    path: Path, since: float
+) -> tuple[Vec3, tuple[float, float, float, float], str] | None:
+    """(position, orientation, mode) of the last sample in a trajectory file written at
+    or after Unix time `since` (this run's t0: a file left by an earlier run into the
+    same directory is not this craft's state), or None."""
+    try:
+        lines = path.read_text().splitlines()
+    except OSError:
+        return None
+    for line in reversed(lines):  # the last whole sample: a SIGKILL can cut the last line
+        if '"p"' not in line:
+            continue
+        try:
+            row = json.loads(line)
+            w, p, q, mode = float(row["w"]), row["p"], row["q"], str(row["mode"])
+            pos = (float(p[0]), float(p[1]), float(p[2]))
+            quat = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        except (ValueError, KeyError, TypeError, IndexError):
+            continue
+        return (pos, quat, mode) if w >= since else None
+    return None
 
 
 def load_trajectory(path: Path, t0: float | None = None) -> Trajectory:
