@@ -2,9 +2,10 @@
 
 The checker reads the same JSON Lines records users get (DESIGN section 3) plus the
 injected faults, so the virtual simulator and the multi-process `swarmd sim` are judged
-by one piece of code. What a robot executes is reconstructed from its events:
-`started{role: active}` and `takeover` start a function; `fenced`, `leave`, `stopped`
-and a crash stop it; a paused robot executes nothing until it resumes.
+by one piece of code. What a robot executes is reconstructed from its events
+(sim/holders.py): `started{role: active}` and `takeover` start a function; `fenced`,
+`leave`, `stopped`, a `started` as standby and a crash stop it; a paused robot executes
+nothing until it resumes.
 
 Invariants (each violation names the time, robot and what went wrong):
 1. takeover: an ACTIVE robot that crashes (or leaves, reports a fault, or stays paused
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sim.faults import Fault
+from sim.holders import HolderFold
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
@@ -80,7 +82,12 @@ class Checker:
     loss: float = 0.0
     bounds: Bounds = field(init=False)
     violations: list[Violation] = field(default_factory=list)
-    executing: dict[int, str] = field(default_factory=dict)
+    # Who executes what comes from the shared fold of the log (sim/holders.py), built
+    # so that it can judge: it is per robot, so two robots on one slot both show (the
+    # dual-execution check needs them); and with no `down` faults it counts every event
+    # a robot logs, even one after its injected crash. Deaths, pauses and health come
+    # from the injected faults below, never from the log the nodes write.
+    holding: HolderFold = field(default_factory=lambda: HolderFold(down=()))
     dead: set[int] = field(default_factory=set)
     paused: set[int] = field(default_factory=set)
     unhealthy: dict[int, float] = field(default_factory=dict)
@@ -97,6 +104,11 @@ class Checker:
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
+
+    @property
+    def executing(self) -> dict[int, str]:
+        """robot -> the function it executes, as its own events tell."""
+        return self.holding.executing()
 
     # ------------------------------------------------------------------ inputs
     def fault(self, t: float, fault: Fault, phase: str) -> None:
@@ -119,7 +131,7 @@ class Checker:
             f = self.executing.get(r)
             if fault.kind == "crash":
                 self.dead.add(r)
-                self.executing.pop(r, None)
+                self.holding.forget(r)
                 self.paused.discard(r)
             else:
                 self.unhealthy[r] = t
@@ -148,16 +160,13 @@ class Checker:
 
     def event(self, rec: dict[str, Any]) -> None:
         t, r, name = float(rec["t"]), int(rec["robot"]), rec["event"]
-        if name == "started" and rec.get("role") == "active" and rec.get("function"):
-            self.executing[r] = rec["function"]
-        elif name == "takeover":
+        self.holding.feed(rec)
+        if name == "takeover":
             f = rec["function"]
-            self.executing[r] = f
             for key in [k for k in self.episodes if k[1] == f]:
                 del self.episodes[key]  # the warning ended in a takeover
             self._takeover(t, r, f, int(rec.get("replaced", 0)))
         elif name in ("fenced", "leave", "stopped"):
-            self.executing.pop(r, None)
             self._close_watcher(r)
         elif name == "warn":
             key = (r, rec["function"])

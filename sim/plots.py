@@ -3,8 +3,9 @@ trajectory plot. matplotlib with the Agg backend (no display needed).
 
 The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records
 `{"t", "robot", "event", ...}`), so it works for `--virtual` runs without physics too.
-`role_spans` turns the log into per-robot spans of (role, function); `sim/render.py`
-colours the crafts of the video with the same spans.
+`role_spans` turns the log into per-robot spans of (role, function), from the one fold of
+the log (`sim.holders`); `sim/render.py` colours the crafts of the video with the same
+spans.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from sim.holders import HolderFold
 
 if TYPE_CHECKING:
     from sim.quad.robot import Trajectory
@@ -46,28 +49,22 @@ class Span:
     function: str | None
 
 
-def _role_name(value: Any) -> str:
-    name = str(value).lower()
-    if name.startswith("role."):
-        name = name[5:]
-    return "standby" if name == "inactive" else name
-
-
 def role_spans(
     events: Iterable[Mapping[str, Any]], end: float | None = None
 ) -> dict[int, list[Span]]:
     """Per robot, the spans of (role, function) the event log implies, in time order.
 
-    started -> its role; claim -> claiming; backoff / leave -> standby; takeover ->
-    active; fenced -> fenced (FENCE_SHOW s, then standby); fault crash/motor -> crashed
-    until the robot starts again; stopped -> no span (the process is gone)."""
+    The roles are `sim.holders.HolderFold`'s (claiming shows the claimed function,
+    fenced the one stopped), with a crash or motor failure shown as crashed until the
+    robot starts again. Two things are drawn only here: fenced lasts FENCE_SHOW s and
+    then the robot is a standby again; stopped ends the robot's lane (no span)."""
     evs = sorted(
         (e for e in events if isinstance(e.get("robot"), int) and e["robot"] > 0),
         key=lambda e: float(e.get("t", 0.0)),
     )
     t_end = end if end is not None else max((float(e.get("t", 0.0)) for e in evs), default=0.0)
+    fold = HolderFold(down=DOWN_FAULTS)
     state: dict[int, tuple[float, str, str | None]] = {}
-    down: set[int] = set()
     spans: dict[int, list[Span]] = {}
 
     def close(rid: int, t: float) -> None:
@@ -77,8 +74,6 @@ def role_spans(
                 spans.setdefault(rid, []).append(Span(rid, t0, t, role, fn))
 
     def enter(rid: int, t: float, role: str, fn: str | None) -> None:
-        if rid in down and role != "crashed":
-            return
         prev = state.get(rid)
         if prev is not None and prev[1] == role and prev[2] == fn:
             return
@@ -86,28 +81,17 @@ def role_spans(
         state[rid] = (t, role, fn)
 
     for e in evs:
-        rid, t, name = int(e["robot"]), float(e.get("t", 0.0)), str(e.get("event"))
+        rid, t = int(e["robot"]), float(e.get("t", 0.0))
         prev = state.get(rid)
         if prev is not None and prev[1] == "fenced" and t > prev[0] + FENCE_SHOW:
             enter(rid, prev[0] + FENCE_SHOW, "standby", None)
-        fn = e.get("function")
-        fn = str(fn) if fn is not None else None
-        if name == "started":
-            down.discard(rid)
-            enter(rid, t, _role_name(e.get("role", "standby")), fn)
-        elif name == "claim":
-            enter(rid, t, "claiming", fn)
-        elif name in ("backoff", "leave"):
-            enter(rid, t, "standby", None)
-        elif name == "takeover":
-            enter(rid, t, "active", fn)
-        elif name == "fenced":
-            enter(rid, t, "fenced", fn)
-        elif name == "fault" and str(e.get("kind")) in DOWN_FAULTS:
-            enter(rid, t, "crashed", None)
-            down.add(rid)
-        elif name == "stopped":
+        holding = fold.feed(e)
+        if holding is None:
+            continue
+        if holding.role == "stopped":
             close(rid, t)
+        else:
+            enter(rid, t, holding.role, holding.function)
     for rid, (t0, role, _fn) in list(state.items()):
         stop = t_end
         if role == "fenced":

@@ -44,22 +44,25 @@ import socket
 import sys
 import tempfile
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Coroutine, Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from pathlib import Path
-from typing import Any
+from typing import Any, ParamSpec
 
 import yaml
 
 from sim.faults import Fault
+from sim.holders import HolderFold
 from sim.netfilter import partition_windows
 
 START_MARGIN = 0.3
 """s between the last robot's `ready` and t0: enough to deliver `go` to 50 processes."""
 READY_TIMEOUT = 20.0
 """s allowed for every robot process to load its config and open its transport."""
+
+P = ParamSpec("P")
 
 
 @dataclass(slots=True)
@@ -96,41 +99,33 @@ class RobotView:
 
 
 class SwarmView:
-    """Folds events into the per-robot view shown live (role, function, last event)."""
+    """Folds events into the per-robot view shown live (role, function, last event).
+
+    Role, function and epoch come from the one fold of the log (`sim.holders`); the
+    process column from the injected faults, which only the orchestrator knows."""
 
     def __init__(self, robots: Sequence[int]) -> None:
         self.robots = {r: RobotView() for r in robots}
+        self.fold = HolderFold()
 
     def feed(self, rec: dict[str, Any]) -> None:
         view = self.robots.get(int(rec.get("robot", 0)))
         if view is None:
             return
+        holding = self.fold.feed(rec)
+        if holding is not None:
+            # The process column says killed or stopped; the role column shows none.
+            view.role = "-" if holding.role in ("crashed", "stopped") else holding.role.upper()
+            view.function = holding.executing
+            view.epoch = holding.epoch if holding.role in ("active", "claiming") else None
         name = str(rec.get("event", ""))
-        match name:
-            case "started":
-                view.role = str(rec.get("role", "?")).upper()
-                view.function = rec.get("function")
-                view.process = "running"
-            case "takeover":
-                view.role, view.function, view.epoch = "ACTIVE", rec.get("function"), rec.get(
-                    "epoch"
-                )
-            case "claim":
-                view.role = "CLAIMING"
-            case "backoff":
-                view.role = "STANDBY"
-            case "fenced":
-                view.role, view.function = "FENCED", None
-            case "leave":
-                view.role, view.function = "STANDBY", None
-            case "stopped":
-                view.process = "stopped"
-            case "fault":
-                kind = str(rec.get("kind", ""))
-                view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
-                                "leave": "leaving"}.get(kind, view.process)
-                if kind == "crash":
-                    view.role, view.function = "-", None
+        if name == "started":
+            view.process = "running"
+        elif name == "stopped":
+            view.process = "stopped"
+        elif name == "fault":
+            view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
+                            "leave": "leaving"}.get(str(rec.get("kind", "")), view.process)
         view.last_event = name if name != "fault" else f"fault {rec.get('kind')}"
         view.last_t = float(rec.get("t", 0.0))
 
@@ -571,31 +566,26 @@ async def run_realtime_async(
     return result
 
 
-def run_realtime(
-    swarm_path: Path,
-    *,
-    duration: float,
-    faults: Sequence[Fault] = (),
-    loss: float = 0.0,
-    seed: int = 0,
-    events_path: Path | None = None,
-    report_dir: Path | None = None,
-    physics: bool = False,
-    transport: str = "udp",
-    live: bool = True,
-    port: int | None = None,
-) -> RealtimeResult:
-    """`swarmd sim` without --virtual. Ctrl-C / SIGTERM kill every robot, then raise."""
+def _until_signalled(
+    run: Callable[P, Coroutine[Any, Any, RealtimeResult]],
+) -> Callable[P, RealtimeResult]:
+    """The blocking form of `run`, taking exactly its arguments (one parameter list
+    for both forms): runs it in a new event loop where SIGTERM ends the run like
+    Ctrl-C (asyncio.run turns SIGINT into a cancel), and `run`'s cleanup kills every
+    robot before the exception goes up."""
 
-    async def main() -> RealtimeResult:
-        task = asyncio.current_task()
-        assert task is not None
-        # SIGTERM ends the run like Ctrl-C (asyncio.run turns SIGINT into a cancel).
-        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, task.cancel)
-        return await run_realtime_async(
-            swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
-            events_path=events_path, report_dir=report_dir, physics=physics,
-            transport=transport, live=live, port=port,
-        )
+    def blocking(*args: P.args, **kwargs: P.kwargs) -> RealtimeResult:
+        async def main() -> RealtimeResult:
+            task = asyncio.current_task()
+            assert task is not None
+            asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, task.cancel)
+            return await run(*args, **kwargs)
 
-    return asyncio.run(main())
+        return asyncio.run(main())
+
+    return blocking
+
+
+run_realtime = _until_signalled(run_realtime_async)
+"""`swarmd sim` without --virtual: `run_realtime_async`'s parameters, blocking.
+Ctrl-C / SIGTERM kill every robot, then raise."""

@@ -16,6 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from sim.faults import Fault
+from sim.holders import HolderFold
 from sim.invariants import Violation, check_events
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -90,39 +91,22 @@ def _r(x: float | None) -> float | None:
 
 
 def _holder_at(events: list[dict[str, Any]], robot: int, t: float) -> str | None:
-    held: str | None = None
+    """The function `robot` executed when a fault hit it at `t`. Fault records from `t`
+    on are left out: the fault being explained has not acted yet (its own record may
+    carry the same t); an earlier crash has (a dead robot holds nothing)."""
+    fold = HolderFold()
     for e in events:
         if e["t"] > t:
             break
-        if e["robot"] != robot:
-            continue
-        name = e["event"]
-        if name == "started":
-            held = e.get("function") if e.get("role") == "active" else None
-        elif name == "takeover":
-            held = e["function"]
-        elif name in ("fenced", "leave", "stopped"):
-            held = None
-    return held
+        if e["robot"] == robot and (e["event"] != "fault" or e["t"] < t):
+            fold.feed(e)
+    return fold.executing().get(robot)
 
 
 def holders_at_end(events: list[dict[str, Any]], dead: set[int]) -> dict[str, list[int]]:
-    held: dict[int, str | None] = {}
-    for e in events:
-        r, name = e["robot"], e["event"]
-        if name == "started":
-            held[r] = e.get("function") if e.get("role") == "active" else None
-        elif name == "takeover":
-            held[r] = e["function"]
-        elif name in ("fenced", "leave", "stopped") or (
-            name == "fault" and e.get("kind") == "crash"
-        ):
-            held[r] = None
-    out: dict[str, list[int]] = {}
-    for r, f in sorted(held.items()):
-        if f is not None and r not in dead:
-            out.setdefault(f, []).append(r)
-    return dict(sorted(out.items()))
+    """function -> the robots executing it when the run ended (robots in `dead` left
+    out), from the event log."""
+    return HolderFold().feed_all(events).holders(exclude=dead)
 
 
 def summarize(
