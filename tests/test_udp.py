@@ -8,7 +8,9 @@ from collections.abc import Mapping
 from typing import Any
 
 import pytest
+from pydantic import ValidationError
 
+from swarmd.config.robot import UdpTransportConfig
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport
 
@@ -106,9 +108,9 @@ async def test_udp_send_errors_are_counted_not_raised() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"group": "10.0.0.1"}, "not a multicast address"),
+        ({"group": "10.0.0.1"}, "udp group 10.0.0.1 is not a multicast group"),
         ({"group": "nonsense"}, "not an IPv4 address"),
-        ({"interface": "eth0"}, "must be the IPv4 address"),
+        ({"interface": "eth0"}, "not its name"),
         ({"port": 0}, "out of range"),
         ({"ttl": 300}, "out of range"),
     ],
@@ -116,3 +118,17 @@ async def test_udp_send_errors_are_counted_not_raised() -> None:
 def test_udp_rejects_bad_config_with_clear_message(kwargs: dict[str, Any], message: str) -> None:
     with pytest.raises(TransportError, match=message):
         UdpTransport(**kwargs)
+
+
+@pytest.mark.parametrize(("field", "value"),
+                         [("group", "10.0.0.1"), ("group", "nonsense"), ("interface", "eth0")])
+def test_robot_file_and_transport_refuse_the_same_addresses(field: str, value: str) -> None:
+    # One check (swarmd/transport/addresses.py): a robot file that validates never
+    # fails later in the constructor, and both say the same thing.
+    kwargs: dict[str, Any] = {field: value}
+    with pytest.raises(TransportError) as transport:
+        UdpTransport(**kwargs)
+    with pytest.raises(ValidationError) as config:
+        UdpTransportConfig(kind="udp", **kwargs)
+    said = str(transport.value).split(" ", 2)[2]  # after "udp group" / "udp interface"
+    assert said in str(config.value)

@@ -28,6 +28,7 @@ from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.config.swarm import RobotEntry, SwarmConfig
 from swarmd.config.swarm_rules import load_swarm
 from swarmd.keys import KeyFileError, load_key
+from swarmd.transport.addresses import interface_address, multicast_group
 
 
 class _Model(BaseModel):
@@ -60,25 +61,17 @@ class UdpTransportConfig(_Model):
     loopback: bool = True
     """IP_MULTICAST_LOOP: needed when several robots run on one machine (sim)."""
 
+    # The transport's own checks (swarmd/transport/addresses.py): a file that validates
+    # never fails later in UdpTransport's constructor.
     @field_validator("group")
     @classmethod
     def _multicast(cls, value: str) -> str:
-        try:
-            addr = ipaddress.IPv4Address(value)
-        except ValueError:
-            raise ValueError(f"{value!r} is not an IPv4 address") from None
-        if not addr.is_multicast:
-            raise ValueError(f"{value} is not a multicast group (224.0.0.0/4)")
-        return value
+        return multicast_group(value)
 
     @field_validator("interface")
     @classmethod
     def _ipv4(cls, value: str) -> str:
-        try:
-            ipaddress.IPv4Address(value)
-        except ValueError:
-            raise ValueError(f"{value!r} is not an IPv4 interface address") from None
-        return value
+        return interface_address(value)
 
 
 class SerialTransportConfig(_Model):

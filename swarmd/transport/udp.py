@@ -14,12 +14,12 @@ the core drops them by sender id.
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import logging
 import socket
 from collections.abc import Mapping
 from typing import Any
 
+from swarmd.transport.addresses import interface_address, multicast_group
 from swarmd.transport.base import EventCallback, FrameCallback, TransportError
 
 log = logging.getLogger(__name__)
@@ -52,18 +52,13 @@ class UdpTransport:
         loopback: bool = True,
     ) -> None:
         try:
-            addr = ipaddress.IPv4Address(group)
-        except ValueError:
-            raise TransportError(f"udp group {group!r} is not an IPv4 address") from None
-        if not addr.is_multicast:
-            raise TransportError(f"udp group {group} is not a multicast address (224.0.0.0/4)")
+            multicast_group(group)
+        except ValueError as exc:
+            raise TransportError(f"udp group {exc}") from None
         try:
-            ipaddress.IPv4Address(interface)
-        except ValueError:
-            raise TransportError(
-                f"udp interface {interface!r} must be the IPv4 address of the interface "
-                "to send on (default 127.0.0.1)"
-            ) from None
+            interface_address(interface)
+        except ValueError as exc:
+            raise TransportError(f"udp interface {exc}") from None
         if not 0 < port < 65536:
             raise TransportError(f"udp port {port} is out of range 1..65535")
         if not 0 <= ttl <= 255:
