@@ -18,6 +18,9 @@ from typing import TYPE_CHECKING, Any
 from sim.holders import HolderFold
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
     from sim.quad.robot import Trajectory
 
 ROLE_COLORS: dict[str, str] = {
@@ -112,6 +115,18 @@ def role_at(spans: Sequence[Span], t: float) -> Span | None:
     return None
 
 
+def _save(fig: Figure, ax: Axes, title: str, path: Path) -> Path:
+    """Title, lay out, write the PNG (creating its folder) and free the figure."""
+    import matplotlib.pyplot as plt
+
+    ax.set_title(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 _MARKERS = {
     # event -> (marker, colour, which robot's lane: the event's robot or its subject)
     "fault": ("X", "#d62728", "robot"),
@@ -192,12 +207,7 @@ def timeline_png(
     below = -0.18 - 0.3 / max(1, len(robots))
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, below),
               ncol=len(handles), fontsize=8, frameon=False)
-    ax.set_title(title or "roles and functions over time")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, ax, title or "roles and functions over time", path)
 
 
 def trajectory_png(
@@ -243,9 +253,5 @@ def trajectory_png(
     ax.grid(alpha=0.3)
     if trajectories:
         ax.legend(loc="best", fontsize=8)
-    ax.set_title(title or "top-down trajectories (square: home, dot: end, X: crashed)")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, ax, title or "top-down trajectories (square: home, dot: end, X: crashed)",
+                 path)
