@@ -122,3 +122,18 @@ async def test_restart_resumes_this_runs_craft_and_a_new_run_starts_afresh(
     await new_run.close()
     assert load_trajectory(path).t[0] == 0.0
     assert sum('"robot"' in line for line in path.read_text().splitlines()) == 1
+
+
+async def test_a_stopping_robot_lands_its_craft_before_the_process_goes(
+    tmp_path: Path,
+) -> None:
+    # leave:R@T ends the process; the trajectory must not end with the craft in the air.
+    home = (3.0, 0.5, 0.0)
+    link = QuadLink(3, home, traj_path=tmp_path / "traj-3.jsonl")
+    link.robot.assign("pent", {"kind": "slot", "position": [0.0, 3.0, 2.5]})
+    link.robot.step_until(6.0)  # airborne before the link starts (no real-time wait)
+    await link.start(lambda h: None)
+    await link.close()
+    tr = load_trajectory(tmp_path / "traj-3.jsonl")
+    assert tr.modes[-1] == "parked" and "crashed" not in tr.modes
+    assert tr.pos[-1][:2] == pytest.approx(home[:2], abs=0.1)

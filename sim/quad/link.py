@@ -34,7 +34,7 @@ from typing import IO, Any
 
 from sim.quad.functions import FunctionSpecError, parse_function
 from sim.quad.model import Preset, Vec3, preset, x2
-from sim.quad.robot import QuadRobot, last_state
+from sim.quad.robot import Mode, QuadRobot, last_state
 from swarmd.core.roles import Health
 from swarmd.link.base import HealthCallback
 
@@ -46,6 +46,9 @@ HEALTH_PERIOD = 0.5
 """s: longest time between two health reports."""
 STATS_PERIOD = 2.0
 """s between two lateness lines in the trajectory file."""
+LAND_HORIZON = 60.0
+"""s of physics `close` may fast-forward to land the craft (a 20 m flight home and a
+4 m descent take ~17 s)."""
 
 
 def default_home(robot_id: int) -> Vec3:
@@ -160,19 +163,34 @@ class QuadLink:
         self.robot.release(function)
 
     async def close(self) -> None:
-        """Stop stepping; flush the trajectory."""
+        """Stop stepping; land the craft (fast-forward, see `_land_before_exit`); flush
+        the trajectory."""
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
         self._catch_up()
+        self._land_before_exit()
         self.robot.sample_now()
         self._flush()
         if self._file is not None:
             self._file.close()
             self._file = None
         self._on_health = None
+
+    def _land_before_exit(self) -> None:
+        # The daemon is stopping (a `leave` fault, a clean stop) and the craft's physics
+        # dies with this process: without this the trajectory ends in mid-air and the
+        # replay shows the craft hanging there. Landing is simulated ahead of the wall
+        # clock (samples keep their future Unix times `w`), ~0.1 s of CPU, well inside
+        # the daemon's 10 s allowance for closing the link.
+        r = self.robot
+        if r.mode in (Mode.TAKEOFF, Mode.FLYING):
+            r.release()
+        end, errors = r.t + LAND_HORIZON, self.errors
+        while r.mode is Mode.LANDING and r.t < end and self.errors == errors:
+            self._step(min(end, r.t + 1.0))
 
     # -- simulator faults ----------------------------------------------------------------
     def fail_motor(self, index: int = 0) -> None:
