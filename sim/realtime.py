@@ -35,6 +35,7 @@ if TYPE_CHECKING:
 
 import asyncio
 import contextlib
+import functools
 import json
 import multiprocessing
 import os
@@ -567,13 +568,14 @@ async def run_realtime_async(
 
 
 def _until_signalled(
-    run: Callable[P, Coroutine[Any, Any, RealtimeResult]],
+    run: Callable[P, Coroutine[Any, Any, RealtimeResult]], name: str, doc: str,
 ) -> Callable[P, RealtimeResult]:
     """The blocking form of `run`, taking exactly its arguments (one parameter list
     for both forms): runs it in a new event loop where SIGTERM ends the run like
     Ctrl-C (asyncio.run turns SIGINT into a cancel), and `run`'s cleanup kills every
     robot before the exception goes up."""
 
+    @functools.wraps(run)  # inspect.signature / help() show run's parameters
     def blocking(*args: P.args, **kwargs: P.kwargs) -> RealtimeResult:
         async def main() -> RealtimeResult:
             task = asyncio.current_task()
@@ -583,9 +585,12 @@ def _until_signalled(
 
         return asyncio.run(main())
 
+    blocking.__name__ = blocking.__qualname__ = name
+    blocking.__doc__ = doc
     return blocking
 
 
-run_realtime = _until_signalled(run_realtime_async)
-"""`swarmd sim` without --virtual: `run_realtime_async`'s parameters, blocking.
-Ctrl-C / SIGTERM kill every robot, then raise."""
+run_realtime = _until_signalled(
+    run_realtime_async, "run_realtime",
+    "`swarmd sim` without --virtual: `run_realtime_async`'s parameters, blocking. "
+    "Ctrl-C / SIGTERM kill every robot, then raise.")
