@@ -28,7 +28,10 @@ import stat
 from collections.abc import Sequence
 from pathlib import Path
 
-KEY_LEN = 32
+from swarmd.core.wire import KEY_LEN
+
+__all__ = ["KEY_LEN", "KeyFileError", "generate_key", "load_key", "load_keys", "parse_key"]
+
 _MAX_FILE = 4096  # a key file is 32 or ~65 bytes; anything big is the wrong file
 
 

@@ -17,10 +17,11 @@ from hypothesis import strategies as st
 
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
-from swarmd.core.node import KEY_LEN, Node, NodeError, Restored, Snapshot
+from swarmd.core.node import Node, NodeError, Restored, Snapshot
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
+from swarmd.core.wire import KEY_LEN
 
 _seqs: dict[int, int] = {}
 

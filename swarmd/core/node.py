@@ -70,11 +70,6 @@ class _Claim:
     resend: float
 
 
-KEY_LEN = 32
-"""bytes. A swarm key's size (the same as `swarmd.keys.KEY_LEN`, which the core may not
-import: layering rule). HMAC takes any length; checking it catches a wrong file."""
-
-
 class NodeError(RuntimeError):
     """Misuse of the node API (a bug in the driver), never caused by peer frames."""
 
@@ -278,7 +273,7 @@ class Node:
         of them is accepted; one tagged only with a key no longer listed is dropped as
         `auth`. An empty list means unsigned, allowed only if the node is unsigned now.
 
-        Raises `NodeError` (and changes nothing) for a key that is not `KEY_LEN` bytes,
+        Raises `NodeError` (and changes nothing) for a key that is not `wire.KEY_LEN` bytes,
         or for an empty list while signing: a config that lost its key lines would
         otherwise turn authentication off on a running robot, which then sends frames
         every keyed robot drops and accepts forged ones (DESIGN section 2). Turning
@@ -289,9 +284,9 @@ class Node:
         for i, key in enumerate(new):
             if not isinstance(key, bytes):
                 raise NodeError(f"swarm key {i} is a {type(key).__name__}, not bytes")
-            if len(key) != KEY_LEN:
+            if len(key) != wire.KEY_LEN:
                 raise NodeError(f"swarm key {i} is {len(key)} bytes; a swarm key is "
-                                f"exactly {KEY_LEN} bytes")
+                                f"exactly {wire.KEY_LEN} bytes")
         if not new and self.keys:
             raise NodeError("no swarm key given while frames are signed; turning signing "
                             "off needs a restart, not a key reload")
