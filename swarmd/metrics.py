@@ -48,7 +48,7 @@ from prometheus_client import (
 from prometheus_client.core import CounterMetricFamily
 from prometheus_client.registry import Collector
 
-from swarmd.core.actions import Action, Event
+from swarmd.core.actions import EVENT_FIELDS, Action, Event
 from swarmd.core.roles import Role
 
 if TYPE_CHECKING:
@@ -61,10 +61,7 @@ if TYPE_CHECKING:
 DEFAULT_PORT = 9477
 """Port of the endpoint when the robot file enables it without naming one."""
 
-EVENT_NAMES = (
-    "started", "suspect", "warn", "vote", "claim", "backoff", "takeover", "fenced",
-    "refute", "leave", "alert", "stopped",
-)
+EVENT_NAMES = tuple(name for name in EVENT_FIELDS if name != "fault")
 """DESIGN section 3's event names, exported at 0 from the start so `rate()` works
 before the first occurrence (Prometheus best practice: avoid missing series)."""
 

@@ -352,15 +352,20 @@ class Runtime:
 
     # ---------------------------------------------------------------- channel events
     def _on_transport_event(self, name: str, fields: Mapping[str, Any]) -> None:
+        """A channel condition (radio up or down, a send error): counted and logged to
+        the daemon's own log, not the event log, whose names are a contract (DESIGN
+        section 3, `EVENT_FIELDS`). The protocol itself notices a dead channel through
+        missing heartbeats, as the paper's robots would."""
         now = self.loop.time()
+        failed = name != "transport_up"
         if name in ("send_error", "transport_error"):
             self.counters["transport_errors"] += 1
             last = self._reported.get(name)
             if last is not None and now - last < _RATE_LIMIT_S:
                 return  # counted; reported at most once a second
             self._reported[name] = now
-        t = round(self.wall_clock() - self.time_origin, 6)
-        self._emit_record({"t": t, "robot": self.robot_id, "event": name, **fields})
+        log.log(logging.WARNING if failed else logging.INFO, "channel: %s", name,
+                extra={"channel": name, "fields": dict(fields)})
 
     # ---------------------------------------------------------------- persistence
     def _check_state(self, *, force: bool = False) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import pytest
 from PIL import Image
+from test_event_contract import check_records
 
 from sim.render import gl_available
 from swarmd.config import load_swarm
@@ -62,6 +63,7 @@ def test_flown_report_has_summary_events_timeline_and_trajectories(
     assert json.loads((report / "summary.json").read_text())["faults"] == faults
     events = [json.loads(line) for line in (report / "events.jsonl").read_text().splitlines()]
     assert any(e["event"] == "takeover" and e["robot"] == 6 for e in events)
+    check_records(events)  # DESIGN section 3's names and fields only
     assert _png(report / "timeline.png")[0] > 0
     assert _png(report / "trajectories.png")[0] > 0
     # Every robot flew (or stood parked) with its own physics and left a trajectory.

@@ -37,7 +37,7 @@ async def test_paper_swarm_fails_over_across_emulated_radios(
         await swarm.start()
         try:
             # Wait until standby 6 has heard f2's holder: the swarm is up on the air.
-            heard = await swarm.wait_for(lambda e: e["event"] == "transport_up", 1)
+            heard = await swarm.wait_for(lambda e: e["event"] == "started", 1)
             assert heard is not None
             for _ in range(100):
                 if swarm.robots[6].node.snapshot().known.get("f2", (0, 0))[0] == 2:

@@ -32,6 +32,28 @@ class Release:
     function: str
 
 
+EVENT_FIELDS: Mapping[str, tuple[str, ...]] = {
+    "started": ("role", "function"),
+    "suspect": ("subject", "function"),
+    "warn": ("subject", "function"),
+    "vote": ("subject", "function", "from", "count"),
+    "claim": ("subject", "function", "epoch"),
+    "backoff": ("subject", "function", "winner"),
+    "takeover": ("function", "epoch", "replaced"),
+    "fenced": ("function", "epoch"),
+    "refute": (),
+    "leave": ("function", "reason"),
+    "alert": ("function", "reason"),
+    "fault": ("kind",),
+    "stopped": (),
+}
+"""The event log's names and the fields each one always carries (DESIGN section 3, an
+outside contract: clients parse it). A record may carry more fields (`refute` names its
+subject and function), never fewer, and no other name goes into the log: a channel's
+condition (radio up/down, send errors) goes to the daemon's own log and counters.
+`fault` is written by `swarmd sim` only."""
+
+
 @dataclass(frozen=True, slots=True)
 class Event:
     """One event-log record: `name` and its fields as DESIGN section 3 lists them."""
