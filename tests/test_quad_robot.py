@@ -43,6 +43,9 @@ def test_motor_failure_is_faulty_and_the_craft_falls() -> None:
     assert r.position[2] < 0.3  # fell
     assert r.mode is Mode.CRASHED and r.crashed_at is not None
     assert not r.assign("f2", SLOT)  # a broken craft does not take off again
+    # the trajectory says it fell, not that it landed
+    modes = [s.mode for s in r.samples if s.t > 5.0]
+    assert "landing" not in modes and modes[0] == "falling" and modes[-1] == "crashed"
 
 
 def test_hitting_the_ground_while_flying_is_a_crash() -> None:
@@ -152,10 +155,15 @@ def test_a_restarted_robot_resumes_in_the_air_and_lands_at_home() -> None:
     assert math.dist(r.position[:2], home[:2]) < 0.1
 
 
-def test_a_restarted_crashed_robot_stays_crashed() -> None:
+def test_a_restarted_broken_robot_stays_broken() -> None:
     r = QuadRobot(2, (0.0, 0.0, 0.0))
     r.resume((3.0, 1.0, 0.04), (1.0, 0.0, 0.0, 0.0), "crashed")
     assert r.health() is Health.FAULTY
     r.step_until(0.5)
     assert r.position == pytest.approx((3.0, 1.0, 0.04), abs=0.02)
     assert not r.assign("f1", SLOT)
+    falling = QuadRobot(3, (0.0, 0.0, 0.0))
+    falling.resume((3.0, 1.0, 1.2), (1.0, 0.0, 0.0, 0.0), "falling")
+    assert falling.health() is Health.FAULTY
+    falling.step_until(3.0)
+    assert mode_of(falling) is Mode.CRASHED

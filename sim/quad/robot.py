@@ -52,6 +52,8 @@ LAND_SPEED = 0.5
 """Descent rate when landing, m/s."""
 ARM_HEIGHT = 0.3
 """Ground contact counts as a crash only after the craft was this high, m."""
+FALLING = "falling"
+"""Trajectory mode of a craft in the air with a motor out (whatever its daemon said)."""
 
 
 class Mode(Enum):
@@ -191,7 +193,7 @@ class QuadRobot:
         process died and came back; the craft did not vanish). A craft that was in the
         air comes back LANDING from there: the new daemon holds no function yet (rule 2,
         its old one was taken over), and a real autopilot holds position meanwhile. A
-        crashed craft stays crashed (its health says FAULTY at once)."""
+        crashed or falling craft stays broken (its health says FAULTY at once)."""
         d = self.data
         d.qpos[0:3] = pos
         d.qpos[3:7] = quat
@@ -200,6 +202,9 @@ class QuadRobot:
         if mode == Mode.CRASHED.value:
             self.mode = Mode.CRASHED
             self.crashed_at = self.t
+        elif mode == FALLING:  # a restart does not mend the rotor: it keeps falling
+            self.mode = Mode.LANDING
+            self.fail_motor(0)
         elif mode == Mode.PARKED.value or pos[2] < self.home[2] + self.preset.rest_height + 0.05:
             self.mode = Mode.PARKED
         else:
@@ -235,12 +240,15 @@ class QuadRobot:
 
     def _sample(self) -> None:
         q = self.data.qpos
+        mode = self.mode.value
+        if self.failed_motors and self.mode not in (Mode.PARKED, Mode.CRASHED):
+            mode = FALLING  # not "landing" after the daemon's release: it cannot land
         self.samples.append(
             Sample(
                 self.t,
                 (float(q[0]), float(q[1]), float(q[2])),
                 (float(q[3]), float(q[4]), float(q[5]), float(q[6])),
-                self.mode.value,
+                mode,
                 self.function,
             )
         )
