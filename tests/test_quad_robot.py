@@ -167,3 +167,22 @@ def test_a_restarted_broken_robot_stays_broken() -> None:
     assert falling.health() is Health.FAULTY
     falling.step_until(3.0)
     assert mode_of(falling) is Mode.CRASHED
+
+
+def test_a_restarts_samples_replace_what_the_last_process_simulated_ahead(
+    tmp_path: Path,
+) -> None:
+    # leave (close lands the craft, samples ahead of the clock) then restart at 1002:
+    # from 1002 on only the new process's samples count.
+    path = tmp_path / "traj-4.jsonl"
+    head = {"robot": 4, "preset": "x2", "home": [0, 0, 0]}
+    lines = [{**head, "wall0": 1000.0}]
+    lines += [{"t": t, "p": [t, 0, 1], "q": [1, 0, 0, 0], "mode": "landing", "function": None,
+               "w": 1000.0 + t} for t in (0.0, 1.0, 2.0, 3.0, 4.0)]
+    lines += [{**head, "wall0": 1002.0}]
+    lines += [{"t": t, "p": [9, 9, 0], "q": [1, 0, 0, 0], "mode": "parked", "function": None,
+               "w": 1002.0 + t} for t in (0.0, 1.0)]
+    path.write_text("".join(json.dumps(row) + "\n" for row in lines))
+    tr = load_trajectory(path, t0=1000.0)
+    assert list(tr.t) == [0.0, 1.0, 2.0, 3.0]
+    assert list(tr.pos[:, 0]) == [0.0, 1.0, 9.0, 9.0]

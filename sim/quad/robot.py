@@ -425,6 +425,11 @@ def load_trajectory(path: Path, t0: float | None = None) -> Trajectory:
                 h = row.get("home") or (0.0, 0.0, 0.0)
                 home = (float(h[0]), float(h[1]), float(h[2]))
                 wall0 = row.get("wall0")
+                if t0 is not None and wall0 is not None:
+                    # A new process of this robot from here on: drop what the previous
+                    # one simulated ahead of the clock (QuadLink.close lands the craft
+                    # fast-forwarded), or the replay would flicker between the two.
+                    rows = [r for r in rows if float(r["t"]) < float(wall0) - t0]
                 continue
             if not {"t", "p", "q"} <= row.keys():
                 continue
