@@ -22,6 +22,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from decimal import Decimal
+from typing import Any
 
 KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor")
 _DURATION_KINDS = {"pause", "partition"}
@@ -60,6 +61,21 @@ class Fault:
             return f"partition:{groups}@{_num(self.at)}+{_num(self.duration or 0.0)}"
         tail = f"+{_num(self.duration)}" if self.duration is not None else ""
         return f"{self.kind}:{self.robot}@{_num(self.at)}{tail}"
+
+
+def fault_record(fault: Fault, t: float) -> dict[str, Any]:
+    """The `fault` event of an injected fault, one per fault, when it is applied (DESIGN
+    section 3 `fault{kind}`; docs/sim.md): `robot` is the target, 0 for a partition;
+    `spec` always, `duration` and `groups` when the fault has them. Both simulators log
+    this, so a log reads the same whichever produced it."""
+    rec: dict[str, Any] = {"t": round(t, 6), "robot": 0 if fault.kind == "partition" else
+                           fault.robot, "event": "fault", "kind": fault.kind,
+                           "spec": fault.spec()}
+    if fault.duration is not None:
+        rec["duration"] = fault.duration
+    if fault.groups:
+        rec["groups"] = [list(g) for g in fault.groups]
+    return rec
 
 
 def _num(x: float | None) -> str:

@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.faults import Fault
+from sim.faults import Fault, fault_record
 from sim.invariants import Checker, Violation
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
@@ -281,25 +281,17 @@ class VirtualSwarm:
 
     def _fault(self, fault: Fault, phase: str) -> None:
         t = self.now
+        if phase == "begin":
+            # One record per injected fault, as the real-time sim logs it; the end of a
+            # pause or partition is `duration` after it, not a record of its own.
+            self._record(fault_record(fault, t))
+        self.checker.fault(t, fault, phase)
         if fault.kind == "partition":
-            if phase == "begin":
-                self.partition = {r: i for i, g in enumerate(fault.groups) for r in g}
-                for target in fault.robots:
-                    self._record({"t": round(t, 6), "robot": target, "event": "fault",
-                                  "kind": "partition", "spec": fault.spec()})
-            else:
-                self.partition = None
-                for target in fault.robots:
-                    self._record({"t": round(t, 6), "robot": target, "event": "fault",
-                                  "kind": "heal", "spec": fault.spec()})
-            self.checker.fault(t, fault, phase)
+            self.partition = {r: i for i, g in enumerate(fault.groups) for r in g} \
+                if phase == "begin" else None
             return
         rid = fault.robot
         r = self.robots[rid]
-        kind = fault.kind if phase == "begin" else "resume"
-        self._record({"t": round(t, 6), "robot": rid, "event": "fault", "kind": kind,
-                      "spec": fault.spec()})
-        self.checker.fault(t, fault, phase)
         node = r.node
         match fault.kind, phase:
             case "crash", _:

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.faults import KINDS, Fault, FaultSpecError, check_faults, parse_fault
+from sim.faults import KINDS, Fault, FaultSpecError, check_faults, fault_record, parse_fault
+from sim.virtual import run_virtual
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
 
 PAPER_IDS = {1, 2, 3, 4, 5, 6}
 
@@ -139,9 +144,9 @@ def _faults(draw: st.DrawFn) -> Fault:
         named = draw(st.lists(_ids, min_size=2, max_size=8, unique=True))
         cut = sorted(draw(st.sets(st.integers(1, len(named) - 1), min_size=1)))
         bounds = [0, *cut, len(named)]
-        groups = tuple(tuple(named[a:b]) for a, b in zip(bounds, bounds[1:], strict=False))
-        dur = draw(_times.filter(lambda d: d > 0))
-        return Fault(kind, at, tuple(named), dur, groups)
+        groups = tuple(tuple(named[a:b]) for a, b in itertools.pairwise(bounds))
+        length = draw(_times.filter(lambda d: d > 0))
+        return Fault(kind, at, tuple(named), length, groups)
     dur = draw(_times.filter(lambda d: d > 0)) if kind == "pause" else None
     return Fault(kind, at, (draw(_ids),), dur)
 
@@ -157,3 +162,25 @@ def test_spec_keeps_small_and_precise_times() -> None:
     assert Fault("crash", 1e-05, (2,)).spec() == "crash:2@0.00001"
     assert Fault("crash", 1234567.5, (2,)).spec() == "crash:2@1234567.5"
     assert Fault("crash", 0.123456789, (2,)).spec() == "crash:2@0.123456789"
+
+
+def test_fault_record_form() -> None:
+    assert fault_record(parse_fault("pause:2@3+1.5"), 3.0000004) == {
+        "t": 3.0, "robot": 2, "event": "fault", "kind": "pause", "spec": "pause:2@3+1.5",
+        "duration": 1.5}
+    assert fault_record(parse_fault("partition:1,2|3@2+1"), 2.0) == {
+        "t": 2.0, "robot": 0, "event": "fault", "kind": "partition",
+        "spec": "partition:1,2|3@2+1", "duration": 1.0, "groups": [[1, 2], [3]]}
+
+
+def test_virtual_logs_one_fault_record_per_injected_fault(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    """The virtual log reads as the real-time one (docs/sim.md): one `fault` per injected
+    fault, kinds from the CLI only (it logged `resume`/`heal` records and one partition
+    record per named robot)."""
+    plan, params = paper
+    specs = ["pause:2@2+1", "partition:1,2|3,4@2.5+1", "crash:3@4"]
+    faults = [parse_fault(s) for s in specs]
+    result = run_virtual(plan, params, duration=6, faults=faults)
+    records = [e for e in result.events if e["event"] == "fault"]
+    assert records == [fault_record(f, f.at) for f in faults]
