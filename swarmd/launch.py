@@ -70,6 +70,9 @@ def parse_launch(text: str, name: str = "<launch>") -> list[LaunchRobot]:
             if "$(" in value:
                 raise LaunchError(f"{label}: param {key}: substitution args ({value!r}) "
                                   "are not supported; write the value out")
+            if key in params:  # ROS takes the last one: a silent surprise, refuse it
+                raise LaunchError(f"{label}: param {key} is given twice "
+                                  f"({params[key]!r} and {value!r})")
             params[key] = value
         robots.append(_robot(params, label))
     if not robots:

@@ -62,6 +62,9 @@ def test_import_to_stdout_with_swarm_id() -> None:
                      "param state: 'asleep'", id="bad state"),
         pytest.param(_launch(NODE.format(id="$(arg id)", extra="")),
                      "substitution args", id="substitution"),
+        pytest.param(_launch(NODE.format(id=1, extra="<param name='robot_id' value='7'/>")),
+                     "node[0] (name='n1'): param robot_id is given twice ('1' and '7')",
+                     id="param twice"),
     ],
 )
 def test_bad_launch_files(tmp_path: Path, text: str, fragment: str) -> None:
@@ -88,6 +91,9 @@ def test_invalid_resulting_swarm_exit_1(tmp_path: Path) -> None:
     assert result.exit_code == 1
     assert "robots[0].neighbors: robot 9 is not in the swarm" in result.output
     assert not out.exists()
+    # the problems name the converted text, not the file that was not written
+    assert "<x.launch converted>: robots[0].neighbors" in result.output
+    assert str(out) not in result.output
 
 
 def test_unreadable_launch_exit_2(tmp_path: Path) -> None:

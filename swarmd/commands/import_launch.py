@@ -40,9 +40,11 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(1) from None
         # The result must be a valid swarm (an unknown neighbour in the launch file, a
         # slot with too few watchers): say so in the launch file's terms, write nothing.
-        target = output if output is not None else Path(f"<{file.name} converted>")
+        # Name the problems after the converted text, never after `output`: nothing was
+        # written there, so a line number in that file would point at nothing.
+        target = output if output is not None else Path(file.name)
         try:
-            cfg = parse_swarm(text, str(target), target)
+            cfg = parse_swarm(text, f"<{file.name} converted>", target)
         except ConfigError as exc:
             typer.echo(f"{file}: the converted swarm is not valid:", err=True)
             for p in exc.problems:
