@@ -37,7 +37,7 @@ def test_parse_slot_and_patrol() -> None:
 
 
 def test_parse_ignores_runtime_extras() -> None:
-    # The runtime adds t0 to the spec it hands the link (link/base.py).
+    # A spec may carry the run's t0 for the link (sim/quad/link.py): not a field.
     assert parse_function("f", {"kind": "slot", "position": [0, 0, 1], "t0": 5.0}) == SlotSpec(
         (0.0, 0.0, 1.0)
     )

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from sim.quad.functions import PatrolFlight
 from sim.quad.link import QuadLink, default_home, read_stats
 from sim.quad.robot import Mode, QuadRobot, load_trajectory
 from swarmd.core.roles import Health
@@ -137,3 +138,18 @@ async def test_a_stopping_robot_lands_its_craft_before_the_process_goes(
     tr = load_trajectory(tmp_path / "traj-3.jsonl")
     assert tr.modes[-1] == "parked" and "crashed" not in tr.modes
     assert tr.pos[-1][:2] == pytest.approx(home[:2], abs=0.1)
+
+
+def test_a_restarted_robot_keeps_the_runs_patrol_clock() -> None:
+    # restart:R@T: the new process starts T s into the run. A patrol assigned to it must
+    # be scheduled on the run's clock (heading where the holder would be), not its own.
+    square = {"kind": "patrol", "speed": 1.0,
+              "waypoints": [[0, 0, 1], [2, 0, 1], [2, 2, 1], [0, 2, 1]]}
+    run_t0 = 1000.0
+    link = QuadLink(7, (0.0, 0.0, 0.0), wall=lambda: run_t0 + 5.0, restart_of=run_t0)
+    link.assign("p", 1, square)  # 5 s into the run: arc 5 of 8, heading to waypoint 3
+    flight = link.robot.flight
+    assert isinstance(flight, PatrolFlight) and flight.first == 3
+    fresh = QuadLink(8, (0.0, 0.0, 0.0), wall=lambda: run_t0 + 5.0)
+    fresh.assign("p", 1, square)  # a first start: its own start is the run's t0
+    assert isinstance(fresh.robot.flight, PatrolFlight) and fresh.robot.flight.first == 1

@@ -79,8 +79,9 @@ class QuadLink:
         self.traj_path = traj_path
         self.restart_of = restart_of
         """The run's t0 (Unix time) if this process restarts a robot of that run: the
-        craft resumes where the last one left it and the trajectory file is appended;
-        otherwise a stale file (an earlier run into the same directory) is replaced."""
+        craft resumes where the last one left it, the trajectory file is appended, and
+        patrols keep the run's clock; otherwise a stale file (an earlier run into the
+        same directory) is replaced."""
         if restart_of is not None and traj_path is not None:
             state = last_state(traj_path, since=restart_of)
             if state is not None:
@@ -142,10 +143,15 @@ class QuadLink:
         self._task = loop.create_task(self._run(), name=f"quad{self.robot_id}")
 
     def assign(self, function: str, epoch: int, params: Mapping[str, Any]) -> None:
-        """Fly `function`; params are its spec plus `t0` (the run's start, Unix time)."""
+        """Fly `function`; params are its spec, optionally with `t0` (the run's start,
+        Unix time; default `restart_of`, else this link's start)."""
         try:
             spec = parse_function(function, params)
-            t0_wall = float(params.get("t0", self.wall0))
+            # The patrol clock is the run's (functions.py). The daemon's params carry no
+            # t0: a first process starts at the run's t0, so its own wall0 is that to a
+            # few ms; a restarted one started later and must use the run's t0.
+            origin = self.restart_of if self.restart_of is not None else self.wall0
+            t0_wall = float(params.get("t0", origin))
         except (FunctionSpecError, TypeError, ValueError) as exc:
             self.errors += 1
             log.error("robot %d: cannot fly %s (epoch %d): %s", self.robot_id, function,
