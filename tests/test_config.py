@@ -426,3 +426,13 @@ def test_keys_signing_key_first(tmp_path: Path) -> None:
     cfg = load_robot(_robot(tmp_path, {"key_files": ["old.key"]},
                             swarm=BASE | {"key_file": "swarm.key"}))
     assert cfg.keys() == (swarm_key, old_key)
+
+
+def test_robot_file_given_as_swarm_file_says_so() -> None:
+    """`swarmd sim robot2.yaml` used to print four schema errors (`swarm` is not a
+    mapping, `functions`/`robots` missing, `robot` unknown); one problem says what to do."""
+    with pytest.raises(ConfigError) as info:
+        parse_swarm("robot: 2\nswarm: paper.yaml\ntransport: {kind: udp}\n", "r2.yaml")
+    assert [str(p) for p in info.value.problems] == [
+        "r2.yaml: <top>: this is a robot file (it has `robot:`); give the swarm file it "
+        "names: paper.yaml (line 1)"]

@@ -44,6 +44,13 @@ def parse_swarm(text: str, name: str = "<string>", path: Path | None = None) -> 
 def inspect_swarm(source: Source) -> tuple[SwarmConfig | None, list[Problem]]:
     """Validate without raising on cross-check errors: the config (None if its shape is
     invalid) and every problem. `swarmd check` prints a table even for a bad swarm."""
+    data = source.data
+    if isinstance(data, dict) and "robot" in data and "robots" not in data:
+        # A robot file where a swarm file belongs (`swarmd sim robot2.yaml`): one clear
+        # problem instead of four schema errors about fields a robot file never has.
+        named = f": {data['swarm']}" if isinstance(data.get("swarm"), str) else ""
+        return None, [source.problem((), "this is a robot file (it has `robot:`); give the "
+                                     f"swarm file it names{named}")]
     try:
         cfg: SwarmConfig = validate(SwarmConfig, source)
     except ConfigError as exc:
