@@ -186,7 +186,8 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
 def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
                  duration: float | None = None) -> list[str]:
     """Problems with a fault list against a swarm: unknown robots, motor without
-    physics, and (given the run's `duration`) a fault that would start after the end."""
+    physics (`physics` is True for --virtual too: sim.virtual turns a motor fault into
+    `unhealthy`), and (given the run's `duration`) a fault that would start after the end."""
     problems = []
     for f in faults:
         unknown = [r for r in f.robots if r not in robot_ids]
@@ -194,7 +195,8 @@ def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
             problems.append(f"{f.spec()}: robot {unknown[0]} is not in the swarm "
                             f"(robots: {_ranges(robot_ids)})")
         if f.kind == "motor" and not physics:
-            problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics/--virtual)")
+            problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics; "
+                            "--virtual models one as the robot reporting itself unhealthy)")
         if duration is not None and f.at >= duration:
             problems.append(f"{f.spec()}: starts at {_num(f.at)} s, not before the end of the "
                             f"run (--duration {_num(duration)})")

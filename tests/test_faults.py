@@ -112,7 +112,9 @@ def test_check_faults_lists_non_contiguous_ids() -> None:
 def test_check_faults_motor_needs_physics() -> None:
     motor = [parse_fault("motor:2@5")]
     assert check_faults(motor, PAPER_IDS, physics=True) == []
-    assert "need physics" in check_faults(motor, PAPER_IDS, physics=False)[0]
+    assert check_faults(motor, PAPER_IDS, physics=False) == [
+        "motor:2@5: motor faults need physics (drop --no-physics; --virtual models one as "
+        "the robot reporting itself unhealthy)"]
 
 
 def test_check_faults_after_the_end_of_the_run() -> None:
