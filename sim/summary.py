@@ -21,7 +21,10 @@ from sim.invariants import Violation, check_events
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
-_REPLACEABLE = ("crash", "pause", "leave", "unhealthy", "motor")
+_REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor")
+"""Faults whose row says who took the robot's slot over. In real time `restart` kills the
+process first, so its slot can be taken over like a crash's (or kept, if the robot is
+back before T_max: then the row shows no takeover)."""
 
 
 @dataclass(frozen=True, slots=True)

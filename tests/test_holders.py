@@ -136,6 +136,20 @@ def test_summary_holder_when_the_fault_hit_and_at_the_end() -> None:
     assert s.holders == {"f1": [1], "f2": [6]} == holders_at_end(events, dead={2})
 
 
+def test_summary_says_who_took_over_a_restarted_robots_slot() -> None:
+    swarm = load_swarm(PAPER)
+    events = log(ev(3.0, 2, "fault", kind="restart"),
+                 ev(3.4, 1, "suspect", subject=2, function="f2"),
+                 ev(3.6, 6, "takeover", function="f2", epoch=1, replaced=2),
+                 ev(3.9, 2, "started", role="standby", function=None))
+    s = summarize(events, [parse_fault("restart:2@3")], swarm.to_plan(), swarm.params(),
+                  loss=0.0, duration=5.0, mode="test")
+    row = s.faults[0]
+    assert (row.function, row.by, row.epoch) == ("f2", 6, 1)
+    assert row.detected is not None and abs(row.detected - 0.4) < 1e-9
+    assert row.taken_over is not None and abs(row.taken_over - 0.6) < 1e-9
+
+
 def test_checker_a_restarted_robot_that_starts_as_standby_executes_nothing() -> None:
     # Real time: restart of a live robot kills its process first; the new node starts
     # as standby once it hears the slot taken over. Before the shared fold the checker
