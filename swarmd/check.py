@@ -196,7 +196,25 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
     )
 
 
-SECTIONS: list[SectionBuilder] = [coverage_section, timing_section, budget_section]
+def flight_section(cfg: SwarmConfig) -> Section | None:
+    """What the simulator's quadrotors make of each function (issue 4): `swarmd sim`
+    with physics refuses a swarm whose functions a craft cannot fly (a waypoint under
+    the ground, a slot at ground level); said here first, as notes, since real robots
+    interpret their functions themselves."""
+    try:
+        from sim.quad.functions import flight_problems
+    except ImportError:  # a robot's install without the simulator
+        return None
+    problems = {name: flight_problems({name: cfg.function_spec(name)})
+                for name in cfg.functions}
+    notes = tuple(f"swarmd sim (physics) will refuse: {p}"
+                  for bad in problems.values() for p in bad)
+    # No table: the coverage table already lists the functions; only problems print.
+    return Section(key="flight", title="", columns=(), rows=(), data=problems, notes=notes)
+
+
+SECTIONS: list[SectionBuilder] = [coverage_section, timing_section, budget_section,
+                                  flight_section]
 """Report sections in order; append a builder to add one (e.g. the channel budget)."""
 
 
@@ -240,12 +258,13 @@ def render(report: CheckReport, console: Console) -> None:
         style = "red" if p.severity == "error" else "yellow"
         console.print(Text(str(p), style=style), soft_wrap=True)
     for s in report.sections:
-        table = Table(title=s.title, title_justify="left")
-        for col in s.columns:
-            table.add_column(col)
-        for row in s.rows:
-            table.add_row(*(Text(cell) for cell in row))
-        console.print(table)
+        if s.columns:  # a section may be notes alone
+            table = Table(title=s.title, title_justify="left")
+            for col in s.columns:
+                table.add_column(col)
+            for row in s.rows:
+                table.add_row(*(Text(cell) for cell in row))
+            console.print(table)
         for note in s.notes:
             console.print(Text(note), soft_wrap=True)
     errors = sum(p.severity == "error" for p in report.problems)

@@ -98,5 +98,50 @@ def test_sections_can_be_appended(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(check_mod, "SECTIONS", [*check_mod.SECTIONS, extra])
     report = run_check(CONFIGS / "paper.yaml")
     assert [s.key for s in report.sections] == ["coverage", "timing", "channel_budget",
-                                                "extra"]
+                                                "flight", "extra"]
     assert report.as_json()["extra"] == {"n": 6}
+
+
+def _under_ground(tmp_path: Path) -> Path:
+    doc = yaml.safe_load((CONFIGS / "paper.yaml").read_text())
+    doc["functions"]["f3"] = {"kind": "patrol", "speed": 1.0,
+                              "waypoints": [[0.0, 0.0, 1.0], [2.0, 0.0, -1.0]]}
+    path = tmp_path / "under.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_check_says_which_function_the_simulated_craft_cannot_fly(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["check", str(_under_ground(tmp_path)), "--json"])
+    flight = json.loads(result.stdout)["flight"]
+    assert flight["f1"] == [] and flight["f2"] == []
+    assert len(flight["f3"]) == 1 and "waypoints[1]" in flight["f3"][0]
+    assert "under the ground" in flight["f3"][0]
+
+
+def test_sim_with_physics_refuses_an_unflyable_function_before_starting(
+        tmp_path: Path) -> None:
+    path = _under_ground(tmp_path)
+    result = runner.invoke(app, ["sim", str(path), "--duration", "2"])
+    assert result.exit_code == 2
+    assert "functions.f3.waypoints[1]" in result.stderr
+    # The protocol alone does not care: the bare and virtual runs still go.
+    assert runner.invoke(app, ["sim", str(path), "--virtual", "--duration", "2"]).exit_code == 0
+
+
+def test_sim_refuses_a_fault_after_the_end_of_the_run() -> None:
+    result = runner.invoke(app, ["sim", str(CONFIGS / "paper.yaml"), "--virtual",
+                                 "--duration", "5", "--fault", "crash:2@7"])
+    assert result.exit_code == 2
+    assert "--duration 5" in result.stderr
+
+
+def test_sim_prints_problems_as_plain_text(tmp_path: Path) -> None:
+    # A `[x, y]` in a message is text, not rich markup; one problem per line.
+    doc = yaml.safe_load((CONFIGS / "paper.yaml").read_text())
+    doc["functions"]["f2"]["position"] = [2.0, 0.0]
+    path = tmp_path / "short.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(app, ["sim", str(path), "--virtual"])
+    assert result.exit_code == 2
+    assert "functions.f2" in result.stderr and "[" in result.stderr, result.stderr

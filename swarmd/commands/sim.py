@@ -64,7 +64,9 @@ def register(app: typer.Typer) -> None:
         from sim.faults import FaultSpecError, check_faults, parse_fault
         from swarmd.config import ConfigError, load_swarm
 
-        err = Console(stderr=True, highlight=False)
+        # Problems are plain text: no rich markup (a `[x, y, z]` in a message is not a
+        # tag) and no wrapping (one problem a line, for grep).
+        err = Console(stderr=True, highlight=False, markup=False, soft_wrap=True)
         try:
             cfg = load_swarm(swarm)
         except ConfigError as exc:
@@ -77,11 +79,22 @@ def register(app: typer.Typer) -> None:
             err.print(f"--fault: {exc}")
             raise typer.Exit(2) from None
         plan, params = cfg.to_plan(), cfg.params()
-        problems = check_faults(faults, set(plan.robots), physics=virtual or not no_physics)
+        problems = check_faults(faults, set(plan.robots), physics=virtual or not no_physics,
+                                duration=duration)
         if problems:
             for p in problems:
                 err.print(f"--fault: {p}")
             raise typer.Exit(2)
+        if not virtual and not no_physics:
+            # What a craft cannot fly (a waypoint under the ground...) is refused before
+            # any robot starts, not logged by a robot that then stays parked.
+            from sim.quad.functions import flight_problems
+
+            flight = flight_problems({n: cfg.function_spec(n) for n in plan.functions})
+            for p in flight:
+                err.print(f"{swarm}: {p} (or run with --no-physics)")
+            if flight:
+                raise typer.Exit(2)
         if report is not None:
             _clear_report(report)
         out = Console(highlight=False, stderr=json_out)
