@@ -93,17 +93,19 @@ def _r(x: float | None) -> float | None:
     return None if x is None else round(x, 3)
 
 
-def _holder_at(events: list[dict[str, Any]], robot: int, t: float) -> str | None:
-    """The function `robot` executed when a fault hit it at `t`. Fault records from `t`
-    on are left out: the fault being explained has not acted yet (its own record may
-    carry the same t); an earlier crash has (a dead robot holds nothing)."""
+def _state_at(events: list[dict[str, Any]], robot: int, t: float) -> tuple[str | None, bool]:
+    """(the function `robot` executed, whether it was down) when a fault hit it at `t`.
+    Records from `t` on are left out: the fault being explained has not acted yet, and
+    what it caused may carry the same t (`--virtual` logs the robot's own `leave` at the
+    fault's instant); an earlier crash has acted (a dead robot holds nothing)."""
     fold = HolderFold()
     for e in events:
-        if e["t"] > t:
+        if e["t"] >= t:
             break
-        if e["robot"] == robot and (e["event"] != "fault" or e["t"] < t):
+        if e["robot"] == robot:
             fold.feed(e)
-    return fold.executing().get(robot)
+    holding = fold.robots.get(robot)
+    return fold.executing().get(robot), holding is not None and holding.role == "crashed"
 
 
 def holders_at_end(events: list[dict[str, Any]], dead: set[int]) -> dict[str, list[int]]:
@@ -135,6 +137,7 @@ def summarize(
             seen.add(key)
             unique.append(v)
     outcomes = []
+    credited: set[int] = set()  # takeovers already explained by an earlier fault
     for fault in sorted(faults, key=lambda f: f.at):
         if fault.kind not in _REPLACEABLE:
             outcomes.append(FaultOutcome(fault.spec(), fault.kind, None if fault.kind ==
@@ -142,9 +145,11 @@ def summarize(
                                          None, None, None, None))
             continue
         r = fault.robot
-        f = _holder_at(events, r, fault.at)
+        f, down = _state_at(events, r, fault.at)
         detected = taken = by = epoch = None
-        for e in events:
+        for i, e in enumerate(events):
+            if down:
+                break  # a fault on a robot already dead explains nothing
             if e["t"] < fault.at:
                 continue
             name = e["event"]
@@ -154,7 +159,8 @@ def summarize(
             ):
                 detected = e["t"] - fault.at
             if taken is None and name == "takeover" and e.get("replaced") == r \
-                    and (f is None or e.get("function") == f):
+                    and (f is None or e.get("function") == f) and i not in credited:
+                credited.add(i)
                 taken, by, epoch = e["t"] - fault.at, e["robot"], e.get("epoch")
         outcomes.append(FaultOutcome(fault.spec(), fault.kind, r, fault.at, f, detected,
                                      taken, by, epoch))

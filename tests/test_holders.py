@@ -172,3 +172,27 @@ def test_checker_counts_what_a_crashed_robot_still_logs() -> None:
                  ev(4.0, 2, "takeover", function="f3", epoch=1, replaced=3)),
         [parse_fault("crash:2@3")], swarm.to_plan(), swarm.params(), loss=0.0, duration=5.0)
     assert checker.holding.robots[2] == Holding("active", "f3", 1)
+
+
+def _virtual_summary(*specs: str, duration: float = 6.0) -> Any:
+    swarm = load_swarm(PAPER)
+    plan, params = swarm.to_plan(), swarm.params()
+    faults = [parse_fault(s) for s in specs]
+    res = run_virtual(plan, params, duration=duration, faults=faults, seed=1)
+    return summarize(res.events, faults, plan, params, loss=0.0, duration=duration,
+                     mode="virtual")
+
+
+@pytest.mark.parametrize("kind", ["leave", "unhealthy", "motor"])
+def test_summary_names_the_slot_of_a_robot_that_hands_over_at_the_faults_instant(
+        kind: str) -> None:
+    # --virtual logs the robot's own `leave` at the fault's t: the slot is the one it
+    # held before (the row said function null, slot '-').
+    row = _virtual_summary(f"{kind}:2@3").faults[0]
+    assert (row.function, row.by) == ("f2", 6)
+
+
+def test_summary_does_not_credit_a_fault_on_a_dead_robot_with_the_earlier_takeover() -> None:
+    crash, late = _virtual_summary("crash:2@3", "unhealthy:2@3.5").faults
+    assert (crash.function, crash.by) == ("f2", 6)
+    assert (late.function, late.detected, late.taken_over, late.by) == (None, None, None, None)
