@@ -54,7 +54,7 @@ from typing import Any, ParamSpec
 
 import yaml
 
-from sim.faults import Fault
+from sim.faults import Fault, fault_record
 from sim.holders import HolderFold
 from sim.netfilter import partition_windows
 
@@ -410,23 +410,18 @@ class Orchestrator:
     def run_time(self) -> float:
         return time.time() - self.t0
 
-    def _fault_event(self, fault: Fault, robot: int) -> None:
-        rec: dict[str, Any] = {"t": round(self.run_time(), 6), "robot": robot, "event": "fault",
-                               "kind": fault.kind, "spec": fault.spec()}
-        if fault.duration is not None:
-            rec["duration"] = fault.duration
-        if fault.groups:
-            rec["groups"] = [list(g) for g in fault.groups]
+    def _fault_event(self, fault: Fault) -> None:
+        rec = fault_record(fault, self.run_time())  # the same record as --virtual's
         self.events.append(rec)
         self.view.feed(rec)
 
     def _apply(self, fault: Fault) -> None:
         loop = asyncio.get_running_loop()
         if fault.kind == "partition":
-            self._fault_event(fault, 0)  # the receive filters already hold the window
+            self._fault_event(fault)  # the receive filters already hold the window
             return
         robot = fault.robot
-        self._fault_event(fault, robot)
+        self._fault_event(fault)
         proc = self.procs.get(robot)
         match fault.kind:
             case "crash":
