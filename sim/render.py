@@ -217,6 +217,7 @@ def report_pictures(
     if not trajs:
         out["video_error"] = "no trajectories (run without physics?)"
         return out
+    trajs = [_with_fall(tr, events) for tr in trajs]
     out["trajectory_png"] = trajectory_png(trajs, report_dir / "trajectories.png", functions)
     if video:
         res = render_swarm(trajs, events, report_dir, fps=fps, speed=speed,
@@ -226,6 +227,43 @@ def report_pictures(
         if res.error:
             out["video_error"] = res.error
     return out
+
+
+FALL_STEP = 0.05
+"""s between the samples of a drawn fall."""
+
+
+def _with_fall(tr: Trajectory, events: Sequence[Mapping[str, Any]]) -> Trajectory:
+    """A robot whose process was killed (`crash`, or a `restart` it did not come back
+    from) stops writing its trajectory in mid-air. For the pictures only, its craft
+    falls from the last sample to the ground (free fall, level) and lies there
+    "crashed", instead of hanging black where it was. Nothing else is changed: the
+    physics of a dead process is unknown, this is a drawing."""
+    if len(tr.t) == 0:
+        return tr
+    last = float(tr.t[-1])
+    # Killed where the samples end (a restarted robot's samples go on after its kill).
+    killed = any(e.get("event") == "fault" and e.get("robot") == tr.robot
+                 and e.get("kind") in ("crash", "restart")
+                 and abs(float(e.get("t", 0.0)) - last) <= 0.5 for e in events)
+    if not killed or (tr.modes and tr.modes[-1] in ("parked", "crashed")):
+        return tr
+    ground = float(tr.pos[0][2])  # it started parked on the ground at home
+    z0 = float(tr.pos[-1][2])
+    fall = math.sqrt(max(0.0, 2.0 * (z0 - ground) / 9.81))
+    steps = max(1, math.ceil(fall / FALL_STEP))
+    ts = [last + fall * (k + 1) / steps for k in range(steps)]
+    pos = [(tr.pos[-1][0], tr.pos[-1][1], max(ground, z0 - 4.905 * (t - last) ** 2))
+           for t in ts]
+    return Trajectory(
+        tr.robot,
+        np.concatenate([tr.t, np.array(ts)]),
+        np.concatenate([tr.pos, np.array(pos)]),
+        np.concatenate([tr.quat, np.repeat(tr.quat[-1:], steps, axis=0)]),
+        (*tr.modes, *("crashed",) * steps) if tr.modes else tr.modes,
+        (*tr.functions, *(None,) * steps) if tr.functions else tr.functions,
+        tr.home,
+    )
 
 
 # -- the child ----------------------------------------------------------------------------

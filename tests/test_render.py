@@ -58,3 +58,25 @@ def test_no_backend_is_an_error_not_an_exception(tmp_path: Path,
     monkeypatch.setattr("sim.render.gl_available", lambda: (False, "no GL here"))
     res = render_swarm([], [], tmp_path)
     assert res.error == "no GL here" and res.video is None
+
+
+def test_a_killed_robot_is_drawn_falling_to_the_ground() -> None:
+    from sim.render import _with_fall
+
+    a = QuadRobot(2, (0.0, 0.0, 0.0))
+    a.assign("f2", {"kind": "slot", "position": [0.0, 1.0, 1.5]})
+    a.step_until(3.0)
+    tr = trajectory_of(a)
+    end = float(tr.t[-1])
+    assert tr.pos[-1][2] > 1.0  # in the air when its process died
+    crash = [{"t": end + 0.01, "robot": 2, "event": "fault", "kind": "crash"}]
+    fell = _with_fall(tr, crash)
+    assert fell.pos[-1][2] == pytest.approx(tr.pos[0][2])  # on the ground it started on
+    assert fell.modes[-1] == "crashed"
+    assert list(fell.pos[-1][:2]) == list(tr.pos[-1][:2])  # straight down
+    assert all(b > a for a, b in zip(fell.t, fell.t[1:], strict=False))
+    # Free fall from ~1.5 m: about 0.55 s.
+    assert 0.4 < fell.t[-1] - end < 0.7
+    # Not for a robot alive to the end, or one killed long before its samples end.
+    assert _with_fall(tr, []) is tr
+    assert _with_fall(tr, [{**crash[0], "t": 0.5}]) is tr
