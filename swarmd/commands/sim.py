@@ -200,7 +200,7 @@ def _say_report(out: Any, report: Path, pictures: dict[str, Any], *, physics: bo
     """Tell the user what `--report` wrote and, when a picture is missing, why: a
     missing GL backend must not look like a silent success (issue 4 item 5)."""
     names = sorted(p.name for p in report.iterdir() if p.is_file())
-    out.print(f"report: {report}/ — {', '.join(names)}")
+    out.print(f"report: {report}/ — {', '.join(names)}", soft_wrap=True)
     if not physics:
         out.print("report: trajectories and video need physics (not with --virtual or "
                   "--no-physics)")
