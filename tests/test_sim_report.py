@@ -122,3 +122,18 @@ def test_report_that_is_a_file_is_refused(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert "not a directory" in proc.stderr
     assert target.read_text() == "not a directory"
+
+
+def test_craft_chooses_the_quadrotor_every_robot_flies(tmp_path: Path) -> None:
+    proc = _sim("--craft", "crazyflie", "--duration", "2", "--report", str(tmp_path),
+                "--json", timeout=90)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    headers = [json.loads(p.read_text().splitlines()[0])
+               for p in tmp_path.glob("realtime/state/*/traj-*.jsonl")]
+    assert len(headers) == 6 and {h["preset"] for h in headers} == {"crazyflie"}
+
+
+def test_an_unknown_craft_is_refused_naming_the_known_ones() -> None:
+    proc = _sim("--craft", "x9", "--duration", "2", timeout=60)
+    assert proc.returncode == 2
+    assert "'x9'" in proc.stderr and "crazyflie" in proc.stderr and "x2" in proc.stderr

@@ -51,6 +51,10 @@ def register(app: typer.Typer) -> None:
         no_physics: Annotated[bool, typer.Option(
             "--no-physics", help="Real-time mode: bare daemons, no MuJoCo quadrotors.")]
         = False,
+        craft: Annotated[str | None, typer.Option(
+            "--craft", help="Quadrotor preset every robot flies: x2 (Skydio X2-class, "
+            "1.3 kg, the default: visible in pictures) or crazyflie (27 g). Also "
+            "SWARMD_QUAD_PRESET.")] = None,
         transport: Annotated[str, typer.Option(
             "--transport", help="Real-time mode channel: udp (multicast on loopback), "
             "or xbee / serial over emulated radios.")] = "udp",
@@ -86,6 +90,18 @@ def register(app: typer.Typer) -> None:
                 err.print(f"--fault: {p}")
             raise typer.Exit(2)
         if not virtual and not no_physics:
+            import os
+
+            from sim.quad.model import PRESETS
+
+            # The robot processes read the preset from their environment (sim.quad.link),
+            # which the forkserver, started below, inherits.
+            chosen = craft or os.environ.get("SWARMD_QUAD_PRESET", "x2")
+            if chosen not in PRESETS:
+                err.print(f"--craft: unknown quadrotor preset {chosen!r} "
+                          f"(known: {', '.join(PRESETS)})")
+                raise typer.Exit(2)
+            os.environ["SWARMD_QUAD_PRESET"] = chosen
             # What a craft cannot fly (a waypoint under the ground...) is refused before
             # any robot starts, not logged by a robot that then stays parked.
             from sim.quad.functions import flight_problems
