@@ -138,7 +138,13 @@ class Checker:
             if f is not None:
                 self._expect_takeover(t, r, f, fault.kind)
         elif fault.kind == "restart" and phase == "begin":
+            # A restart kills the process first (both simulators): the robot executes
+            # nothing until its new node logs `started` (at once in --virtual, after a
+            # process start in real time, during which the slot may be taken over).
+            self._close_watcher(r)
             self.dead.discard(r)
+            self.holding.forget(r)
+            self.paused.discard(r)
         elif fault.kind == "pause":
             if phase == "begin":
                 self.paused.add(r)

@@ -293,20 +293,14 @@ class VirtualSwarm:
         rid = fault.robot
         r = self.robots[rid]
         node = r.node
+        if fault.kind == "restart" and r.alive:
+            # A restart of a live robot is a crash first, as in real time (docs/sim.md):
+            # the new node starts at once from what the old one persisted.
+            self._kill(r)
         match fault.kind, phase:
             case "crash", _:
-                if node is not None and r.alive:
-                    snap = node.snapshot()
-                    held = (snap.function, snap.epoch) if snap.function and \
-                        snap.role == Role.ACTIVE else None
-                    r.persisted = Restored(known=dict(snap.known), held=held)
-                    r.seq_high = snap.seq
-                r.alive = False
-                r.timer_gen += 1
-                r.timer_at = None
+                self._kill(r)
             case "restart", _:
-                if r.alive:
-                    return  # restarting a live robot: nothing to do
                 r.alive, r.paused, r.buffered = True, False, []
                 r.node = Node(rid, self.plan, self.params, t, keys=self.keys,
                               seq_start=r.seq_high + 1_000_000,
@@ -332,6 +326,18 @@ class VirtualSwarm:
                     self._call(rid, _OP_HEALTH, Health.FAULTY)
             case "liar", _:
                 self._push(t, _LIAR, rid, None)
+
+    def _kill(self, r: _Robot) -> None:
+        """A crash: the node's persisted state is kept (DESIGN rule 2), the rest is gone."""
+        if r.node is not None and r.alive:
+            snap = r.node.snapshot()
+            held = (snap.function, snap.epoch) if snap.function and \
+                snap.role == Role.ACTIVE else None
+            r.persisted = Restored(known=dict(snap.known), held=held)
+            r.seq_high = snap.seq
+        r.alive = False
+        r.timer_gen += 1
+        r.timer_at = None
 
     def _lie(self, rid: int) -> None:
         """`liar:R@T`: R warns about the holders of the slots its slot watches (or of

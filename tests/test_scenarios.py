@@ -212,3 +212,45 @@ def test_interest_filter_changes_no_outcome(config: str, faults: tuple[str, ...]
     assert takeovers(a), "each case must make somebody take over"
     assert a.holders() == b.holders()
     assert a.deliveries < b.deliveries  # the filter did filter
+
+
+def test_restart_of_a_live_robot_is_a_crash_then_a_start_from_its_state(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # As in real time (docs/sim.md): killed, then a new node on the persisted state. It
+    # listens rejoin_hold (> T_max) before resuming f2 (docs/daemon.md), its silence is
+    # noticed, 6 takes f2 over, and the restarted robot rejoins as a standby (rule 2).
+    # Before, --virtual ignored a restart of a live robot.
+    plan, params = paper
+    res = run(plan, params, "restart:2@3", duration=8.0)
+    assert res.violations == []
+    assert takeovers(res) == [(6, "f2", 1, 2)]
+    again = [e for e in named(res, "started") if e["robot"] == 2 and e["t"] >= 3.0]
+    assert [(e["role"], e["function"]) for e in again] == [("standby", None)]
+    assert res.holders()["f2"] == [6]
+
+
+def test_checker_a_slow_restart_after_a_takeover_is_not_a_dual_execution(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Real time on a loaded machine: robot 2's new process logs `started` 1.5 s after
+    # 6 took f2 over, then is fenced. Before, the checker held 2 on f2 all that time.
+    from sim.faults import parse_fault
+    from sim.invariants import check_events
+
+    plan, params = paper
+    start: list[dict[str, Any]] = [
+        {"t": 0.0, "robot": r, "event": "started", "role": "active", "function": f"f{r}"}
+        for r in (1, 2, 3, 4)]
+    start += [{"t": 0.0, "robot": r, "event": "started", "role": "standby", "function": None}
+              for r in (5, 6)]
+    events: list[dict[str, Any]] = [
+              *start,
+              {"t": 3.0, "robot": 2, "event": "fault", "kind": "restart"},
+              {"t": 3.4, "robot": 1, "event": "suspect", "subject": 2, "function": "f2"},
+              {"t": 3.6, "robot": 6, "event": "takeover", "function": "f2", "epoch": 1,
+               "replaced": 2},
+              {"t": 5.1, "robot": 2, "event": "started", "role": "active", "function": "f2"},
+              {"t": 5.2, "robot": 2, "event": "fenced", "function": "f2", "epoch": 1}]
+    checker = check_events(events, [parse_fault("restart:2@3")], plan, params, loss=0.0,
+                           duration=8.0)
+    assert [v.kind for v in checker.violations] == []
+    assert checker.false_takeovers == []
