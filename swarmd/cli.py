@@ -15,7 +15,10 @@ app = typer.Typer(
     help=(
         "Failure handling for robot swarms. Robots heartbeat to their neighbours; a "
         "neighbour that misses heartbeats warns the standby robot; a standby warned by "
-        "enough distinct neighbours takes the failed robot's function over."
+        "enough distinct neighbours takes the failed robot's function over.\n\n"
+        "Each command has its own --help (what it does, its options with units and "
+        "defaults, exit codes, an example). Docs: README.md and docs/ in the source.\n\n"
+        "Example: swarmd sim configs/paper.yaml --virtual --fault crash:2@5 --duration 20"
     ),
     no_args_is_help=True,
     add_completion=False,

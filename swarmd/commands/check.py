@@ -13,14 +13,21 @@ def register(app: typer.Typer) -> None:
 
     @app.command("check")
     def check(
-        file: Annotated[Path, typer.Argument(help="Swarm file (or a robot file: its swarm "
-                                             "is checked too).")],
-        json_out: Annotated[bool, typer.Option("--json", help="Print the report as JSON.")]
-        = False,
+        file: Annotated[Path, typer.Argument(help="Swarm file, or a robot file (then its "
+                                             "swarm file is checked too).")],
+        json_out: Annotated[bool, typer.Option(
+            "--json", help="Print the report as one JSON document: file, ok, problems, "
+            "coverage, timing, channel_budget, flight.")] = False,
     ) -> None:
         """Validate a swarm file; show who watches and who covers each function.
 
-        Exit 0 if usable (warnings allowed), 1 on errors, 2 if the file is unreadable.
+        Prints every problem with its file, field and line, then the coverage table, the
+        timing in use with the detection bound, the channel budget on each radio medium,
+        and what a simulated craft could not fly (docs/config.md).
+
+        Exit codes: 0 usable (warnings allowed), 1 errors, 2 the file cannot be read.
+
+        Example: swarmd check configs/paper.yaml
         """
         import json
 

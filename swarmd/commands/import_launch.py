@@ -14,19 +14,33 @@ def register(app: typer.Typer) -> None:
 
     @app.command("import-launch")
     def import_launch(
-        file: Annotated[Path, typer.Argument(help="ROS launch file (paper's appendix).")],
+        file: Annotated[Path, typer.Argument(
+            help="ROS launch XML, one <node> per robot with params robot_id, state, "
+            "neighbors, subs (the paper's appendix).")],
         output: Annotated[
-            Path | None, typer.Option("-o", "--output", help="Write here instead of stdout.")
+            Path | None, typer.Option("-o", "--output", help="Write the swarm file here "
+                                      "(replaced if it exists). Default: stdout.")
         ] = None,
         swarm_id: Annotated[
-            int, typer.Option("--swarm-id", min=0, max=0xFFFF, help="16-bit swarm id.")
+            int, typer.Option("--swarm-id", min=0, max=0xFFFF,
+                              help="16-bit swarm id carried by every frame.")
         ] = 1543,
         name: Annotated[
-            str | None, typer.Option("--name", help="Swarm name (default: file stem).")
+            str | None, typer.Option("--name", help="Swarm name. Default: the launch "
+                                     "file's name without its extension.")
         ] = None,
     ) -> None:
-        """Convert a launch file: active robot R gets slot fR; neighbours and subs carry
-        over; timing preset udp. Exit 1 on a bad launch file, 2 if it cannot be read."""
+        """Convert the paper's ROS launch file into a swarm file.
+
+        Active robot R gets the function fR, a slot on a circle of radius 2 m at 1.5 m;
+        neighbors and subs carry over; timing is the udp preset. The result is validated
+        like swarmd check before anything is written (docs/config.md).
+
+        Exit codes: 0 written, 1 malformed launch file or a swarm check would refuse, 2
+        the launch file cannot be read or the output cannot be written.
+
+        Example: swarmd import-launch tests/fixtures/paper.launch -o my-swarm.yaml
+        """
         from swarmd.config import ConfigError, parse_swarm
         from swarmd.launch import LaunchError, import_launch_file
 

@@ -14,10 +14,11 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def keygen(
         path: Annotated[
-            Path, typer.Argument(help="Key file to create, e.g. /etc/swarmd/swarm.key")
+            Path, typer.Argument(help="Key file to create (its directory must exist).")
         ],
         force: Annotated[
-            bool, typer.Option("--force", help="Replace an existing key file.")
+            bool, typer.Option("--force", help="Replace an existing key file (default: "
+                               "refuse).")
         ] = False,
         hex_format: Annotated[
             bool, typer.Option("--hex", help="Write 64 hex digits instead of 32 raw bytes.")
@@ -26,7 +27,12 @@ def register(app: typer.Typer) -> None:
         """Generate a swarm key (32 random bytes, file mode 0600).
 
         Every robot of a swarm needs the same key: generate it once and copy it to each
-        robot (scp -p keeps the mode), owned by the daemon's user.
+        robot (scp -p keeps the mode), owned by the daemon's user; the swarm file's
+        key_file names it (docs/operations.md section 4).
+
+        Exit codes: 0 written, 1 the file exists (without --force) or cannot be written.
+
+        Example: swarmd keygen swarm.key
         """
         from swarmd.keys import KeyFileError, generate_key
 

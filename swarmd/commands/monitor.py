@@ -22,25 +22,42 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def monitor(
         config: Annotated[Path | None, typer.Option(
-            "--config", help="A robot file: listen with its swarm, transport and keys.")] = None,
+            "--config", help="A robot file: listen with its swarm, its UDP transport and "
+            "its keys (signed swarms).")] = None,
         swarm: Annotated[Path | None, typer.Option(
-            "--swarm", help="A swarm file (with --group/--port) instead of --config.")] = None,
-        group: Annotated[str, typer.Option("--group", help="UDP multicast group.")] = (
-            DEFAULT_GROUP),
-        port: Annotated[int, typer.Option("--port", help="UDP port.")] = DEFAULT_PORT,
+            "--swarm", help="A swarm file instead of --config; the channel is then "
+            "--group, --port, --interface.")] = None,
+        group: Annotated[str, typer.Option(
+            "--group", help="UDP multicast group (with --swarm).")] = DEFAULT_GROUP,
+        port: Annotated[int, typer.Option("--port", help="UDP port (with --swarm).")] = (
+            DEFAULT_PORT),
         interface: Annotated[str, typer.Option(
             "--interface",
-            help="IPv4 address of the interface to listen on (default loopback).")] = (
+            help="IPv4 address of the interface to listen on (with --swarm; the default "
+            "is loopback, a Wi-Fi swarm needs this machine's address on it).")] = (
             "127.0.0.1"),
         once: Annotated[bool, typer.Option(
-            "--once", help="Listen --duration s, print, exit.")] = False,
-        as_json: Annotated[bool, typer.Option("--json", help="Print JSON (with --once).")] = False,
+            "--once", help="Listen for --duration seconds, print one table, exit.")] = False,
+        as_json: Annotated[bool, typer.Option(
+            "--json", help="Print one JSON document instead of a table (implies "
+            "--once).")] = False,
         duration: Annotated[float | None, typer.Option(
             "--duration",
-            help="Seconds to listen (default 2 with --once, else forever).")] = None,
+            help="Seconds to listen. Default: 2 with --once or --json, else until "
+            "Ctrl-C.")] = None,
     ) -> None:
-        """Watch the swarm channel: robot, role, function, epoch, last heard, health,
-        warnings and votes, alerts. Passive: sends nothing."""
+        """Watch the swarm channel, like the paper's base station; sends nothing.
+
+        A live table per robot: role, function, epoch, last heard, health, who warns
+        about it and how many distinct witnesses, alerts (a silent slot, a suspicion
+        nobody claims, two robots on one function). Give exactly one of --config or
+        --swarm. UDP only.
+
+        Exit codes: 0 done, 1 unusable config or the channel cannot be opened, 2 bad
+        usage (neither or both of --config and --swarm, a radio transport), 130 Ctrl-C.
+
+        Example: swarmd monitor --swarm configs/paper.yaml --once --json --duration 5
+        """
         import asyncio
         import json
         import time

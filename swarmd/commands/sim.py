@@ -19,8 +19,9 @@ if TYPE_CHECKING:
 
 FAULT_HELP = (
     "Inject a fault (repeatable): crash:R@T, restart:R@T, pause:R@T+D, "
-    "partition:1,2|3,4@T+D, liar:R@T, leave:R@T, unhealthy:R@T, motor:R@T (physics). "
-    "T and D in seconds from the start."
+    "partition:1,2|3,4@T+D, liar:R@T, leave:R@T, unhealthy:R@T, motor:R@T (physics "
+    "only). R a robot id; T seconds from the start, before --duration; D seconds it "
+    "lasts. docs/sim.md tells what each one does."
 )
 
 
@@ -31,37 +32,51 @@ def register(app: typer.Typer) -> None:
     def sim(
         swarm: Annotated[Path, typer.Argument(help="Swarm file, e.g. configs/paper.yaml.")],
         virtual: Annotated[bool, typer.Option(
-            "--virtual", help="Run every core in one process on a virtual clock "
-            "(deterministic by --seed, no processes, no physics).")] = False,
+            "--virtual", help="Run every protocol core in this process on a virtual "
+            "clock: deterministic by --seed, far faster than real time, no robot "
+            "processes, no physics.")] = False,
         duration: Annotated[float, typer.Option(
-            "--duration", min=0.1, help="Seconds to simulate.")] = 15.0,
-        seed: Annotated[int, typer.Option("--seed", help="Seed of loss, jitter and start "
-                                          "times.")] = 0,
+            "--duration", min=0.1, help="Length of the run in seconds (wall-clock in "
+            "real time, simulated with --virtual).")] = 15.0,
+        seed: Annotated[int, typer.Option("--seed", help="Seed of frame loss, jitter and "
+                                          "start times.")] = 0,
         loss: Annotated[float, typer.Option(
-            "--loss", min=0.0, max=1.0, help="Probability that a receiver misses a "
-            "frame (per frame, per receiver).")] = 0.0,
+            "--loss", min=0.0, max=1.0, help="Probability, 0 to 1, that a receiver misses "
+            "a frame (drawn per frame and per receiver).")] = 0.0,
         fault: Annotated[list[str] | None, typer.Option("--fault", help=FAULT_HELP)] = None,
         events: Annotated[Path | None, typer.Option(
-            "--events", help="Write the merged event log here (JSON Lines).")] = None,
+            "--events", help="Also write the merged event log to this file (JSON Lines, "
+            "one event a line). Default: not written.")] = None,
         report: Annotated[Path | None, typer.Option(
-            "--report", help="Write events, summary and pictures into this directory.")]
+            "--report", help="Directory for summary.json, events.jsonl, timeline.png and, "
+            "with physics, trajectories.png, swarm.mp4 and key frames; what an earlier run "
+            "wrote there is removed first. Default: no report.")]
         = None,
-        json_out: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
-        = False,
+        json_out: Annotated[bool, typer.Option(
+            "--json", help="Print the summary as JSON on stdout; no live table, the "
+            "report lines go to stderr.")] = False,
         no_physics: Annotated[bool, typer.Option(
-            "--no-physics", help="Real-time mode: bare daemons, no MuJoCo quadrotors.")]
-        = False,
+            "--no-physics", help="Real time with bare daemons (robot link 'none'): no "
+            "MuJoCo quadrotors, so no trajectories or video.")] = False,
         craft: Annotated[str | None, typer.Option(
-            "--craft", help="Quadrotor preset every robot flies: x2 (Skydio X2-class, "
-            "1.3 kg, the default: visible in pictures) or crazyflie (27 g). Also "
-            "SWARMD_QUAD_PRESET.")] = None,
+            "--craft", help="Quadrotor every robot flies (physics only): x2 (Skydio "
+            "X2-class, 1.3 kg, visible in pictures) or crazyflie (27 g). Default: "
+            "$SWARMD_QUAD_PRESET, else x2.")] = None,
         transport: Annotated[str, typer.Option(
-            "--transport", help="Real-time mode channel: udp (multicast on loopback), "
-            "or xbee / serial over emulated radios.")] = "udp",
+            "--transport", help="Channel in real time: udp (multicast on loopback), xbee "
+            "or serial (emulated radios on pseudo-terminals). Not used with --virtual.")]
+        = "udp",
     ) -> None:
         """Run the whole swarm on this machine, inject faults, print a summary.
 
-        Exit 0 when no invariant was violated, 1 when one was, 2 on bad input.
+        Default: one process per robot, each a real daemon (the code swarmd start runs)
+        flying a MuJoCo quadrotor, over UDP multicast on loopback. --no-physics: the same
+        without quadrotors. --virtual: one process on a virtual clock.
+
+        Exit codes: 0 no invariant violated, 1 an invariant was violated, 2 bad input
+        (swarm file, --fault, --craft; nothing was started).
+
+        Example: swarmd sim configs/paper.yaml --fault crash:2@5 --duration 15 --report out/demo
         """
         from rich.console import Console
 

@@ -14,13 +14,28 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
+    """Add the `start` command to the CLI."""
+
     @app.command()
     def start(
-        config: Annotated[Path, typer.Option("--config", "-c", help="Robot file (YAML).")],
+        config: Annotated[Path, typer.Option(
+            "--config", "-c", help="Robot file (YAML, docs/config.md): robot id, swarm "
+            "file, transport, link.")],
         log_level: Annotated[str, typer.Option(
-            "--log-level", help="debug, info, warning or error.")] = "info",
+            "--log-level", help="Least severe level logged: debug, info, warning or "
+            "error.")] = "info",
     ) -> None:
-        """Run one robot's daemon until SIGTERM / SIGINT."""
+        """Run one robot's daemon until SIGTERM / SIGINT (what systemd runs).
+
+        Logs one JSON object a line on stdout. SIGTERM / SIGINT hand the robot's function
+        over (LEAVE, with handover_on_stop) and stop; SIGHUP reloads keys, event log and
+        alert hook (docs/daemon.md).
+
+        Exit codes: 0 clean stop, 1 start-up failure (transport, link, state_dir, key
+        file), 2 unusable config (every problem logged with its file and field).
+
+        Example: swarmd start --config /etc/swarmd/robot.yaml
+        """
         import asyncio
         import logging
 

@@ -86,16 +86,27 @@ def _protocol(dev: Any) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add the `xbee` command group to the CLI."""
-    xbee = typer.Typer(help="Configure, inspect or emulate XBee radios.",
-                       no_args_is_help=True)
+    xbee = typer.Typer(
+        help="Configure, inspect or emulate XBee radios (docs/radios.md).\n\n"
+        "The daemon drives XBees in API mode through digi-xbee; stop it before "
+        "configuring its radio (the port is opened exclusively).\n\n"
+        "Example: swarmd xbee info --port /dev/xbee",
+        no_args_is_help=True)
     app.add_typer(xbee, name="xbee")
 
     @xbee.command("info")
     def info(
-        port: Annotated[str, typer.Option(help="Serial device of the radio.")],
-        baud: Annotated[int, typer.Option(help="UART baud rate (BD).")] = 9600,
+        port: Annotated[str, typer.Option(help="Serial device of the radio, e.g. "
+                                          "/dev/xbee.")],
+        baud: Annotated[int, typer.Option(help="UART baud rate, bit/s (the radio's "
+                                          "BD).")] = 9600,
     ) -> None:
-        """Print what the radio is: protocol, firmware, address, network settings."""
+        """Print what the radio is: protocol, firmware, address, network settings.
+
+        Exit codes: 0 printed, 1 no XBee in API mode answers on --port at --baud.
+
+        Example: swarmd xbee info --port /dev/xbee
+        """
         dev = _open(port, baud)
         try:
             typer.echo(f"port       {port}")
@@ -112,20 +123,36 @@ def register(app: typer.Typer) -> None:
 
     @xbee.command("configure")
     def configure(
-        port: Annotated[str, typer.Option(help="Serial device of the radio.")],
+        port: Annotated[str, typer.Option(help="Serial device of the radio, e.g. "
+                                          "/dev/xbee.")],
         role: Annotated[str, typer.Option(help="coordinator or router (paper: one "
                                           "coordinator, the rest routers).")],
-        pan: Annotated[str, typer.Option(help="PAN id; the paper's is 0x607.")] = "0x607",
-        channel: Annotated[str | None, typer.Option(help="Channel (CH), e.g. 0x0C.")] = None,
+        pan: Annotated[str, typer.Option(help="PAN id (ID), hex 0x607 or decimal; the "
+                                         "same on every robot.")] = "0x607",
+        channel: Annotated[str | None, typer.Option(
+            help="Channel (CH), e.g. 0x0C. Default: keep the radio's.")] = None,
         protocol: Annotated[str | None, typer.Option(
             help="Expected firmware: zigbee, 802.15.4 or digimesh (checked, not "
-                 "changed: that needs a firmware update in XCTU).")] = None,
-        api_mode: Annotated[int | None, typer.Option(help="Set AP to 1 or 2.")] = None,
-        baud: Annotated[int, typer.Option(help="UART baud rate (BD).")] = 9600,
+                 "changed: that needs a firmware update in XCTU). Default: not "
+                 "checked.")] = None,
+        api_mode: Annotated[int | None, typer.Option(
+            help="Set AP to 1 or 2. Default: keep the radio's.")] = None,
+        baud: Annotated[int, typer.Option(help="UART baud rate, bit/s (the radio's "
+                                          "BD).")] = 9600,
         write: Annotated[bool, typer.Option("--write", help="Save to flash (WR) so the "
-                                            "settings survive a power cycle.")] = False,
+                                            "settings survive a power cycle. Default: "
+                                            "applied only.")] = False,
     ) -> None:
-        """Apply the paper's radio settings and print them before and after."""
+        """Apply the paper's radio settings and print them before and after.
+
+        PAN id; coordinator CE=1, DH/DL 0x0000/0xFFFF; routers CE=0 (SM=0 on Zigbee),
+        DH/DL 0x0000/0x0000; MY=0xFFFE on 802.15.4. Changed settings are starred.
+
+        Exit codes: 0 applied, 1 the radio cannot be opened, runs other firmware than
+        --protocol or refused a setting, 2 a bad option value.
+
+        Example: swarmd xbee configure --port /dev/xbee --role router --pan 0x607 --write
+        """
         from digi.xbee.exception import XBeeException
 
         if role not in ("coordinator", "router"):
@@ -165,21 +192,36 @@ def register(app: typer.Typer) -> None:
     @xbee.command("emulate")
     def emulate(
         count: Annotated[int, typer.Argument(help="Number of radios (robot1..robotN).")],
-        protocol: Annotated[str, typer.Option(help="zigbee, 802.15.4 or digimesh.")]
+        protocol: Annotated[str, typer.Option(help="Firmware emulated: zigbee, 802.15.4 "
+                                              "or digimesh.")]
         = "802.15.4",
-        api_mode: Annotated[int, typer.Option(help="API mode, 1 or 2.")] = 1,
-        loss: Annotated[float, typer.Option(help="Per-radio frame loss, 0..1.")] = 0.0,
-        delay: Annotated[float, typer.Option(help="Per-radio extra delay, s.")] = 0.0,
+        api_mode: Annotated[int, typer.Option(help="API mode (AP), 1 or 2.")] = 1,
+        loss: Annotated[float, typer.Option(
+            help="Probability, 0 to 1, that a frame sent or received by a radio is "
+            "lost.")] = 0.0,
+        delay: Annotated[float, typer.Option(
+            help="Extra delivery delay of every radio's frames, seconds.")] = 0.0,
         pan: Annotated[str, typer.Option(help="PAN id of every radio.")] = "0x607",
         channel: Annotated[str, typer.Option(help="Channel of every radio.")] = "0x0C",
-        directory: Annotated[str, typer.Option("--dir", help="Where the device symlinks "
-                                               "go.")] = "/tmp/swarmd-xbee",
-        seed: Annotated[int | None, typer.Option(help="Seed of the loss draws.")] = None,
+        directory: Annotated[str, typer.Option("--dir", help="Directory of the device "
+                                               "symlinks robot1..robotN.")]
+        = "/tmp/swarmd-xbee",
+        seed: Annotated[int | None, typer.Option(
+            help="Seed of the loss draws. Default: random.")] = None,
         transparent: Annotated[bool, typer.Option(
-            "--transparent", help="AP=0 radios (raw byte stream, for `kind: serial`) "
-            "instead of API mode.")] = False,
+            "--transparent", help="AP=0 radios (raw byte stream, for transport kind "
+            "serial) instead of API mode.")] = False,
     ) -> None:
-        """Run N software XBee radios on pseudo-terminals until Ctrl-C."""
+        """Run N software XBee radios on pseudo-terminals until Ctrl-C.
+
+        Radios with one protocol, PAN id and channel hear each other; point a robot
+        file's port at DIR/robotN. Lines on stdin change them live: unplug N, replug N,
+        loss N P, delay N S.
+
+        Exit codes: 0 stopped with Ctrl-C, 2 a bad option value.
+
+        Example: swarmd xbee emulate 6 --protocol 802.15.4 --loss 0.05
+        """
         import sys
 
         from swarmd.xbee_emu import PROTOCOLS, Medium
