@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 import shlex
+import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -109,3 +110,11 @@ def test_readme_lists_exactly_the_sim_options() -> None:
     assert paragraph is not None, "README lost its paragraph of `swarmd sim` options"
     listed = set(re.findall(r"--[a-z][a-z-]*", paragraph.group(1)))
     assert listed == _options(COMMANDS[("sim",)]) - {"--help"}
+
+
+def test_install_script_help_is_its_header_only() -> None:
+    result = subprocess.run(["bash", str(ROOT / "deploy" / "install.sh"), "--help"],
+                            capture_output=True, text=True, timeout=10, check=False)
+    assert result.returncode == 0, result.stderr
+    assert "--root DIR" in result.stdout and "--uninstall" in result.stdout
+    assert "set -" not in result.stdout  # the usage text stops before the code
