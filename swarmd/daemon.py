@@ -79,6 +79,23 @@ def make_transport(cfg: Any) -> Transport:
     return transport
 
 
+class StartupError(RuntimeError):
+    """A set-up step failed (state directory, ...); the message names the config field
+    and the path, as the config's own errors do."""
+
+
+def _ensure_dir(field: str, path: Path) -> None:
+    """Create the directory `field` names, or say clearly why it cannot be used (a file
+    in the way, no permission, a read-only file system)."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise StartupError(f"{field} {path}: exists and is not a directory") from None
+    except OSError as exc:
+        raise StartupError(f"{field} {path}: cannot create the directory: "
+                           f"{exc.strerror or exc}") from exc
+
+
 class Daemon:
     """The pieces of one running daemon; `run_daemon` drives it."""
 
@@ -95,6 +112,11 @@ class Daemon:
         notifier: Notifier | None = None,
     ) -> None:
         self.cfg = cfg
+        """The config last loaded (start or SIGHUP): the live-applied settings."""
+        self.running_cfg = cfg
+        """The config the daemon started with: what a SIGHUP that needs a restart is
+        compared against (a reload that changed the timing and one that changed it back
+        must not ask for a restart)."""
         self.config_path = config_path
         self.robot_id = cfg.robot
         self.swarm_id = cfg.swarm.swarm.id
@@ -180,10 +202,12 @@ class Daemon:
     # ---------------------------------------------------------------- lifecycle
     async def start(self) -> Runtime:
         """Build the node and start transport, link and timers. Raises on set-up
-        failure (the caller turns it into an exit code)."""
+        failure (the caller turns it into an exit code); `StartupError`, `EventLogError`,
+        `MetricsError`, `TransportError` and `SocketLinkError` name the config field."""
         cfg = self.cfg
         loop = asyncio.get_running_loop()
         keys = cfg.keys()  # signing key first, then those also accepted (rotation)
+        _ensure_dir("state_dir", cfg.state_dir)
         persisted = self._load_state()
         seq_start = state_mod.initial_seq(seq_seed(time.time()), persisted)
         params = cfg.swarm.params()
@@ -191,7 +215,10 @@ class Daemon:
         restored = persisted.restored() if persisted is not None else None
         node = Node(cfg.robot, cfg.swarm.to_plan(), params, now, keys=keys,
                     seq_start=seq_start, restored=restored)
-        write_at = self.state_file.write_initial(persisted, seq_start)
+        try:
+            write_at = self.state_file.write_initial(persisted, seq_start)
+        except OSError as exc:  # StateWriteError names the file
+            raise StartupError(f"state_dir {cfg.state_dir}: {exc}") from exc
         if cfg.event_log is not None:
             self.event_log = EventLog(cfg.event_log)
         if cfg.metrics is not None:
@@ -259,7 +286,7 @@ class Daemon:
             log.error("SIGHUP: config not reloaded", extra={
                 "problems": [str(p) for p in exc.problems]})
             return
-        old = self.cfg
+        old = self.running_cfg
         keys: tuple[bytes, ...] | None = None
         try:
             keys = new.keys()
@@ -271,14 +298,13 @@ class Daemon:
             log.error("SIGHUP: keys not reloaded; the old ones stay in use",
                       extra={"error": str(exc)})
             keys = None
-        if new.event_log != old.event_log or self.event_log is not None:
-            if self.event_log is not None and new.event_log is not None:
-                self.event_log.reopen(new.event_log)
-            elif self.event_log is not None:
-                self.event_log.close()
-                self.event_log = None
-            elif new.event_log is not None:
-                self.event_log = EventLog(new.event_log)
+        try:
+            self._reload_event_log(new.event_log)
+        except OSError as exc:  # EventLogError: the old file (if any) stays in use
+            self.reload_errors += 1
+            log.error("SIGHUP: event log not reopened", extra={
+                "error": str(exc), "kept": str(self.event_log.path) if self.event_log
+                else None})
         self.handover_on_stop = new.handover_on_stop
         self._alert_hook = new.swarm.alert_hook
         self._function_specs = self._specs(new)
@@ -295,6 +321,17 @@ class Daemon:
         log.info("SIGHUP: config reloaded", extra={
             "keys": len(keys) if keys is not None else None,
             "restart_needed_for": restart_needed})
+
+    def _reload_event_log(self, path: Path | None) -> None:
+        """SIGHUP: reopen the event log (logrotate moved it, or the path changed), start
+        one newly configured, close one no longer configured. Raises `EventLogError`."""
+        if self.event_log is not None and path is not None:
+            self.event_log.reopen(path)
+        elif self.event_log is not None:
+            self.event_log.close()
+            self.event_log = None
+        elif path is not None:
+            self.event_log = EventLog(path)
 
 
 async def run_daemon(
@@ -319,6 +356,9 @@ async def run_daemon(
     once the first heartbeat is out. `handle_signals` installs SIGTERM / SIGINT (stop)
     and SIGHUP (reload from `config_path`) handlers on the running loop: only one daemon
     per process may ask for that.
+
+    Cancelling the task stops the daemon without handover (see `_stop_cancelled`),
+    cleans up, and re-raises `CancelledError`.
     """
     stop = stop_event if stop_event is not None else asyncio.Event()
     daemon = Daemon(robot_cfg, transport=transport, link=link, receive_filter=receive_filter,
@@ -334,21 +374,40 @@ async def run_daemon(
     try:
         try:
             runtime = await daemon.start()
+        except asyncio.CancelledError:
+            await _stop_cancelled(daemon)
+            raise
         except Exception as exc:
-            log.error("daemon failed to start", extra={"error": str(exc),
-                                                        "error_type": type(exc).__name__})
+            log.error("daemon failed to start", extra={
+                "error": str(exc), "error_type": type(exc).__name__,
+                "config": str(config_path) if config_path is not None else None})
             await daemon.stop()
             return EXIT_FAILURE
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(runtime.first_broadcast.wait(), READY_TIMEOUT)
-        daemon.notifier.ready()
-        log.info("ready", extra={"robot": daemon.robot_id})
-        if on_ready is not None:
-            on_ready(daemon)
-        await stop.wait()
+        try:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(runtime.first_broadcast.wait(), READY_TIMEOUT)
+            daemon.notifier.ready()
+            log.info("ready", extra={"robot": daemon.robot_id})
+            if on_ready is not None:
+                on_ready(daemon)
+            await stop.wait()
+        except asyncio.CancelledError:
+            await _stop_cancelled(daemon)
+            raise
         log.info("stopping", extra={"handover": daemon.handover_on_stop})
         await daemon.stop()
         return EXIT_OK
     finally:
         for sig in installed:
             loop.remove_signal_handler(sig)
+
+
+async def _stop_cancelled(daemon: Daemon) -> None:
+    """The task running `run_daemon` was cancelled: stop as a crash looks to the swarm
+    (no LEAVE, whatever `handover_on_stop` says: the neighbours' watchdogs find it, as
+    the paper's robots would), but still release the robot, write the state and close
+    transport, link and event log, so no timer keeps heartbeating for a daemon nobody
+    runs and no socket is left open. A graceful stop with handover is `stop_event`."""
+    daemon.handover_on_stop = False
+    log.info("stopping", extra={"handover": False, "cancelled": True})
+    await daemon.stop()

@@ -16,19 +16,17 @@ from typing import IO, Any
 log = logging.getLogger(__name__)
 
 
+class EventLogError(OSError):
+    """The event log file cannot be opened; the message names the path and why."""
+
+
 class EventLog:
     """Append JSON Lines records to a file. Write errors are counted, never raised."""
 
     def __init__(self, path: Path | str) -> None:
         self.path = Path(path)
         self.errors = 0
-        self._fh: IO[str] | None = None
-        self._open()
-
-    def _open(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        # Line buffering is not enough for a record split by a full buffer: flush by hand.
-        self._fh = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 - kept open
+        self._fh: IO[str] | None = _open(self.path)
 
     def write(self, record: Mapping[str, Any]) -> None:
         """Append one record and flush it."""
@@ -43,11 +41,13 @@ class EventLog:
                                                        "error": str(exc)})
 
     def reopen(self, path: Path | str | None = None) -> None:
-        """Close and open again (same or new path): logrotate and SIGHUP."""
+        """Open again (same or new path): logrotate and SIGHUP. The new file is opened
+        before the old one is closed: if it cannot be (`EventLogError`), records keep
+        going to the old one rather than nowhere (nothing lost)."""
+        new_path = Path(path) if path is not None else self.path
+        fh = _open(new_path)
         self.close()
-        if path is not None:
-            self.path = Path(path)
-        self._open()
+        self.path, self._fh = new_path, fh
 
     def close(self) -> None:
         if self._fh is not None:
@@ -56,3 +56,13 @@ class EventLog:
             except OSError as exc:
                 log.error("event log close failed", extra={"error": str(exc)})
             self._fh = None
+
+
+def _open(path: Path) -> IO[str]:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # Line buffering is not enough for a record split by a full buffer: flush by hand.
+        return open(path, "a", encoding="utf-8")  # kept open: the caller closes it
+    except OSError as exc:
+        raise EventLogError(f"event_log {path}: cannot open for appending: "
+                            f"{exc.strerror or exc}") from exc

@@ -57,6 +57,12 @@ the next write is due however nothing else changed."""
 
 QUEUE_SIZE = 1024
 BATCH = 64
+DROP_REPORT_S = 10.0
+"""s. Frames dropped since the last report are logged at most this often: an operator
+without a metrics endpoint still sees a robot with the wrong key (`auth`), another swarm
+on the group (`swarm`) or garbage on the channel, without a line per frame."""
+QUIET_DROPS = frozenset({"own"})
+"""Drop reasons never reported: `own` is this robot's multicast echo, every frame."""
 _RATE_LIMIT_S = 1.0  # per name, for channel condition reports (send errors can be per frame)
 
 
@@ -120,6 +126,9 @@ class Runtime:
         self._last_role: tuple[Role, str | None, int] | None = None
         self._last_health: Health | None = None
         self._reported: dict[str, float] = {}
+        self.drop_report_interval = DROP_REPORT_S
+        self._drops_reported: dict[str, int] = {}
+        self._drop_reported_at = -DROP_REPORT_S
         self._running = False
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -136,8 +145,14 @@ class Runtime:
         link raise on set-up (bad device, socket path taken): the daemon reports it."""
         self._loop = asyncio.get_running_loop()
         self._running = True
-        await self.transport.start(self._on_frame, self._on_transport_event)
-        await self.link.start(self._on_health)
+        try:
+            await self.transport.start(self._on_frame, self._on_transport_event)
+            await self.link.start(self._on_health)
+        except BaseException:
+            # Never started: `stop` must not run the node's stop (a LEAVE into a
+            # transport that never opened, a misleading send error).
+            self._running = False
+            raise
         self._rearm()
         period = self.notifier.watchdog_period() if self.notifier is not None else None
         if period is not None:
@@ -277,11 +292,26 @@ class Runtime:
             if self.metrics is not None:
                 self.metrics.heartbeat_lateness(lateness)
         self.counters["ticks"] += 1
+        if now - self._drop_reported_at >= self.drop_report_interval:
+            self._drop_reported_at = now
+            self._report_drops()
         self._step(self.node.tick)
         # Receive-only steps do not look at the snapshot (a flood would make that
         # costly); a tick does, so an epoch learnt from a heartbeat is persisted within
         # one deadline.
         self._check_state()
+
+    def _report_drops(self) -> None:
+        """Log the frames dropped since the last report, by reason (rate-limited by the
+        caller). Drops are counted per frame by the core; a log line per frame would let
+        a flood fill the journal."""
+        current = {**self.node.drops, "queue_overflow": self.counters["queue_overflow"]}
+        new = {reason: n - self._drops_reported.get(reason, 0)
+               for reason, n in sorted(current.items())
+               if reason not in QUIET_DROPS and n > self._drops_reported.get(reason, 0)}
+        self._drops_reported = current
+        if new:
+            log.warning("dropped frames", extra={"drops": new, "total": sum(new.values())})
 
     def _watchdog_at(self, when: float, period: float) -> None:
         def ping() -> None:
@@ -394,9 +424,15 @@ class Runtime:
             return
         try:
             self.seq_write_at = self.state_writer(snap)
+        except OSError as exc:  # disk full, directory gone or read-only: say which
+            self.counters["persist_errors"] += 1
+            log.error("cannot write the state file; will retry on the next change",
+                      extra={"error": str(exc)})
+            return
         except Exception:
             self.counters["persist_errors"] += 1
-            log.exception("cannot write the state file; will retry on the next change")
+            log.exception("cannot write the state file (a bug); will retry on the next "
+                          "change")
             return
         self.counters["state_writes"] += 1
         self._last_persisted = key

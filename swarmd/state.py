@@ -49,6 +49,11 @@ class StateError(Exception):
     """The state file exists but cannot be used. The message says which file and why."""
 
 
+class StateWriteError(OSError):
+    """The state file could not be written (disk full, directory gone, read-only file
+    system); the message names the file."""
+
+
 @dataclass(frozen=True, slots=True)
 class PersistedState:
     """What one robot persists; see the module docstring."""
@@ -122,6 +127,9 @@ def load(path: Path, *, robot: int, swarm: int) -> PersistedState | None:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
         return None
+    except UnicodeDecodeError as exc:  # binary garbage (a disk error, a wrong file)
+        raise StateError(f"{path}: state file is not UTF-8 text ({exc.reason} at byte "
+                         f"{exc.start})") from exc
     except OSError as exc:
         raise StateError(f"{path}: cannot read state file: {exc}") from exc
     try:
@@ -197,8 +205,8 @@ class StateFile:
         write is due (the runtime's `seq_write_at`)."""
         self.seq_reserved = seq_start + SEQ_RESERVE
         base = persisted or PersistedState(robot=self.robot, swarm=self.swarm)
-        save(self.path, PersistedState(robot=self.robot, swarm=self.swarm, known=base.known,
-                                       held=base.held, seq_reserved=self.seq_reserved))
+        self._save(PersistedState(robot=self.robot, swarm=self.swarm, known=base.known,
+                                  held=base.held, seq_reserved=self.seq_reserved))
         return self.seq_reserved - SEQ_RESERVE // 2
 
     def write_snapshot(self, snap: Snapshot) -> int:
@@ -207,6 +215,13 @@ class StateFile:
         held = (snap.function, snap.epoch) if snap.role == Role.ACTIVE and snap.function else None
         if snap.seq + SEQ_RESERVE // 2 >= self.seq_reserved:
             self.seq_reserved = snap.seq + SEQ_RESERVE
-        save(self.path, PersistedState(robot=self.robot, swarm=self.swarm, known=snap.known,
-                                       held=held, seq_reserved=self.seq_reserved))
+        self._save(PersistedState(robot=self.robot, swarm=self.swarm, known=snap.known,
+                                  held=held, seq_reserved=self.seq_reserved))
         return self.seq_reserved - SEQ_RESERVE // 2
+
+    def _save(self, state: PersistedState) -> None:
+        try:
+            save(self.path, state)
+        except OSError as exc:
+            raise StateWriteError(f"{self.path}: cannot write the state file: "
+                                  f"{exc.strerror or exc}") from exc

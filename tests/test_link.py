@@ -138,7 +138,8 @@ async def test_exec_link_health_command_and_failures(tmp_path: Path) -> None:
 
 
 async def test_exec_link_kills_a_hanging_health_command() -> None:
-    link = ExecLink(on_assign="true", health_command="sleep 30", timeout=0.2)
+    # The health command has its own limit, far below the 30 s of assign commands.
+    link = ExecLink(on_assign="true", health_command="sleep 30", health_timeout=0.2)
     health = HealthLog()
     await link.start(health)
     try:

@@ -126,6 +126,8 @@ class ExecLinkConfig(_Model):
     on_assign: Command
     on_release: Command | None = None
     health_command: Command | None = None
+    health_timeout: float = Field(default=5.0, gt=0, description="s")
+    """A health command still running after this is killed: the robot is faulty."""
 
 
 LinkConfig = Annotated[

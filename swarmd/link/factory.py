@@ -30,9 +30,10 @@ def make_link(cfg: Any) -> RobotLink:
         interval = getattr(cfg, "health_interval", None)
         if interval is not None:
             extra["health_interval"] = interval
-        timeout = getattr(cfg, "timeout", None)
-        if timeout is not None:
-            extra["timeout"] = timeout
+        for name in ("timeout", "health_timeout"):
+            value = getattr(cfg, name, None)
+            if value is not None:
+                extra[name] = value
         return ExecLink(on_assign=cfg.on_assign, on_release=cfg.on_release,
                         health_command=getattr(cfg, "health_command", None), **extra)
     raise LinkConfigError(f"unknown robot link kind {kind!r} (none, socket, exec)")

@@ -68,8 +68,8 @@ class SocketLink:
         """Listen on the socket path and arm the health timer."""
         self._on_health = on_health
         self._remove_stale()
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
             self._server = await asyncio.start_unix_server(
                 self._client, path=str(self.path), limit=LINE_LIMIT)
             # Only the daemon's user and group may drive the robot's task.
@@ -81,8 +81,8 @@ class SocketLink:
     def _remove_stale(self) -> None:
         try:
             st = os.lstat(self.path)
-        except FileNotFoundError:
-            return
+        except (FileNotFoundError, NotADirectoryError):
+            return  # nothing there (a parent that is no directory fails in `start`)
         if not stat.S_ISSOCK(st.st_mode):
             raise SocketLinkError(f"{self.path} exists and is not a socket; refusing to "
                                   "replace it")

@@ -14,6 +14,7 @@ the core drops them by sender id.
 from __future__ import annotations
 
 import asyncio
+import errno
 import logging
 import socket
 from collections.abc import Mapping
@@ -37,6 +38,16 @@ MAX_PAYLOAD = 1472
 # the loop (the runtime's queue absorbs the batch); when idle it is one read.
 READ_BATCH = 32
 RECV_SIZE = 2048  # > MAX_PAYLOAD; a larger datagram is truncated and fails to decode
+
+
+_HINTS = {
+    errno.ENODEV: " (transport.interface must be an IPv4 address of this host's "
+                  "interfaces, e.g. 127.0.0.1 or the robot's Wi-Fi address)",
+    errno.EADDRNOTAVAIL: " (transport.interface must be an IPv4 address of this host)",
+    errno.EADDRINUSE: " (another program holds transport.port without SO_REUSEPORT; "
+                      "pick another port or stop it)",
+}
+"""Set-up errors whose errno alone does not tell the operator which field to fix."""
 
 
 class UdpTransport:
@@ -104,7 +115,7 @@ class UdpTransport:
             sock.close()
             raise TransportError(
                 f"cannot open udp multicast {self.group}:{self.port} on interface "
-                f"{self.interface}: {exc}"
+                f"{self.interface}: {exc}{_HINTS.get(exc.errno or 0, '')}"
             ) from exc
         return sock
 
