@@ -19,9 +19,20 @@ injected fault is logged as `fault{kind}` with robot = its target (0 for a parti
 
 The run ends at t0 + duration with a SIGKILL of every robot at once: a graceful stop
 would hand functions over (LEAVE) in the last instant and write takeovers that are
-artefacts of the ending. Ctrl-C, SIGTERM or any exception ends the same way: every
-robot is killed and reaped before `run_realtime` returns or raises; robots also die by
-themselves if the orchestrator does (robot_proc: PDEATHSIG and control-pipe EOF).
+artefacts of the ending. Ctrl-C or SIGTERM (`handle_signals`, the CLI) end the run the
+same way, early: the result says `interrupted` and `ended_at`, so the caller can still
+write the partial report. A cancellation or any exception also kills and reaps every
+robot before it goes up; robots die by themselves if the orchestrator does (robot_proc:
+PDEATHSIG and control-pipe EOF).
+
+What can go wrong with the processes themselves is reported, never silently passed over
+(`RealtimeResult.problems`): a robot that fails to start (or is not ready within
+`READY_TIMEOUT`: the run is refused with the reason and the robot's log), a robot
+process that ends on its own during the run (`deaths`: the time its pipe closed, so the
+checker treats it as a crash rather than calling its replacement a false takeover), a
+live robot whose daemon never logged `started`. Each robot also reports how late its
+event loop runs (`sim.robot_proc.LatenessProbe`), so a summary can say when the machine
+could not keep up.
 
 Events from every robot arrive over pipes and are merged by t into one log.
 """
@@ -62,6 +73,8 @@ START_MARGIN = 0.3
 """s between the last robot's `ready` and t0: enough to deliver `go` to 50 processes."""
 READY_TIMEOUT = 20.0
 """s allowed for every robot process to load its config and open its transport."""
+STARTED_GRACE = 3.0
+"""s a live robot process has, from its start, to log `started` before that is a problem."""
 
 P = ParamSpec("P")
 
@@ -79,9 +92,20 @@ class RealtimeResult:
     run_dir: Path | None
     """Robot files, per-robot logs and pids; kept only when `report_dir` was given."""
     problems: list[str] = field(default_factory=list)
-    """Robots that failed to start or exited on their own with an error."""
+    """Robot processes that failed to start, ended on their own, or never started their
+    daemon: a run with problems is not a trustworthy test of the protocol."""
     stats: dict[int, dict[str, int]] = field(default_factory=dict)
     """Receive-filter counters of robots that exited gracefully (leave)."""
+    deaths: dict[int, float] = field(default_factory=dict)
+    """robot -> run time (s) its process ended on its own (not by a fault or a leave)."""
+    late: list[tuple[int, float, float]] = field(default_factory=list)
+    """(robot, run time s, ms) of every event-loop wake-up `LATE_MS` or more late."""
+    wakes: int = 0
+    """Wake-ups of every robot's lateness probe (the late ones and the others)."""
+    interrupted: str | None = None
+    """The signal that ended the run early (SIGINT, SIGTERM), None if it ran to the end."""
+    ended_at: float | None = None
+    """Run time (s) the robots were killed: `duration`, or earlier when interrupted."""
 
 
 # -- live view ------------------------------------------------------------------------------
@@ -155,8 +179,15 @@ class _Proc:
     control: Connection
     ready: bool = False
     alive: bool = True
+    """Not killed by the orchestrator, nor seen to end."""
     eof: bool = False
     error: str | None = None
+    spawned_at: float = 0.0
+    """Run time the process was started (0 for the robots started before t0)."""
+    left: bool = False
+    """Told to leave: its own exit is the expected end."""
+    died_at: float | None = None
+    """Run time its event pipe closed although nobody killed it."""
 
 
 def free_udp_port() -> int:
@@ -289,9 +320,13 @@ class Orchestrator:
         self.events: list[dict[str, Any]] = []
         self.stats: dict[int, dict[str, int]] = {}
         self.problems: list[str] = []
+        self.late: list[tuple[int, float, float]] = []
+        self.wakes = 0
         self.view = SwarmView(self.robots)
         self.t0 = 0.0
         self._ready = asyncio.Event()
+        self._stop = asyncio.Event()
+        self.interrupted: str | None = None
         self._ctx = _context(physics)
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
@@ -336,7 +371,8 @@ class Orchestrator:
             process.start()
         ev_w.close()
         ctl_r.close()
-        proc = _Proc(robot, process, ev_r, ctl_w, ready=t0 is not None)
+        proc = _Proc(robot, process, ev_r, ctl_w, ready=t0 is not None,
+                     spawned_at=self.run_time() if t0 is not None else 0.0)
         asyncio.get_running_loop().add_reader(ev_r.fileno(), self._on_events, proc)
         self._write_pids(proc)
         return proc
@@ -366,6 +402,13 @@ class Orchestrator:
                 asyncio.get_running_loop().remove_reader(proc.events.fileno())
             if not proc.ready:
                 self._ready_check()
+            if proc.alive and self.t0:
+                # Its pipe closed and nobody killed it: the process ended on its own.
+                proc.alive = False
+                proc.died_at = self.run_time()
+                view = self.view.robots.get(proc.robot_id)
+                if view is not None:
+                    view.process = "left" if proc.left else "exited"
 
     def _record(self, proc: _Proc, rec: dict[str, Any]) -> None:
         ctl = rec.get("_ctl")
@@ -374,10 +417,12 @@ class Orchestrator:
             self._ready_check()
         elif ctl == "error":
             proc.error = str(rec.get("error"))
-            self.problems.append(f"robot {proc.robot_id} failed: {proc.error}")
             self._ready_check()
         elif ctl == "stats":
             self.stats[proc.robot_id] = {k: int(v) for k, v in rec.items() if k != "_ctl"}
+        elif ctl == "late":
+            self.wakes += int(rec.get("n", 0))
+            self.late.extend((proc.robot_id, float(t), float(ms)) for t, ms in rec.get("s", ()))
         elif ctl is None:
             self.events.append(rec)
             self.view.feed(rec)
@@ -399,9 +444,9 @@ class Orchestrator:
 
     def kill_all(self) -> None:
         """SIGKILL every robot process and reap it; safe to call more than once."""
-        for proc in [*self.procs.values(), *self.retired]:
+        for proc in self._all():
             self._kill_proc(proc)
-        for proc in [*self.procs.values(), *self.retired]:
+        for proc in self._all():
             proc.process.join(timeout=5.0)
             with contextlib.suppress(OSError):
                 proc.control.close()
@@ -439,6 +484,7 @@ class Orchestrator:
                 self.procs[robot] = self._spawn(robot, self.t0)
             case "leave" | "unhealthy" | "liar" | "motor":
                 if proc is not None and proc.alive:
+                    proc.left = proc.left or fault.kind == "leave"
                     self._send(proc, {"cmd": fault.kind})
             case _:
                 self.problems.append(f"fault kind {fault.kind} is not supported in real time")
@@ -451,62 +497,125 @@ class Orchestrator:
                 view.process = "running"
 
     # -- the run ----------------------------------------------------------------------------
-    async def run(self) -> RealtimeResult:
+    def interrupt(self, reason: str) -> None:
+        """End the run now (a signal handler): robots are killed, the result is partial."""
+        if self.interrupted is None:
+            self.interrupted = reason
+        self._stop.set()
+
+    async def _until(self, event: asyncio.Event, timeout: float) -> bool:
+        """Wait for `event` or `interrupt()` for at most `timeout` s: True if `event` was
+        set."""
+        waits = [asyncio.ensure_future(event.wait()), asyncio.ensure_future(self._stop.wait())]
+        try:
+            await asyncio.wait(waits, timeout=timeout, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for w in waits:
+                w.cancel()
+        return event.is_set()
+
+    async def run(self, *, handle_signals: bool = False) -> RealtimeResult:
         loop = asyncio.get_running_loop()
         handles: list[asyncio.TimerHandle] = []
         live_ctx: Any = contextlib.nullcontext()
+        startup = 0.0
+        ended_at = 0.0
+        installed: list[signal.Signals] = []
+        if handle_signals:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                loop.add_signal_handler(sig, self.interrupt, sig.name)
+                installed.append(sig)
         try:
             started = time.monotonic()
             for robot in self.robots:
                 self.procs[robot] = self._spawn(robot, None)
             self._ready_check()
-            try:
-                await asyncio.wait_for(self._ready.wait(), READY_TIMEOUT)
-            except TimeoutError:
+            ready = await self._until(self._ready, READY_TIMEOUT)
+            if not ready and self.interrupted is None:
                 slow = [r for r, p in self.procs.items() if not p.ready]
-                raise RuntimeError(f"robots {slow} not ready after {READY_TIMEOUT} s") from None
+                raise RuntimeError(
+                    f"robots {slow} not ready after {READY_TIMEOUT:g} s: "
+                    + "; ".join(f"robot {r}: {self._log_tail(self.procs[r])}" for r in slow))
             startup = time.monotonic() - started
             failed = [p for p in self.procs.values() if not p.ready]
-            if failed:
+            if failed and self.interrupted is None:
                 raise RuntimeError(
                     "robot processes failed to start: "
                     + "; ".join(f"robot {p.robot_id}: {p.error or self._log_tail(p)}"
                                 for p in failed)
                 )
-            self.t0 = time.time() + START_MARGIN
-            for proc in self.procs.values():
-                self._send(proc, {"cmd": "go", "t0": self.t0})
-            for fault in self.faults:
-                if fault.at <= self.duration:
-                    delay = self.t0 + fault.at - time.time()
-                    handles.append(loop.call_later(max(0.0, delay), self._apply, fault))
-            if self.live and sys.stdout.isatty():
-                from rich.live import Live
+            if self.interrupted is None:
+                self.t0 = time.time() + START_MARGIN
+                for proc in self.procs.values():
+                    self._send(proc, {"cmd": "go", "t0": self.t0})
+                for fault in self.faults:
+                    if fault.at <= self.duration:
+                        delay = self.t0 + fault.at - time.time()
+                        handles.append(loop.call_later(max(0.0, delay), self._apply, fault))
+                if self.live and sys.stdout.isatty():
+                    from rich.live import Live
 
-                live_ctx = Live(get_renderable=lambda: self.view.table(self.run_time()),
-                                refresh_per_second=4, transient=False)
-            with live_ctx:
-                await asyncio.sleep(max(0.0, self.t0 + self.duration - time.time()))
+                    live_ctx = Live(get_renderable=lambda: self.view.table(self.run_time()),
+                                    refresh_per_second=4, transient=False)
+                with live_ctx:
+                    await self._until(self._stop, self.t0 + self.duration - time.time())
+                ended_at = min(self.duration, max(0.0, self.run_time()))
+                self._check_started(ended_at)
         finally:
+            for sig in installed:
+                loop.remove_signal_handler(sig)
             for h in handles:
                 h.cancel()
             self.kill_all()
             await self._drain()
-        for p in [*self.procs.values(), *self.retired]:
-            if p.error is None and p.process.exitcode not in (0, -signal.SIGKILL, None):
-                self.problems.append(f"robot {p.robot_id} exited with {p.process.exitcode}: "
-                                     f"{self._log_tail(p)}")
+        self._process_problems()
         self.events.sort(key=lambda r: float(r.get("t", 0.0)))
         return RealtimeResult(
             events=self.events, robots=self.robots, duration=self.duration, t0=self.t0,
             startup_s=startup, run_dir=self.run_dir if self.report_dir else None,
             problems=self.problems, stats=self.stats,
+            deaths={p.robot_id: p.died_at for p in self._all() if p.died_at is not None
+                    and not p.left},
+            late=sorted(self.late, key=lambda x: x[1]), wakes=self.wakes,
+            interrupted=self.interrupted, ended_at=ended_at,
         )
+
+    def _all(self) -> list[_Proc]:
+        return [*self.retired, *self.procs.values()]
+
+    def _check_started(self, end: float) -> None:
+        """Live robots whose daemon never logged `started` (e.g. a transport that blocks
+        on open): alive, but not in the swarm. Called before the robots are killed."""
+        for p in self.procs.values():
+            if not p.alive or end - p.spawned_at < STARTED_GRACE:
+                continue
+            if not any(e.get("robot") == p.robot_id and e.get("event") == "started"
+                       and float(e.get("t", 0.0)) >= p.spawned_at - 0.5 for e in self.events):
+                self.problems.append(
+                    f"robot {p.robot_id}: process alive but its daemon never started (no "
+                    f"`started` event in {end - p.spawned_at:.1f} s): {self._log_tail(p)}")
+
+    def _process_problems(self) -> None:
+        """One line for each robot process that ended on its own, with its exit code and
+        the end of its log (its error, when it sent one)."""
+        for p in self._all():
+            code = p.process.exitcode
+            if p.died_at is not None:
+                if p.left and code == 0:
+                    continue  # a leave: the daemon handed over and exited
+                self.problems.append(
+                    f"robot {p.robot_id}: process ended on its own at t={p.died_at:.2f} s "
+                    f"(exit code {code}): {p.error or self._log_tail(p)}")
+            elif p.error is not None and p.ready:
+                self.problems.append(f"robot {p.robot_id} failed: {p.error}")
+            elif code not in (0, -signal.SIGKILL, None):
+                self.problems.append(f"robot {p.robot_id} exited with {code}: "
+                                     f"{self._log_tail(p)}")
 
     async def _drain(self) -> None:
         """Read what the killed robots wrote before they died (bounded)."""
         deadline = time.monotonic() + 2.0
-        procs = [*self.procs.values(), *self.retired]
+        procs = self._all()
         while time.monotonic() < deadline and not all(p.eof for p in procs):
             for p in procs:
                 if not p.eof:
@@ -517,12 +626,23 @@ class Orchestrator:
             with contextlib.suppress(OSError):
                 p.events.close()
 
-    def _log_tail(self, proc: _Proc, lines: int = 5) -> str:
+    def _log_tail(self, proc: _Proc, lines: int = 3) -> str:
+        """The last lines of a robot's log, for a problem report: a JSON log line
+        (swarmd.logs) as its message and error, anything else (a traceback) as is."""
         path = self.run_dir / "logs" / f"robot{proc.robot_id}.log"
         try:
-            return " | ".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
+            text = path.read_text(errors="replace").strip()
         except OSError:
             return "(no log)"
+        out = []
+        for line in text.splitlines()[-lines:]:
+            try:
+                rec = json.loads(line)
+                line = f"{rec['msg']}" + (f": {rec['error']}" if "error" in rec else "")
+            except (ValueError, TypeError, KeyError):
+                pass
+            out.append(line)
+        return " | ".join(out) or "(empty log)"
 
     def cleanup(self) -> None:
         if self.medium is not None:
@@ -545,13 +665,16 @@ async def run_realtime_async(
     transport: str = "udp",
     live: bool = False,
     port: int | None = None,
+    handle_signals: bool = False,
 ) -> RealtimeResult:
-    """Run the swarm in real time (see the module docstring); awaitable form for tests."""
+    """Run the swarm in real time (see the module docstring); awaitable form for tests.
+    `handle_signals`: SIGINT and SIGTERM end the run early with a partial result
+    (`interrupted`) instead of raising; only one run per process may ask for that."""
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
                         physics=physics, live=live, report_dir=report_dir, port=port,
                         transport=transport)
     try:
-        result = await orch.run()
+        result = await orch.run(handle_signals=handle_signals)
     finally:
         orch.cleanup()
     if events_path is not None:
@@ -565,20 +688,13 @@ async def run_realtime_async(
 def _until_signalled(
     run: Callable[P, Coroutine[Any, Any, RealtimeResult]], name: str, doc: str,
 ) -> Callable[P, RealtimeResult]:
-    """The blocking form of `run`, taking exactly its arguments (one parameter list
-    for both forms): runs it in a new event loop where SIGTERM ends the run like
-    Ctrl-C (asyncio.run turns SIGINT into a cancel), and `run`'s cleanup kills every
-    robot before the exception goes up."""
+    """The blocking form of `run`, taking exactly its arguments (one parameter list for
+    both forms), in a new event loop; `handle_signals` defaults to True there."""
 
     @functools.wraps(run)  # inspect.signature / help() show run's parameters
     def blocking(*args: P.args, **kwargs: P.kwargs) -> RealtimeResult:
-        async def main() -> RealtimeResult:
-            task = asyncio.current_task()
-            assert task is not None
-            asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, task.cancel)
-            return await run(*args, **kwargs)
-
-        return asyncio.run(main())
+        kwargs.setdefault("handle_signals", True)
+        return asyncio.run(run(*args, **kwargs))
 
     blocking.__name__ = blocking.__qualname__ = name
     blocking.__doc__ = doc
@@ -587,5 +703,7 @@ def _until_signalled(
 
 run_realtime = _until_signalled(
     run_realtime_async, "run_realtime",
-    "`swarmd sim` without --virtual: `run_realtime_async`'s parameters, blocking. "
-    "Ctrl-C / SIGTERM kill every robot, then raise.")
+    "`swarmd sim` without --virtual: `run_realtime_async`'s parameters, blocking. Ctrl-C "
+    "and SIGTERM end the run early: every robot is killed and reaped, and the partial "
+    "result says `interrupted` (the CLI still writes its report and exits 128 + the "
+    "signal's number).")

@@ -12,6 +12,10 @@ module's `child_main` in a forkserver child. What the simulator adds around the 
 - two pipes to the orchestrator: events out (one JSON object a message, t relative to
   the run's t0), control in (`go`, `leave`, `unhealthy`, `liar`, `motor`). EOF on the
   control pipe means the orchestrator is gone: the daemon stops.
+- a lateness probe (`LatenessProbe`): how late this process's event loop wakes up, sent
+  to the orchestrator every second, so that a summary can say "the robots were late"
+  when the machine could not keep up, instead of passing the false suspicions that
+  follow off as protocol failures.
 
 Process hygiene (issue 3 item 5: Ctrl-C leaves no process behind): the child puts itself
 in its own process group (so the terminal's SIGINT reaches only the orchestrator, which
@@ -48,9 +52,16 @@ from swarmd.core.roles import Health
 from swarmd.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
+from swarmd.logs import setup_logging
 from swarmd.runtime import Runtime
 
 _PR_SET_PDEATHSIG = 1
+PROBE_PERIOD = 0.1
+"""s between two wake-ups of the lateness probe (a heartbeat period of the udp preset)."""
+PROBE_REPORT = 1.0
+"""s between two lateness messages to the orchestrator (SIGKILL ends a run: report often)."""
+LATE_MS = 1.0
+"""ms: wake-ups later than this are listed one by one; the others only counted."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,6 +153,51 @@ class Liar:
             self._task.cancel()
 
 
+# -- lateness -------------------------------------------------------------------------------
+
+
+class LatenessProbe:
+    """How late this process's event loop runs: every `PROBE_PERIOD` it asks to wake up
+    and measures by how much it overslept; every `PROBE_REPORT` it emits
+    `{"_ctl": "late", "n": wake-ups, "s": [[t, ms], ...]}`, listing only the wake-ups
+    `LATE_MS` or more late (t = their run time), so an idle swarm sends a few bytes a
+    second.
+
+    The daemon's heartbeats ride on the same loop, so this is how late they go out: a
+    lateness near `t_max` makes the neighbours suspect a healthy robot (paper Fig. 7)."""
+
+    def __init__(self, emit: Callable[[Mapping[str, Any]], None],
+                 clock: Callable[[], float]) -> None:
+        self.emit = emit
+        self.clock = clock
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    async def _run(self) -> None:
+        loop = asyncio.get_running_loop()
+        samples: list[list[float]] = []
+        wakes = 0
+        reported = loop.time()
+        while True:
+            due = loop.time() + PROBE_PERIOD
+            await asyncio.sleep(PROBE_PERIOD)
+            now = loop.time()
+            wakes += 1
+            late_ms = round(1000 * max(0.0, now - due), 1)
+            if late_ms >= LATE_MS:
+                samples.append([round(self.clock(), 3), late_ms])
+            if now - reported >= PROBE_REPORT:
+                self.emit({"_ctl": "late", "n": wakes, "s": samples})
+                samples, wakes, reported = [], 0, now
+
+
 # -- process set-up -------------------------------------------------------------------------
 
 
@@ -193,6 +249,7 @@ class _Robot:
         )
         self.stop_event: asyncio.Event | None = None
         self.go: asyncio.Event | None = None
+        self.probe = LatenessProbe(emit, self._run_time)
 
     def _run_time(self) -> float:
         return time.time() - (self.t0 or 0.0)
@@ -258,6 +315,7 @@ class _Robot:
         def ready(daemon: Daemon) -> None:
             self.liar.runtime = daemon.runtime
 
+        self.probe.start()
         try:
             return await run_daemon(
                 self.cfg,
@@ -272,12 +330,16 @@ class _Robot:
             )
         finally:
             self.liar.stop()
+            self.probe.stop()
 
 
 def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None:
     """Forkserver entry: run one robot until killed, told to leave, or orphaned."""
     _die_with_parent()
     _redirect_output(spec.log_path)
+    # The daemon's warnings and errors as JSON lines (swarmd.logs), with their fields
+    # (`error`, `error_type`): the orchestrator quotes them when a robot fails.
+    setup_logging("WARNING")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     def emit(record: Mapping[str, Any]) -> None:

@@ -4,22 +4,34 @@ Both simulators end here, so `--virtual` and the multi-process run print the sam
 thing: per injected fault the detection latency (fault -> first `suspect` of the robot,
 or its own `leave` when it handed over), the takeover latency (fault -> `takeover` of
 its slot), who took over; the counts of false takeovers and invariant violations.
+
+A real-time run adds what only processes on a real machine have (`summarize_realtime`):
+robot processes that failed or ended on their own (`problems`: the run is not ok, the
+command exits non-zero), and how late the robots' event loops ran. When they were late
+enough to be suspected, `warnings` says so first, so that false suspicions and takeovers
+caused by a machine that could not keep up are not read as protocol failures.
 """
 
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from sim.faults import Fault
 from sim.holders import HolderFold
 from sim.invariants import Violation, check_events
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+
+if TYPE_CHECKING:
+    from sim.realtime import RealtimeResult
 
 _REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor")
 """Faults whose row says who took the robot's slot over. In real time `restart` kills the
@@ -64,10 +76,15 @@ class Summary:
     holders: dict[str, list[int]]
     """function -> robots executing it at the end, from the event log."""
     extra: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    """Robot processes that failed or ended on their own (real time): not ok."""
+    warnings: list[str] = field(default_factory=list)
+    """What makes the figures less telling without making the run wrong (lateness)."""
 
     @property
     def ok(self) -> bool:
-        return not self.violations
+        """No invariant violated and no robot process lost along the way."""
+        return not self.violations and not self.problems
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -81,6 +98,8 @@ class Summary:
             "alerts": self.alerts,
             "violations": [v.as_dict() for v in self.violations],
             "holders": self.holders,
+            "process_problems": self.problems,
+            "warnings": self.warnings,
             "ok": self.ok,
             **self.extra,
         }
@@ -124,9 +143,15 @@ def summarize(
     duration: float,
     mode: str,
     extra_violations: list[Violation] | None = None,
+    deaths: Mapping[int, float] | None = None,
 ) -> Summary:
+    """The summary of a run from its events and injected faults. `deaths`: robot -> time
+    its process ended on its own (real time); the checker treats each as a crash (its
+    replacement is no false takeover) and the fault table shows it as one."""
     events = sorted(events, key=lambda e: e["t"])
-    checker = check_events(events, faults, plan, params, loss=loss, duration=duration)
+    died = [Fault("crash", t, (r,)) for r, t in sorted((deaths or {}).items())]
+    checker = check_events(events, [*faults, *died], plan, params, loss=loss,
+                           duration=duration)
     violations = list(checker.violations) + list(extra_violations or [])
     # Checker and a simulator may both report a raise; keep one of each.
     seen: set[tuple[float, str, int | None]] = set()
@@ -138,9 +163,11 @@ def summarize(
             unique.append(v)
     outcomes = []
     credited: set[int] = set()  # takeovers already explained by an earlier fault
-    for fault in sorted(faults, key=lambda f: f.at):
+    labelled = [(f, f.spec()) for f in faults] + [(f, f"died:{f.robot}@{f.at:.2f}")
+                                                  for f in died]
+    for fault, spec in sorted(labelled, key=lambda fs: fs[0].at):
         if fault.kind not in _REPLACEABLE:
-            outcomes.append(FaultOutcome(fault.spec(), fault.kind, None if fault.kind ==
+            outcomes.append(FaultOutcome(spec, fault.kind, None if fault.kind ==
                                          "partition" else fault.robot, fault.at, None,
                                          None, None, None, None))
             continue
@@ -162,7 +189,7 @@ def summarize(
                     and (f is None or e.get("function") == f) and i not in credited:
                 credited.add(i)
                 taken, by, epoch = e["t"] - fault.at, e["robot"], e.get("epoch")
-        outcomes.append(FaultOutcome(fault.spec(), fault.kind, r, fault.at, f, detected,
+        outcomes.append(FaultOutcome(spec, fault.kind, r, fault.at, f, detected,
                                      taken, by, epoch))
     dead = set(checker.dead)
     return Summary(
@@ -177,6 +204,86 @@ def summarize(
         alerts=sum(1 for e in events if e["event"] == "alert"),
         holders=holders_at_end(events, dead),
     )
+
+
+# -- real time ------------------------------------------------------------------------------
+
+PAUSE_AFTERMATH = 1.0
+"""s after a pause during which the paused robot's lateness is the pause's, not the
+machine's (SIGSTOP freezes its loop; after SIGCONT it works off the backlog)."""
+
+
+def _pct(values: Sequence[float], q: float) -> float:
+    """Nearest-rank percentile of sorted `values` (q in [0, 100])."""
+    return values[min(len(values) - 1, max(0, round(q / 100 * len(values) + 0.5) - 1))]
+
+
+def lateness_figures(
+    late: Sequence[tuple[int, float, float]], wakes: int, faults: Sequence[Fault],
+) -> dict[str, Any]:
+    """p50 / p99 / max of how late the robots' event loops woke up (ms), from the probes'
+    late wake-ups `(robot, t, ms)` and the count of all wake-ups (the others were on time,
+    under `sim.robot_proc.LATE_MS`). A paused robot's own lateness during and just after
+    its pause is left out: it is the fault, not the machine."""
+    frozen = [(f.robot, f.at, (f.end or f.at) + PAUSE_AFTERMATH) for f in faults
+              if f.kind == "pause"]
+    kept = [x for x in late if not any(r == x[0] and a <= x[1] <= b for r, a, b in frozen)]
+    n = max(wakes - (len(late) - len(kept)), len(kept))
+    if n == 0:
+        return {"wakes": 0}
+    on_time = [0.0] * (n - len(kept))  # under LATE_MS: counted, not listed
+    values = sorted(on_time + [ms for _, _, ms in kept])
+    worst = max(kept, key=lambda x: x[2], default=None)
+    return {"wakes": n, "p50_ms": _pct(values, 50), "p99_ms": _pct(values, 99),
+            "max_ms": values[-1], "max_robot": worst[0] if worst else None,
+            "max_t": worst[1] if worst else None}
+
+
+def lateness_warning(figures: Mapping[str, Any], params: Params,
+                     violations: Sequence[Violation]) -> str | None:
+    """The warning a run gets when its robots were late enough to be suspected: a
+    heartbeat due every `heartbeat_interval` and late by `t_max - heartbeat_interval`
+    leaves a gap of `t_max` (paper Fig. 7), and half of that margin is already more
+    than a loaded machine should eat. None when they were on time."""
+    margin_ms = 1000 * (params.t_max - params.heartbeat_interval)
+    worst = float(figures.get("max_ms", 0.0))
+    if worst < margin_ms / 2:
+        return None
+    text = (f"robots were late: p99 {figures['p99_ms']:g} ms, max {worst:g} ms (robot "
+            f"{figures['max_robot']} at t={figures['max_t']:.2f} s), against a margin of "
+            f"{margin_ms:g} ms (t_max - heartbeat_interval); this machine could not keep "
+            f"up (load average {os.getloadavg()[0]:.1f}), so suspicions and takeovers of "
+            "healthy robots in this run may come from the load, not from the protocol")
+    if violations:
+        text += f"; {len(violations)} invariant violation(s) to read with that in mind"
+    return text
+
+
+def summarize_realtime(
+    result: RealtimeResult, faults: list[Fault], plan: SwarmPlan, params: Params, *,
+    loss: float,
+) -> Summary:
+    """The summary of a real-time run (`sim.realtime`): `summarize` over the merged log,
+    up to the time the run really ended (earlier when interrupted), with the robots that
+    died on their own as crashes, plus what only real processes have: their problems,
+    start-up time, lateness and the load of the machine."""
+    end = result.ended_at if result.ended_at is not None else result.duration
+    summary = summarize(result.events, [f for f in faults if f.at <= end], plan, params,
+                        loss=loss, duration=round(end, 2), mode="real time",
+                        deaths=result.deaths)
+    summary.problems = list(result.problems)
+    figures = lateness_figures(result.late, result.wakes, faults)
+    warning = lateness_warning(figures, params, summary.violations)
+    if warning is not None:
+        summary.warnings.append(warning)
+    if result.interrupted is not None:
+        summary.warnings.append(f"interrupted by {result.interrupted} at t={end:.2f} s of "
+                                f"{result.duration:g} s: a partial run")
+        summary.extra["interrupted"] = {"signal": result.interrupted, "at": round(end, 3)}
+    summary.extra["startup_s"] = round(result.startup_s, 2)
+    summary.extra["lateness_ms"] = figures
+    summary.extra["loadavg"] = [round(x, 2) for x in os.getloadavg()]
+    return summary
 
 
 def render_summary(summary: Summary, console: Console) -> None:
@@ -201,6 +308,10 @@ def render_summary(summary: Summary, console: Console) -> None:
                   f"false takeovers: {len(summary.false_takeovers)}   "
                   f"invariant violations: {len(summary.violations)}")
     for v in summary.violations:
-        console.print(f"[red]VIOLATION[/red] t={v.t:.3f} {v.kind}: {v.detail}")
+        console.print(Text.assemble(("VIOLATION", "red"), f" t={v.t:.3f} {v.kind}: {v.detail}"))
+    for p in summary.problems:
+        console.print(f"PROCESS PROBLEM: {p}", markup=False, highlight=False, style="red")
+    for w in summary.warnings:
+        console.print(f"WARNING: {w}", markup=False, highlight=False, style="yellow")
     for k, v in summary.extra.items():
-        console.print(f"{k}: {v}")
+        console.print(f"{k}: {v}", markup=False, soft_wrap=True)

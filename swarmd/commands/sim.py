@@ -127,7 +127,12 @@ def register(app: typer.Typer) -> None:
             if flight:
                 raise typer.Exit(2)
         if report is not None:
-            _clear_report(report)
+            try:
+                _clear_report(report)
+            except OSError as exc:  # read-only, a file on the path, no permission...
+                err.print(f"--report: {report} cannot be written: "
+                          f"{exc.strerror or exc} ({type(exc).__name__})")
+                raise typer.Exit(2) from None
         out = Console(highlight=False, stderr=json_out)
 
         if virtual:
@@ -159,6 +164,11 @@ def register(app: typer.Typer) -> None:
             render_summary(summary, out)
         if report is not None:
             _say_report(out, report, pictures, physics=not virtual and not no_physics)
+        interrupted = summary.extra.get("interrupted")
+        if interrupted:  # Ctrl-C / SIGTERM: the shell's 128 + signal number
+            import signal
+
+            raise typer.Exit(128 + signal.Signals[interrupted["signal"]].value)
         raise typer.Exit(0 if summary.ok else 1)
 
 
@@ -187,7 +197,7 @@ def _run_realtime(swarm: Path, plan: Any, params: Any, faults: list[Any], *, dur
                   seed: int, loss: float, report: Path | None, physics: bool, transport: str,
                   live: bool) -> Summary:
     from sim.realtime import run_realtime
-    from sim.summary import summarize
+    from sim.summary import summarize_realtime
 
     try:
         result = run_realtime(swarm, duration=duration, faults=faults, loss=loss, seed=seed,
@@ -196,11 +206,7 @@ def _run_realtime(swarm: Path, plan: Any, params: Any, faults: list[Any], *, dur
     except (ValueError, RuntimeError) as exc:
         typer.echo(f"swarmd sim: {exc}", err=True)
         raise typer.Exit(2) from None
-    summary = summarize(result.events, faults, plan, params, loss=loss, duration=duration,
-                        mode="real time")
-    if result.problems:
-        summary.extra["process problems"] = result.problems
-    summary.extra["startup_s"] = round(result.startup_s, 2)
+    summary = summarize_realtime(result, faults, plan, params, loss=loss)
     summary.extra["_t0"] = result.t0
     summary.extra["_events"] = result.events
     return summary
@@ -225,6 +231,10 @@ def _clear_report(report: Path) -> None:
     for pattern in REPORT_FILES:
         for path in report.glob(pattern):
             path.unlink(missing_ok=True)
+    # Refuse an unwritable directory now, not after the run (an OSError goes up).
+    probe = report / ".swarmd-write-test"
+    probe.write_bytes(b"")
+    probe.unlink()
 
 
 def _say_report(out: Any, report: Path, pictures: dict[str, Any], *, physics: bool) -> None:

@@ -1,0 +1,234 @@
+"""What the real-time `swarmd sim` does when the processes, not the protocol, go wrong.
+
+Pure tests of the summary's new facts (robots that died on their own, lateness, the
+problems that make a run not ok), and three short real-process runs of the paper swarm:
+a robot process ended from outside plus a robot whose daemon cannot start, a robot that
+hangs before `ready`, an interrupted run. Every real run is bounded by `wait_for`, and
+each checks that no robot process is left behind.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from rich.console import Console
+from test_realtime import _alive
+from typer.testing import CliRunner
+
+import sim.realtime as realtime
+from sim.faults import parse_fault
+from sim.realtime import Orchestrator, RealtimeResult, run_realtime_async
+from sim.summary import (
+    lateness_figures,
+    lateness_warning,
+    render_summary,
+    summarize,
+    summarize_realtime,
+)
+from swarmd.cli import app
+from swarmd.config import load_swarm
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ROOT / "configs" / "paper.yaml"
+
+
+# -- the summary --------------------------------------------------------------------------
+
+
+def _started() -> list[dict[str, Any]]:
+    out: list[dict[str, Any]] = [
+        {"t": 0.01, "robot": r, "event": "started", "role": "active", "function": f"f{r}"}
+        for r in (1, 2, 3, 4)]
+    return out + [{"t": 0.01, "robot": r, "event": "started", "role": "standby",
+                   "function": None} for r in (5, 6)]
+
+
+def test_a_robot_that_died_on_its_own_is_a_crash_not_a_false_takeover(
+    paper: tuple[SwarmPlan, Params],
+) -> None:
+    plan, params = paper
+    events = [*_started(),
+              {"t": 2.6, "robot": 6, "event": "takeover", "function": "f2", "epoch": 1,
+               "replaced": 2}]
+    blind = summarize(events, [], plan, params, loss=0.0, duration=5.0, mode="real time")
+    # What it used to say: robot 2 still held f2, so 6 replaced a healthy robot.
+    assert {v.kind for v in blind.violations} == {"false_takeover", "dual_execution"}
+    told = summarize(events, [], plan, params, loss=0.0, duration=5.0, mode="real time",
+                     deaths={2: 2.0})
+    assert told.violations == [] and told.false_takeovers == []
+    assert [(f.spec, f.function, f.by) for f in told.faults] == [("died:2@2.00", "f2", 6)]
+
+
+def test_lateness_leaves_out_a_paused_robot_and_counts_on_time_wake_ups() -> None:
+    late = [(2, 3.2, 2000.0), (2, 5.5, 900.0), (4, 1.0, 30.0)]
+    figures = lateness_figures(late, 100, [parse_fault("pause:2@3+2")])
+    # Robot 2's 2 s freeze and its catching up within a second are the pause's.
+    assert figures["wakes"] == 98 and figures["max_ms"] == 30.0
+    assert (figures["max_robot"], figures["p50_ms"]) == (4, 0.0)
+    assert lateness_figures(late, 100, [])["max_ms"] == 2000.0
+    assert lateness_figures([], 0, []) == {"wakes": 0}
+
+
+def test_late_robots_get_a_warning_and_on_time_ones_none(
+    paper: tuple[SwarmPlan, Params],
+) -> None:
+    _, params = paper  # udp: t_max 0.5 s, heartbeat 0.1 s: margin 400 ms
+    on_time = lateness_figures([(1, 2.0, 150.0)], 200, [])
+    assert lateness_warning(on_time, params, []) is None
+    late = lateness_figures([(3, 4.5, 450.0)], 200, [])
+    text = lateness_warning(late, params, [])
+    assert text is not None
+    assert "robots were late" in text and "450 ms" in text and "robot 3 at t=4.50" in text
+
+
+def _result(**kw: Any) -> RealtimeResult:
+    base: dict[str, Any] = {"events": _started(), "robots": (1, 2, 3, 4, 5, 6),
+                            "duration": 5.0, "t0": 0.0, "startup_s": 0.3, "run_dir": None}
+    return RealtimeResult(**{**base, **kw})
+
+
+def test_process_problems_make_the_run_not_ok_and_are_printed_one_a_line(
+    paper: tuple[SwarmPlan, Params],
+) -> None:
+    plan, params = paper
+    problem = "robot 3: process ended on its own at t=1.00 s (exit code 1): [boom]"
+    summary = summarize_realtime(_result(problems=[problem], late=[(1, 2.0, 420.0)],
+                                         wakes=300), [], plan, params, loss=0.0)
+    assert summary.violations == [] and not summary.ok
+    doc = json.loads(summary.to_json())
+    assert doc["process_problems"] == [problem] and doc["ok"] is False
+    assert doc["lateness_ms"]["max_ms"] == 420.0 and len(doc["warnings"]) == 1
+    console = Console(record=True, width=200)
+    render_summary(summary, console)
+    text = console.export_text()
+    assert f"PROCESS PROBLEM: {problem}" in text  # markup-free: "[boom]" stays
+    assert "WARNING: robots were late" in text
+
+
+def test_an_interrupted_run_is_summarised_up_to_where_it_ended(
+    paper: tuple[SwarmPlan, Params],
+) -> None:
+    plan, params = paper
+    crash = parse_fault("crash:2@3")  # after the interruption: no expectation on it
+    summary = summarize_realtime(_result(interrupted="SIGTERM", ended_at=2.5), [crash],
+                                 plan, params, loss=0.0)
+    assert summary.duration == 2.5 and summary.faults == [] and summary.ok
+    assert summary.extra["interrupted"] == {"signal": "SIGTERM", "at": 2.5}
+    assert any("interrupted by SIGTERM" in w for w in summary.warnings)
+
+
+# -- --report -----------------------------------------------------------------------------
+
+
+def test_report_that_cannot_be_written_is_refused_before_the_run(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    result = CliRunner().invoke(app, ["sim", str(PAPER), "--no-physics", "--report",
+                                      str(blocker / "out")])
+    assert result.exit_code == 2, result.output
+    assert "cannot be written" in result.output and "Not a directory" in result.output
+
+
+# -- real processes -----------------------------------------------------------------------
+
+
+def _pids(run_dir: Path) -> list[int]:
+    doc = json.loads((run_dir / "pids.json").read_text())
+    return [*doc["robots"].values(), *doc["retired"]]
+
+
+async def _wait_for_file(path: Path, timeout: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert time.monotonic() < deadline, path
+        await asyncio.sleep(0.05)
+
+
+@pytest.mark.slow
+async def test_robot_processes_that_end_on_their_own_are_reported(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Robot 4's daemon cannot start (its state_dir is under a file): it exits non-zero
+    # right after `go`. Robot 2 is killed from outside the orchestrator.
+    write = realtime.write_robot_file
+    (tmp_path / "blocker").write_text("a file")
+
+    def robot_file(run_dir: Path, swarm: Path, robot: int, **kw: Any) -> Path:
+        path = write(run_dir, swarm, robot, **kw)
+        if robot == 4:
+            doc = yaml.safe_load(path.read_text())
+            doc["state_dir"] = str(tmp_path / "blocker" / "state")
+            path.write_text(yaml.safe_dump(doc))
+        return path
+
+    monkeypatch.setattr(realtime, "write_robot_file", robot_file)
+    run = asyncio.ensure_future(run_realtime_async(PAPER, duration=3.0,
+                                                   report_dir=tmp_path))
+    await _wait_for_file(tmp_path / "realtime" / "pids.json")
+    pids = json.loads((tmp_path / "realtime" / "pids.json").read_text())["robots"]
+    await asyncio.sleep(1.8)  # robots ready, go, t ~ 1 s: the daemons run
+    os.kill(pids["2"], signal.SIGTERM)
+    result = await asyncio.wait_for(run, 30.0)
+    assert set(result.deaths) == {2, 4}
+    assert 0.0 <= result.deaths[4] < result.deaths[2]
+    by_robot = {p.split(":")[0]: p for p in result.problems}
+    assert set(by_robot) == {"robot 2", "robot 4"}, result.problems
+    assert "ended on its own" in by_robot["robot 2"] and "exit code -15" in by_robot["robot 2"]
+    assert "ended on its own" in by_robot["robot 4"]
+    swarm = load_swarm(PAPER)
+    summary = summarize_realtime(result, [], swarm.to_plan(), swarm.params(), loss=0.0)
+    # Robot 6 replaced robot 2 (4's slot went to 5): crashes, not false takeovers.
+    assert summary.false_takeovers == [] and summary.violations == []
+    assert not summary.ok
+    assert [p for p in _pids(tmp_path / "realtime") if _alive(p)] == []
+
+
+@pytest.mark.slow
+async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Robot 3's robot file is a FIFO nobody writes: its process blocks reading it.
+    write = realtime.write_robot_file
+
+    def robot_file(run_dir: Path, swarm: Path, robot: int, **kw: Any) -> Path:
+        path = write(run_dir, swarm, robot, **kw)
+        if robot == 3:
+            path.unlink()
+            os.mkfifo(path)
+        return path
+
+    monkeypatch.setattr(realtime, "write_robot_file", robot_file)
+    monkeypatch.setattr(realtime, "READY_TIMEOUT", 1.5)
+    with pytest.raises(RuntimeError, match=r"robots \[3\] not ready after 1.5 s"):
+        await asyncio.wait_for(run_realtime_async(PAPER, duration=2.0, report_dir=tmp_path),
+                               30.0)
+    assert [p for p in _pids(tmp_path / "realtime") if _alive(p)] == []
+
+
+@pytest.mark.slow
+async def test_an_interrupted_run_returns_what_happened_so_far(tmp_path: Path) -> None:
+    orch = Orchestrator(PAPER, duration=30.0, faults=[parse_fault("crash:2@0.5")], loss=0.0,
+                        seed=0, physics=False, live=False, report_dir=tmp_path)
+    try:
+        run = asyncio.ensure_future(orch.run())
+        while not orch.t0 or orch.run_time() < 1.5:
+            await asyncio.sleep(0.05)
+        orch.interrupt("SIGINT")
+        result = await asyncio.wait_for(run, 15.0)
+    finally:
+        orch.cleanup()
+    assert result.interrupted == "SIGINT"
+    assert result.ended_at is not None and 1.5 <= result.ended_at < 5.0
+    assert [e["robot"] for e in result.events if e["event"] == "takeover"] == [6]
+    assert result.problems == [] and result.deaths == {}
+    assert [p for p in _pids(tmp_path / "realtime") if _alive(p)] == []
