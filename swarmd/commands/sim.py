@@ -73,8 +73,9 @@ def register(app: typer.Typer) -> None:
         flying a MuJoCo quadrotor, over UDP multicast on loopback. --no-physics: the same
         without quadrotors. --virtual: one process on a virtual clock.
 
-        Exit codes: 0 no invariant violated, 1 an invariant was violated, 2 bad input
-        (swarm file, --fault, --craft; nothing was started).
+        Exit codes: 0 no invariant violated, 1 an invariant was violated or a robot
+        process failed, 2 bad input (swarm file, --fault, --craft, --report; nothing was
+        started), 130 / 143 ended early by Ctrl-C / SIGTERM (partial report).
 
         Example: swarmd sim configs/paper.yaml --fault crash:2@5 --duration 15 --report out/demo
         """
