@@ -25,6 +25,22 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
+def _version(value: bool) -> None:
+    if value:
+        from swarmd import __version__
+
+        typer.echo(f"swarmd {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Failure handling for robot swarms (see --help)."""
+
+
 # Order here is the order in `swarmd --help`.
 COMMAND_MODULES = (
     "start",

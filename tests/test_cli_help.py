@@ -120,3 +120,15 @@ def test_install_script_help_is_its_header_only() -> None:
     assert result.returncode == 0, result.stderr
     assert "--root DIR" in result.stdout and "--uninstall" in result.stdout
     assert "set -" not in result.stdout  # the usage text stops before the code
+
+
+def test_version_prints_the_package_version() -> None:
+    from swarmd import __version__
+
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0 and result.stdout.strip() == f"swarmd {__version__}"
+
+
+def test_emulating_no_radio_is_a_usage_error() -> None:
+    result = runner.invoke(app, ["xbee", "emulate", "0"])
+    assert result.exit_code == 2 and "count" in result.output

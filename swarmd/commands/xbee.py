@@ -191,7 +191,7 @@ def register(app: typer.Typer) -> None:
 
     @xbee.command("emulate")
     def emulate(
-        count: Annotated[int, typer.Argument(help="Number of radios (robot1..robotN).")],
+        count: Annotated[int, typer.Argument(min=1, help="Number of radios (robot1..robotN).")],
         protocol: Annotated[str, typer.Option(help="Firmware emulated: zigbee, 802.15.4 "
                                               "or digimesh.")]
         = "802.15.4",
