@@ -3,8 +3,8 @@
 Pure tests of the summary's new facts (robots that died on their own, lateness, the
 problems that make a run not ok), and three short real-process runs of the paper swarm:
 a robot process ended from outside plus a robot whose daemon cannot start, a robot that
-hangs before `ready`, an interrupted run. Every real run is bounded by `wait_for`, and
-each checks that no robot process is left behind.
+hangs before `ready`, an interrupted run; and one SIGTERM to the command itself. Every
+real run is bounded, and each checks that no robot process is left behind.
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import asyncio
 import json
 import os
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -20,7 +22,7 @@ from typing import Any
 import pytest
 import yaml
 from rich.console import Console
-from test_realtime import _alive
+from test_realtime import _alive, _descendants
 from typer.testing import CliRunner
 
 import sim.realtime as realtime
@@ -232,3 +234,31 @@ async def test_an_interrupted_run_returns_what_happened_so_far(tmp_path: Path) -
     assert [e["robot"] for e in result.events if e["event"] == "takeover"] == [6]
     assert result.problems == [] and result.deaths == {}
     assert [p for p in _pids(tmp_path / "realtime") if _alive(p)] == []
+
+
+@pytest.mark.slow
+def test_sigterm_to_the_command_writes_a_partial_report_and_exits_143(tmp_path: Path) -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarmd.cli", "sim", str(PAPER), "--no-physics", "--json",
+         "--duration", "60", "--fault", "crash:2@0.5", "--report", str(tmp_path)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not (tmp_path / "realtime" / "pids.json").exists() \
+                or not list((tmp_path / "realtime" / "logs").glob("*")):
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        family = _descendants(proc.pid)
+        time.sleep(1.5)  # past t0 and the crash
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    summary = json.loads(out)
+    assert summary["interrupted"]["signal"] == "SIGTERM"
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary
+    assert (tmp_path / "events.jsonl").exists() and (tmp_path / "timeline.png").exists()
+    assert [p for p in family if _alive(p)] == []

@@ -149,14 +149,15 @@ def register(app: typer.Typer) -> None:
             _write_events(events, events_list)
         pictures: dict[str, Any] = {}
         if report is not None:
-            _write_report(report, events_list, summary, duration)
+            # summary.duration: where the run really ended (earlier when interrupted).
+            _write_report(report, events_list, summary, summary.duration)
             if not virtual and not no_physics:
                 # Trajectory plot, video and key frames from the robots' trajectory files.
                 from sim.render import report_pictures
 
                 pictures = report_pictures(report, events_list,
                                            {n: cfg.function_spec(n) for n in plan.functions},
-                                           t0=t0, end=duration)
+                                           t0=t0, end=summary.duration)
         if json_out:
             typer.echo(summary.to_json())
         else:
