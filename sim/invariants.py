@@ -101,6 +101,8 @@ class Checker:
     false_takeovers: list[dict[str, Any]] = field(default_factory=list)
     last_fault_at: list[float] = field(default_factory=list)
     paused_until: dict[int, float] = field(default_factory=dict)
+    false_suspicions: int = 0
+    """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
@@ -172,6 +174,9 @@ class Checker:
             for key in [k for k in self.episodes if k[1] == f]:
                 del self.episodes[key]  # the warning ended in a takeover
             self._takeover(t, r, f, int(rec.get("replaced", 0)))
+        elif name == "suspect":
+            if self._healthy_and_reachable(int(rec["subject"]), t):
+                self.false_suspicions += 1
         elif name in ("fenced", "leave", "stopped"):
             self._close_watcher(r)
         elif name == "warn":

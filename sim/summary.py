@@ -76,6 +76,9 @@ class Summary:
     holders: dict[str, list[int]]
     """function -> robots executing it at the end, from the event log."""
     extra: dict[str, Any] = field(default_factory=dict)
+    false_suspicions: int = 0
+    """Watchdogs that fired on a healthy, reachable robot (not an invariant: loss and a
+    late machine cause them; the protocol refutes them, rule 5)."""
     problems: list[str] = field(default_factory=list)
     """Robot processes that failed or ended on their own (real time): not ok."""
     warnings: list[str] = field(default_factory=list)
@@ -95,6 +98,7 @@ class Summary:
             "takeovers": self.takeovers,
             "false_takeovers": len(self.false_takeovers),
             "false_takeover_details": self.false_takeovers,
+            "false_suspicions": self.false_suspicions,
             "alerts": self.alerts,
             "violations": [v.as_dict() for v in self.violations],
             "holders": self.holders,
@@ -203,6 +207,7 @@ def summarize(
         violations=unique,
         alerts=sum(1 for e in events if e["event"] == "alert"),
         holders=holders_at_end(events, dead),
+        false_suspicions=checker.false_suspicions,
     )
 
 
@@ -240,7 +245,7 @@ def lateness_figures(
 
 
 def lateness_warning(figures: Mapping[str, Any], params: Params,
-                     violations: Sequence[Violation]) -> str | None:
+                     violations: Sequence[Violation], suspicions: int = 0) -> str | None:
     """The warning a run gets when its robots were late enough to be suspected: a
     heartbeat due every `heartbeat_interval` and late by `t_max - heartbeat_interval`
     leaves a gap of `t_max` (paper Fig. 7), and half of that margin is already more
@@ -254,6 +259,8 @@ def lateness_warning(figures: Mapping[str, Any], params: Params,
             f"{margin_ms:g} ms (t_max - heartbeat_interval); this machine could not keep "
             f"up (load average {os.getloadavg()[0]:.1f}), so suspicions and takeovers of "
             "healthy robots in this run may come from the load, not from the protocol")
+    if suspicions:
+        text += f"; {suspicions} suspicion(s) of healthy robots"
     if violations:
         text += f"; {len(violations)} invariant violation(s) to read with that in mind"
     return text
@@ -273,7 +280,7 @@ def summarize_realtime(
                         deaths=result.deaths)
     summary.problems = list(result.problems)
     figures = lateness_figures(result.late, result.wakes, faults)
-    warning = lateness_warning(figures, params, summary.violations)
+    warning = lateness_warning(figures, params, summary.violations, summary.false_suspicions)
     if warning is not None:
         summary.warnings.append(warning)
     if result.interrupted is not None:
@@ -306,6 +313,7 @@ def render_summary(summary: Summary, console: Console) -> None:
     console.print(f"holders at the end: {holders or 'none'}")
     console.print(f"takeovers: {summary.takeovers}   alerts: {summary.alerts}   "
                   f"false takeovers: {len(summary.false_takeovers)}   "
+                  f"false suspicions: {summary.false_suspicions}   "
                   f"invariant violations: {len(summary.violations)}")
     for v in summary.violations:
         console.print(Text.assemble(("VIOLATION", "red"), f" t={v.t:.3f} {v.kind}: {v.detail}"))

@@ -71,6 +71,17 @@ def test_a_robot_that_died_on_its_own_is_a_crash_not_a_false_takeover(
     assert [(f.spec, f.function, f.by) for f in told.faults] == [("died:2@2.00", "f2", 6)]
 
 
+def test_suspicions_of_healthy_robots_are_counted(paper: tuple[SwarmPlan, Params]) -> None:
+    plan, params = paper
+    events = [*_started(),
+              {"t": 3.4, "robot": 1, "event": "suspect", "subject": 2, "function": "f2"},
+              {"t": 4.0, "robot": 2, "event": "suspect", "subject": 3, "function": "f3"}]
+    summary = summarize(events, [parse_fault("crash:2@3")], plan, params, loss=0.0,
+                        duration=5.0, mode="real time")
+    assert summary.false_suspicions == 1  # robot 3's; robot 2 had crashed
+    assert json.loads(summary.to_json())["false_suspicions"] == 1
+
+
 def test_lateness_leaves_out_a_paused_robot_and_counts_on_time_wake_ups() -> None:
     late = [(2, 3.2, 2000.0), (2, 5.5, 900.0), (4, 1.0, 30.0)]
     figures = lateness_figures(late, 100, [parse_fault("pause:2@3+2")])
