@@ -132,3 +132,9 @@ def test_version_prints_the_package_version() -> None:
 def test_emulating_no_radio_is_a_usage_error() -> None:
     result = runner.invoke(app, ["xbee", "emulate", "0"])
     assert result.exit_code == 2 and "count" in result.output
+
+
+def test_start_refuses_an_unknown_log_level_as_a_usage_error() -> None:
+    result = runner.invoke(app, ["start", "-c", "configs/robot-example.yaml",
+                                 "--log-level", "bogus"])
+    assert result.exit_code == 2 and "'bogus' is not one of" in result.output

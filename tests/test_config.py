@@ -23,6 +23,7 @@ from swarmd.config import (
     XBeeTransportConfig,
     load_robot,
     load_swarm,
+    parse_robot,
     parse_swarm,
 )
 from swarmd.core.params import Params, radio, udp
@@ -436,3 +437,12 @@ def test_robot_file_given_as_swarm_file_says_so() -> None:
     assert [str(p) for p in info.value.problems] == [
         "r2.yaml: <top>: this is a robot file (it has `robot:`); give the swarm file it "
         "names: paper.yaml (line 1)"]
+
+
+def test_swarm_file_given_as_robot_file_says_so() -> None:
+    """`swarmd start -c paper.yaml` printed seven schema errors; one problem says what to do."""
+    text = (Path(__file__).resolve().parent.parent / "configs" / "paper.yaml").read_text()
+    with pytest.raises(ConfigError) as info:
+        parse_robot(text, "paper.yaml")
+    [problem] = info.value.problems
+    assert "this is a swarm file" in str(problem) and "robot: <id>" in str(problem)

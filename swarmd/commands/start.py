@@ -12,6 +12,14 @@ from typing import Annotated
 
 import typer
 
+LEVELS = ("debug", "info", "warning", "error")
+
+
+def _check_level(value: str) -> str:
+    if value.lower() not in LEVELS:
+        raise typer.BadParameter(f"{value!r} is not one of {', '.join(LEVELS)}")
+    return value.lower()
+
 
 def register(app: typer.Typer) -> None:
     """Add the `start` command to the CLI."""
@@ -22,8 +30,8 @@ def register(app: typer.Typer) -> None:
             "--config", "-c", help="Robot file (YAML, docs/config.md): robot id, swarm "
             "file, transport, link.")],
         log_level: Annotated[str, typer.Option(
-            "--log-level", help="Least severe level logged: debug, info, warning or "
-            "error.")] = "info",
+            "--log-level", callback=_check_level,
+            help="Least severe level logged: debug, info, warning or error.")] = "info",
     ) -> None:
         """Run one robot's daemon until SIGTERM / SIGINT (what systemd runs).
 

@@ -211,6 +211,13 @@ def parse_robot(text: str, name: str = "<string>", path: Path | None = None) -> 
 
 def from_source(src: Source) -> RobotConfig:
     """Validate a parsed robot file and load its swarm file. Raises ConfigError."""
+    data = src.data
+    if isinstance(data, dict) and "robots" in data and "robot" not in data:
+        # A swarm file where a robot file belongs (`swarmd start -c paper.yaml`): one
+        # clear problem instead of a schema error for every swarm-file field.
+        raise ConfigError([src.problem((), "this is a swarm file (it has `robots:`); give "
+                                       "a robot file that names it (`robot: <id>`, "
+                                       "`swarm: <this file>`; docs/config.md)")])
     f: RobotFile = validate(RobotFile, src)
     problems: list[Problem] = []
     swarm_path = src.resolve(f.swarm)
