@@ -204,3 +204,11 @@ def test_monitor_cli_once_json_hears_the_loopback_channel() -> None:
 def test_monitor_cli_needs_exactly_one_source() -> None:
     result = CliRunner().invoke(app, ["monitor", "--once"])
     assert result.exit_code == 2
+
+
+def test_monitor_unusable_swarm_file_exits_2_like_start_and_sim(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("swarm: {id: 1}\nfunctions: {f1: {kind: slot, position: [0, 0]}}\n")
+    result = CliRunner().invoke(app, ["monitor", "--swarm", str(bad), "--once"])
+    assert result.exit_code == 2
+    assert "position" in result.stderr and "[" in result.stderr  # plain text, not markup

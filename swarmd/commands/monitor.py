@@ -53,8 +53,9 @@ def register(app: typer.Typer) -> None:
         nobody claims, two robots on one function). Give exactly one of --config or
         --swarm. UDP only.
 
-        Exit codes: 0 done, 1 unusable config or the channel cannot be opened, 2 bad
-        usage (neither or both of --config and --swarm, a radio transport), 130 Ctrl-C.
+        Exit codes: 0 done, 1 the channel cannot be opened, 2 unusable config or bad
+        usage (neither or both of --config and --swarm, a radio transport), 130 Ctrl-C
+        (as `start` and `sim`).
 
         Example: swarmd monitor --swarm configs/paper.yaml --once --json --duration 5
         """
@@ -70,7 +71,7 @@ def register(app: typer.Typer) -> None:
         from swarmd.transport.udp import UdpTransport
 
         console = Console()
-        err = Console(stderr=True)
+        err = Console(stderr=True, highlight=False, markup=False, soft_wrap=True)
         if (config is None) == (swarm is None):
             err.print("give exactly one of --config ROBOT.yaml or --swarm SWARM.yaml")
             raise typer.Exit(2)
@@ -91,7 +92,10 @@ def register(app: typer.Typer) -> None:
                 key = swarm_cfg.key()
                 keys = [key] if key is not None else []
                 transport = UdpTransport(group=group, port=port, interface=interface)
-        except (ConfigError, ConfigUnreadable, TransportError) as exc:
+        except (ConfigError, ConfigUnreadable) as exc:
+            err.print(str(exc))
+            raise typer.Exit(2) from None
+        except TransportError as exc:
             err.print(str(exc))
             raise typer.Exit(1) from None
         state = MonitorState(swarm_cfg.to_plan(), swarm_cfg.params(), keys)
