@@ -14,7 +14,10 @@ Invariants (each violation names the time, robot and what went wrong):
 2. single holder: outside partitions, no slot is executed by two running robots for
    longer than `bounds.dual`; after a partition heals, within `bounds.converge`;
 3. liars: a takeover of a healthy, reachable robot is a false takeover; without loss it
-   is a violation (a single liar can never get a healthy robot replaced);
+   is a violation (a single liar can never get a healthy robot replaced). A robot is
+   healthy only once its node has logged `started`: a process the machine could not
+   start within the start-up grace is, to the swarm, a dead robot, and replacing it is
+   the protocol working (the real-time summary warns about such a slow start);
 4. warnings: every `warn` episode ends in a takeover of the slot, a refutation, or an
    alert (the paper's verified property, generalised);
 5. no node raises on any input (virtual simulator: exceptions are reported here).
@@ -103,6 +106,8 @@ class Checker:
     paused_until: dict[int, float] = field(default_factory=dict)
     false_suspicions: int = 0
     """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
+    started: set[int] = field(default_factory=set)
+    """Robots whose node has logged `started` (since their last crash or restart)."""
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
@@ -133,6 +138,7 @@ class Checker:
             f = self.executing.get(r)
             if fault.kind == "crash":
                 self.dead.add(r)
+                self.started.discard(r)
                 self.holding.forget(r)
                 self.paused.discard(r)
             else:
@@ -145,6 +151,7 @@ class Checker:
             # process start in real time, during which the slot may be taken over).
             self._close_watcher(r)
             self.dead.discard(r)
+            self.started.discard(r)
             self.holding.forget(r)
             self.paused.discard(r)
         elif fault.kind == "pause":
@@ -174,6 +181,8 @@ class Checker:
             for key in [k for k in self.episodes if k[1] == f]:
                 del self.episodes[key]  # the warning ended in a takeover
             self._takeover(t, r, f, int(rec.get("replaced", 0)))
+        elif name == "started":
+            self.started.add(r)
         elif name == "suspect":
             if self._healthy_and_reachable(int(rec["subject"]), t):
                 self.false_suspicions += 1
@@ -262,6 +271,8 @@ class Checker:
     def _healthy_and_reachable(self, robot: int, t: float) -> bool:
         if robot in self.dead or robot in self.unhealthy or robot in self.paused:
             return False
+        if robot not in self.started:
+            return False  # not (yet) running: to the swarm, a dead robot
         window = self.bounds.takeover + self.params.t_max
         for ft, fault in self.faults:
             if robot not in fault.robots and fault.kind != "partition":

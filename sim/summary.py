@@ -266,6 +266,19 @@ def lateness_warning(figures: Mapping[str, Any], params: Params,
     return text
 
 
+def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
+                grace: float) -> dict[int, float]:
+    """robot -> run time its node first logged `started`, for the robots that started
+    after the start-up grace (their watchers rightly took them for dead) and had no fault
+    before (a restart starts late on purpose)."""
+    first: dict[int, float] = {}
+    for e in events:
+        if e["event"] == "started":
+            first.setdefault(int(e["robot"]), float(e["t"]))
+    return {r: t for r, t in sorted(first.items()) if t > grace
+            and not any(f.kind != "partition" and f.robot == r and f.at <= t for f in faults)}
+
+
 def summarize_realtime(
     result: RealtimeResult, faults: list[Fault], plan: SwarmPlan, params: Params, *,
     loss: float,
@@ -283,6 +296,15 @@ def summarize_realtime(
     warning = lateness_warning(figures, params, summary.violations, summary.false_suspicions)
     if warning is not None:
         summary.warnings.append(warning)
+    slow = slow_starts(result.events, faults, params.startup_grace)
+    if slow:
+        late_robots = ", ".join(f"{r} at {t:.2f} s" for r, t in list(slow.items())[:10])
+        summary.warnings.append(
+            f"{len(slow)} robot(s) started after the start-up grace of "
+            f"{params.startup_grace:g} s ({late_robots}{', ...' if len(slow) > 10 else ''})"
+            ": this machine could not start the swarm in time, and the swarm rightly took "
+            "them for dead (their takeovers are no protocol failure)")
+        summary.extra["slow_starts"] = {str(r): round(t, 3) for r, t in slow.items()}
     if result.interrupted is not None:
         summary.warnings.append(f"interrupted by {result.interrupted} at t={end:.2f} s of "
                                 f"{result.duration:g} s: a partial run")

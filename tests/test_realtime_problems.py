@@ -82,6 +82,23 @@ def test_suspicions_of_healthy_robots_are_counted(paper: tuple[SwarmPlan, Params
     assert json.loads(summary.to_json())["false_suspicions"] == 1
 
 
+def test_a_robot_started_after_the_grace_is_dead_to_the_swarm_and_warned_about(
+    paper: tuple[SwarmPlan, Params],
+) -> None:
+    plan, params = paper
+    # A loaded machine started robot 2's daemon at 3.5 s: robot 6 had replaced it.
+    events = [e for e in _started() if e["robot"] != 2] + [
+        {"t": 3.3, "robot": 6, "event": "takeover", "function": "f2", "epoch": 1,
+         "replaced": 2},
+        {"t": 3.5, "robot": 2, "event": "started", "role": "active", "function": "f2"},
+        {"t": 3.6, "robot": 2, "event": "fenced", "function": "f2", "epoch": 1}]
+    summary = summarize_realtime(_result(events=events), [], plan, params, loss=0.0)
+    assert summary.violations == [] and summary.false_takeovers == []
+    assert summary.extra["slow_starts"] == {"2": 3.5}
+    assert any("started after the start-up grace" in w and "2 at 3.50 s" in w
+               for w in summary.warnings)
+
+
 def test_lateness_leaves_out_a_paused_robot_and_counts_on_time_wake_ups() -> None:
     late = [(2, 3.2, 2000.0), (2, 5.5, 900.0), (4, 1.0, 30.0)]
     figures = lateness_figures(late, 100, [parse_fault("pause:2@3+2")])
