@@ -8,8 +8,10 @@
 2. how many robot processes `swarmd sim` holds on this machine with heartbeats on time:
    grid swarms (configs/make_grid.py) of N = 10, 20, 50 robots with no fault; a passive
    listener in this process timestamps every HEARTBEAT and reports how late each one is
-   against its sender's period (gap - interval), plus false suspicions from the events
-   and the robots' CPU.
+   against its sender's period (gap - interval), plus false suspicions from the events,
+   the robots' own event-loop lateness (sim.robot_proc.LatenessProbe), their CPU and
+   their memory (sum of PSS: forked robots share the preloaded pages, so the sum of RSS
+   overstates it several times).
 
     python bench/bench_realtime.py [--cycles 10] [--sizes 10,20,50] [--seconds 10]
 """
@@ -31,6 +33,8 @@ from typing import Any
 from sim.faults import Fault, parse_fault
 from sim.invariants import check_events
 from sim.realtime import free_udp_port, run_realtime_async
+from sim.summary import lateness_figures
+from sim.summary import percentile as pct
 from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.roles import Role
@@ -39,12 +43,6 @@ from swarmd.transport.udp import UdpTransport
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-
-
-def pct(values: list[float], q: float) -> float:
-    """Nearest-rank percentile (q in [0, 100])."""
-    s = sorted(values)
-    return s[min(len(s) - 1, max(0, round(q / 100 * len(s) + 0.5) - 1))]
 
 
 # -- 1. crash -> takeover -------------------------------------------------------------------
@@ -115,6 +113,18 @@ def grid_swarm(n: int, directory: Path) -> Path:
     return path
 
 
+def pss_mb(pids: list[int]) -> float:
+    """Sum of the proportional set sizes of `pids`, MB (shared pages counted once)."""
+    total = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/smaps_rollup") as f:
+                total += sum(int(line.split()[1]) for line in f if line.startswith("Pss:"))
+        except (OSError, IndexError, ValueError):
+            pass
+    return total / 1024
+
+
 def cpu_seconds(pids: list[int]) -> float:
     total = 0
     for pid in pids:
@@ -159,6 +169,7 @@ async def bench_scale(n: int, seconds: float) -> dict[str, Any]:
             c0, t0 = cpu_seconds(pids), time.monotonic()
             await asyncio.sleep(seconds - 1.0)
             cpu["cores"] = (cpu_seconds(pids) - c0) / (time.monotonic() - t0)
+            cpu["pss_mb"] = pss_mb(pids)
 
         sampler = asyncio.create_task(sample())
         try:
@@ -191,7 +202,9 @@ async def bench_scale(n: int, seconds: float) -> dict[str, Any]:
         "lateness_p99_ms": round(1000 * pct(late, 99), 2) if late else None,
         "lateness_max_ms": round(1000 * max_gap_over, 2),
         "false_suspicions": len(suspects),
+        "loop_lateness_ms": lateness_figures(result.late, result.wakes, []),
         "robot_cpu_cores": round(cpu.get("cores", float("nan")), 3),
+        "robot_pss_mb": round(cpu.get("pss_mb", float("nan"))),
         "on_time": ok,
         # Other work on the machine shares the 2 cores: say how busy it was.
         "loadavg_1min_before_after": [round(load_before, 2), round(load_after, 2)],

@@ -218,8 +218,9 @@ PAUSE_AFTERMATH = 1.0
 machine's (SIGSTOP freezes its loop; after SIGCONT it works off the backlog)."""
 
 
-def _pct(values: Sequence[float], q: float) -> float:
-    """Nearest-rank percentile of sorted `values` (q in [0, 100])."""
+def percentile(values: Sequence[float], q: float) -> float:
+    """Nearest-rank percentile of `values` (q in [0, 100])."""
+    values = sorted(values)
     return values[min(len(values) - 1, max(0, round(q / 100 * len(values) + 0.5) - 1))]
 
 
@@ -239,7 +240,7 @@ def lateness_figures(
     on_time = [0.0] * (n - len(kept))  # under LATE_MS: counted, not listed
     values = sorted(on_time + [ms for _, _, ms in kept])
     worst = max(kept, key=lambda x: x[2], default=None)
-    return {"wakes": n, "p50_ms": _pct(values, 50), "p99_ms": _pct(values, 99),
+    return {"wakes": n, "p50_ms": percentile(values, 50), "p99_ms": percentile(values, 99),
             "max_ms": values[-1], "max_robot": worst[0] if worst else None,
             "max_t": worst[1] if worst else None}
 
