@@ -102,6 +102,10 @@ class RealtimeResult:
     """(robot, run time s, ms) of every event-loop wake-up `LATE_MS` or more late."""
     wakes: int = 0
     """Wake-ups of every robot's lateness probe (the late ones and the others)."""
+    log_errors: list[str] = field(default_factory=list)
+    """Per robot whose log has error lines (swarmd.logs JSON, level error): how many and
+    the first one. A daemon logs an error for what it survives (a link that raised, a
+    node bug): the run went on, but a summary must not pass over it."""
     interrupted: str | None = None
     """The signal that ended the run early (SIGINT, SIGTERM), None if it ran to the end."""
     ended_at: float | None = None
@@ -569,15 +573,19 @@ class Orchestrator:
             self.kill_all()
             await self._drain()
         self._process_problems()
+        deaths = {p.robot_id: p.died_at for p in self._all()
+                  if p.died_at is not None and not p.left}
+        # A robot that died is a problem already, its log quoted there.
+        log_errors = [self._log_errors(r) for r in self.robots if r not in deaths]
         self.events.sort(key=lambda r: float(r.get("t", 0.0)))
         return RealtimeResult(
             events=self.events, robots=self.robots, duration=self.duration, t0=self.t0,
             startup_s=startup, run_dir=self.run_dir if self.report_dir else None,
             problems=self.problems, stats=self.stats,
-            deaths={p.robot_id: p.died_at for p in self._all() if p.died_at is not None
-                    and not p.left},
+            deaths=deaths,
             late=sorted(self.late, key=lambda x: x[1]), wakes=self.wakes,
             interrupted=self.interrupted, ended_at=ended_at,
+            log_errors=[e for e in log_errors if e],
         )
 
     def _all(self) -> list[_Proc]:
@@ -643,6 +651,21 @@ class Orchestrator:
                 pass
             out.append(line)
         return " | ".join(out) or "(empty log)"
+
+    def _log_errors(self, robot: int) -> str:
+        """'robot R: N error(s) in its log, first: ...' or '' (see `log_errors`)."""
+        path = self.run_dir / "logs" / f"robot{robot}.log"
+        errors = []
+        with contextlib.suppress(OSError), path.open(errors="replace") as lines:
+            for line in lines:
+                if '"level":"error"' in line or '"level":"critical"' in line:
+                    with contextlib.suppress(ValueError, TypeError, KeyError):
+                        rec = json.loads(line)
+                        errors.append(f"{rec['msg']}" + (f": {rec['error']}"
+                                                          if "error" in rec else ""))
+        if not errors:
+            return ""
+        return f"robot {robot}: {len(errors)} error(s) in its log, first: {errors[0]}"
 
     def cleanup(self) -> None:
         if self.medium is not None:

@@ -297,6 +297,7 @@ def summarize_realtime(
     warning = lateness_warning(figures, params, summary.violations, summary.false_suspicions)
     if warning is not None:
         summary.warnings.append(warning)
+    summary.warnings.extend(result.log_errors)
     slow = slow_starts(result.events, faults, params.startup_grace)
     if slow:
         late_robots = ", ".join(f"{r} at {t:.2f} s" for r, t in list(slow.items())[:10])

@@ -290,3 +290,21 @@ def test_sigterm_to_the_command_writes_a_partial_report_and_exits_143(tmp_path: 
     assert json.loads((tmp_path / "summary.json").read_text()) == summary
     assert (tmp_path / "events.jsonl").exists() and (tmp_path / "timeline.png").exists()
     assert [p for p in family if _alive(p)] == []
+
+
+def test_errors_a_robot_survived_are_quoted_from_its_log(
+    tmp_path: Path, paper: tuple[SwarmPlan, Params],
+) -> None:
+    orch = Orchestrator(PAPER, duration=1.0, faults=[], loss=0.0, seed=0, physics=False,
+                        live=False, report_dir=tmp_path)
+    log = tmp_path / "realtime" / "logs" / "robot3.log"
+    log.write_text('{"level":"warning","msg":"channel: send_error"}\n'
+                   '{"level":"error","msg":"robot 3: cannot fly f3 (epoch 0): under the ground"}\n'
+                   '{"level":"error","msg":"robot link assign failed","error":"boom"}\n')
+    assert orch._log_errors(3) == ("robot 3: 2 error(s) in its log, first: robot 3: cannot "
+                                   "fly f3 (epoch 0): under the ground")
+    assert orch._log_errors(4) == ""  # no log at all
+    plan, params = paper
+    summary = summarize_realtime(_result(log_errors=[orch._log_errors(3)]), [], plan, params,
+                                 loss=0.0)
+    assert summary.ok and any("cannot fly f3" in w for w in summary.warnings)
