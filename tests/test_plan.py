@@ -65,3 +65,21 @@ def test_self_watch_is_ignored() -> None:
     p = _plan(watches={"a": ("a", "b"), "b": ("a",)})
     assert p.watched("a") == ("b",)
     assert p.watched_by("a") == ("b",)
+
+
+def test_a_robot_naming_its_own_slot_in_subs_covers_it_once() -> None:
+    # A launch file may list a robot's own slot among its subs; it is still one robot
+    # that may take the slot back (a claim race is decided per robot, DESIGN rule 6).
+    p = _plan(robots={1: RobotPlan(1, "a", ("a", "b")), 2: RobotPlan(2, "b"),
+                      3: RobotPlan(3, None, ("a",))})
+    assert p.covered_by("a") == (1, 3)
+    assert p.covered_by("b") == (1, 2)
+
+
+def test_a_vacant_slot_has_no_initial_holder() -> None:
+    # A slot nobody executes at start (only standbys cover it): its watchers suspect it
+    # after the start-up grace (rule 5); there is no robot to name as its holder.
+    p = _plan(robots={1: RobotPlan(1, "a"), 3: RobotPlan(3, None, ("a", "b"))})
+    assert p.initial_holder("a") == 1
+    assert p.initial_holder("b") is None
+    assert p.standbys() == (3,)
