@@ -263,10 +263,10 @@ def test_restored_knowledge_of_a_newer_holder_ends_the_hold_as_standby(
 
 # A robot in its rejoin hold has the STANDBY role, so it also acts as a standby (counts
 # votes, answers LEAVE). `_finish_rejoin` assumes nothing happened meanwhile.
-_REJOIN_BUG = ("rejoin hold (node.py _finish_rejoin / _rejoin_superseded): a robot that "
-               "claims or takes over during its hold raises TransitionError at the hold's "
-               "end or logs started{standby} while ACTIVE; a WARN or CLAIM at a newer "
-               "epoch does not end the hold; a fault during the hold means no `started`")
+# The rejoin hold (node.py `_finish_rejoin`, `_rejoin_superseded`, `_standing_by`): a
+# robot that claimed or took over during its hold raised TransitionError at the hold's end
+# or logged started{standby} while ACTIVE; a WARN or CLAIM at a newer epoch did not end
+# the hold; a fault during the hold meant no `started`. The tests below reproduced each.
 
 Feed = tuple[float, int | Health, wire.Message | None]
 
@@ -307,7 +307,6 @@ def _base(plan: SwarmPlan) -> dict[str, tuple[int, int]]:
     return {f: (plan.initial_holder(f) or 0, 0) for f in plan.functions}
 
 
-@pytest.mark.xfail(strict=True, reason=_REJOIN_BUG)
 @pytest.mark.parametrize("at", [0.1, 0.55], ids=["claim-done-in-hold", "claim-spans-end"])
 def test_a_quorum_during_the_hold_gives_one_consistent_start(
         paper_plan: SwarmPlan, udp_params: Params, at: float) -> None:
@@ -321,7 +320,6 @@ def test_a_quorum_during_the_hold_gives_one_consistent_start(
     assert Assign("f2", 0) not in out
 
 
-@pytest.mark.xfail(strict=True, reason=_REJOIN_BUG)
 def test_a_leave_during_the_hold_gives_one_consistent_start(paper_plan: SwarmPlan,
                                                             udp_params: Params) -> None:
     # 6 reboots holding f2 (epoch 1); in its hold 3 reports a fault and leaves f3,
@@ -332,7 +330,6 @@ def test_a_leave_during_the_hold_gives_one_consistent_start(paper_plan: SwarmPla
     _one_consistent_start(node, out)
 
 
-@pytest.mark.xfail(strict=True, reason=_REJOIN_BUG)
 def test_a_fault_during_the_hold_still_tells_how_the_robot_started(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     feed: list[Feed] = [(0.1, Health.FAULTY, None), (1.0, Health.OK, None)]
@@ -341,7 +338,6 @@ def test_a_fault_during_the_hold_still_tells_how_the_robot_started(
     assert node.snapshot().role is Role.STANDBY
 
 
-@pytest.mark.xfail(strict=True, reason=_REJOIN_BUG)
 def test_a_claim_at_a_newer_epoch_ends_the_hold(paper_plan: SwarmPlan,
                                                 udp_params: Params) -> None:
     # `_rejoin_superseded`: "Someone holds or claims our old slot at a newer epoch: stay

@@ -236,7 +236,10 @@ class Node:
                 self._release()
             elif self.claim is not None:
                 self.claim = None
-            self.rejoin = None
+            if self.rejoin is not None:
+                self.rejoin = None  # a faulty robot resumes nothing: it is a standby now
+                if self.started:
+                    self._emit("started", role="standby", function=None)
             self._to(Trigger.FAULT)
             self._clear_votes()
         elif was_faulty:
@@ -367,7 +370,7 @@ class Node:
                 self.claim = None
                 self._to(Trigger.REFUTED)
         if self.rejoin is not None and self.rejoin[0] == f and sender != self.robot_id:
-            self._rejoin_superseded(f)
+            self._rejoin_superseded(f, self.known[f][1])
 
     def _on_warn(self, sender: int, w: wire.Warn, now: float) -> None:
         f = self.plan.function_at(w.function)
@@ -380,9 +383,9 @@ class Node:
                 self._emit("refute", subject=self.robot_id, function=f)
             return
         holder, epoch = self.known[f]
-        if w.epoch > epoch and self.rejoin is not None and self.rejoin[0] == f:
-            self._rejoin_superseded(f)
-        if f not in self.covers or self.role != Role.STANDBY or self.health == Health.FAULTY:
+        if self.rejoin is not None and self.rejoin[0] == f:
+            self._rejoin_superseded(f, w.epoch)
+        if f not in self.covers or not self._standing_by():
             return
         if w.epoch < epoch or (w.epoch == epoch and w.suspect != holder):
             return  # about an older holder: stale
@@ -439,7 +442,7 @@ class Node:
         if votes is not None:
             votes.clear()
         if self.rejoin is not None and self.rejoin[0] == f:
-            self._rejoin_superseded(f)
+            self._rejoin_superseded(f, c.epoch)
 
     def _on_leave(self, sender: int, lv: wire.Leave, now: float) -> None:
         f = self.plan.function_at(lv.function)
@@ -455,7 +458,7 @@ class Node:
             if not self._live_standby(f, sender, now):
                 watch.mark_alerted()
                 self._emit("alert", function=f, reason="no standby left")
-        if f in self.covers and self.role == Role.STANDBY and self.health != Health.FAULTY:
+        if f in self.covers and self._standing_by():
             self._start_claim(f, sender, epoch, now, trigger=Trigger.LEAVE_HEARD)
 
     # ------------------------------------------------------------------ transitions
@@ -527,13 +530,22 @@ class Node:
         self._watch_neighbours(now)
         self._restart_heartbeats(now)
 
-    def _rejoin_superseded(self, f: str) -> None:
-        """Someone holds or claims our old slot at a newer epoch: stay a standby."""
+    def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
+        """Someone holds, warns about or claims our old slot at `seen_epoch`: newer than
+        the one we held (or held by another robot), we stay a standby. WARN and CLAIM
+        do not update `known` (a liar must not move it), so their epoch is passed in."""
         assert self.rejoin is not None
         _, epoch, _ = self.rejoin
-        if self.known[f][1] > epoch or self.known[f][0] != self.robot_id:
+        if seen_epoch > epoch or self.known[f][1] > epoch or self.known[f][0] != self.robot_id:
             self.rejoin = None
             self._emit("started", role="standby", function=None)
+
+    def _standing_by(self) -> bool:
+        """A standby that may vote and claim (Fig. 9): not faulty, and not in the rejoin
+        hold, where it still means to resume its own slot (rule 2 across a reboot) and
+        must not take another one meanwhile."""
+        return self.role == Role.STANDBY and self.health != Health.FAULTY \
+            and self.rejoin is None
 
     def _to(self, trigger: Trigger) -> None:
         self.role = transition(self.role, trigger)
