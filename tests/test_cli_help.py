@@ -135,6 +135,18 @@ def test_emulating_no_radio_is_a_usage_error() -> None:
 
 
 def test_start_refuses_an_unknown_log_level_as_a_usage_error() -> None:
-    result = runner.invoke(app, ["start", "-c", "configs/robot-example.yaml",
+    result = runner.invoke(app, ["start", "-c", str(ROOT / "configs" / "robot-example.yaml"),
                                  "--log-level", "bogus"])
     assert result.exit_code == 2 and "'bogus' is not one of" in result.output
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--transport", "bogus"], "'bogus' is not one of udp, xbee, serial"),
+    (["--virtual", "--transport", "xbee"], "--virtual has no channel"),
+    (["--no-physics", "--craft", "x2"], "--craft: only with physics"),
+    (["--virtual", "--no-physics"], "give one of the two"),
+])
+def test_sim_refuses_an_option_its_mode_would_ignore(args: list[str], words: str) -> None:
+    result = runner.invoke(app, ["sim", str(ROOT / "configs" / "paper.yaml"), "--duration", "1",
+                                 *args])
+    assert result.exit_code == 2 and words in result.stderr

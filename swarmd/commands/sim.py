@@ -25,6 +25,10 @@ FAULT_HELP = (
 )
 
 
+TRANSPORTS = ("udp", "xbee", "serial")
+"""Channels of the real-time mode (sim.realtime)."""
+
+
 def register(app: typer.Typer) -> None:
     """Add the `sim` command to the CLI."""
 
@@ -87,6 +91,22 @@ def register(app: typer.Typer) -> None:
         # Problems are plain text: no rich markup (a `[x, y, z]` in a message is not a
         # tag) and no wrapping (one problem a line, for grep).
         err = Console(stderr=True, highlight=False, markup=False, soft_wrap=True)
+        # An option the chosen mode ignores is refused, not silently dropped: the user
+        # would believe the run used it.
+        usage = []
+        if transport not in TRANSPORTS:
+            usage.append(f"--transport: {transport!r} is not one of {', '.join(TRANSPORTS)}")
+        elif virtual and transport != "udp":
+            usage.append("--transport: --virtual has no channel (it runs every core in "
+                         "this process); drop --virtual to use emulated radios")
+        if craft is not None and (virtual or no_physics):
+            usage.append("--craft: only with physics (not with --virtual or --no-physics)")
+        if virtual and no_physics:
+            usage.append("--no-physics: --virtual never flies; give one of the two")
+        for u in usage:
+            err.print(u)
+        if usage:
+            raise typer.Exit(2)
         try:
             cfg = load_swarm(swarm)
         except ConfigError as exc:
