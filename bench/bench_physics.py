@@ -146,15 +146,15 @@ def bench_links(n: int, seconds: float) -> dict[str, Any]:
 
 
 def grid_swarm(n: int, directory: Path) -> Path:
-    """A grid swarm of about n robots: rows x cols active plus one standby per row."""
-    shapes = {10: (2, 4), 20: (2, 9), 30: (3, 9), 40: (4, 9), 50: (5, 9)}  # rows*cols + rows
-    rows, cols = shapes[n]
+    """A grid swarm of exactly n robots (configs/make_grid.py `write_grid`)."""
     spec = importlib.util.spec_from_file_location("make_grid", ROOT / "configs" / "make_grid.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    path = directory / f"grid{n}.yaml"
-    path.write_text(module.grid_yaml(rows, cols))
+    try:
+        path: Path = module.write_grid(n, directory)
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     return path
 
 

@@ -96,20 +96,15 @@ async def bench_takeover(cycles: int) -> dict[str, Any]:
 
 
 def grid_swarm(n: int, directory: Path) -> Path:
-    """A grid swarm of n robots: rows x cols active + one standby per row."""
-    # rows x (cols + 1) robots: cols active and one standby in each row.
-    shapes = {10: (2, 4), 20: (2, 9), 30: (3, 9), 40: (4, 9), 50: (5, 9), 60: (6, 9),
-              80: (8, 9), 100: (10, 9)}
-    if n not in shapes:
-        raise SystemExit(f"size {n} not in {sorted(shapes)}")
-    assert shapes[n][0] * (shapes[n][1] + 1) == n, shapes[n]
+    """A grid swarm of exactly n robots (configs/make_grid.py `write_grid`)."""
     spec = importlib.util.spec_from_file_location("make_grid", ROOT / "configs" / "make_grid.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    rows, cols = shapes[n]
-    path = directory / f"grid{n}.yaml"
-    path.write_text(module.grid_yaml(rows, cols))
+    try:
+        path: Path = module.write_grid(n, directory)
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     return path
 
 

@@ -50,6 +50,26 @@ def grid_yaml(rows: int, cols: int, swarm_id: int = 4100) -> str:
     return "\n".join(out) + "\n"
 
 
+def grid_shape(n: int) -> tuple[int, int]:
+    """(rows, cols) of a grid swarm of exactly `n` robots: rows x cols active robots plus
+    one standby per row, so n = rows * (cols + 1). At least 2 rows and 2 columns, so every
+    slot has 2 grid neighbours (the quorum, DESIGN rule 3); rows as close to 9 columns as
+    n allows (the benchmarks' 10 x 9 grid). ValueError for an n no grid makes."""
+    shapes = [(r, n // r - 1) for r in range(2, n // 3 + 1) if n % r == 0 and n // r - 1 >= 2]
+    if not shapes:
+        raise ValueError(f"no grid swarm of {n} robots: n must be rows * (cols + 1) with "
+                         "rows >= 2 and cols >= 2 (e.g. 6, 8, 9, 10, 12, 20, 30, 50, 100)")
+    return min(shapes, key=lambda rc: (abs(rc[1] - 9), rc[0]))
+
+
+def write_grid(n: int, directory: Path) -> Path:
+    """Write `grid<n>.yaml` (exactly n robots, `grid_shape`) into `directory`."""
+    rows, cols = grid_shape(n)
+    path = Path(directory) / f"grid{n}.yaml"
+    path.write_text(grid_yaml(rows, cols))
+    return path
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     ap.add_argument("--rows", type=int, default=10)
