@@ -215,7 +215,8 @@ def report_pictures(
         except (OSError, ValueError, KeyError, TypeError) as exc:
             out.setdefault("skipped", []).append(f"{path.name}: {exc}")
     if not trajs:
-        out["video_error"] = "no trajectories (run without physics?)"
+        out["video_error"] = ("no trajectory files under realtime/state/ (a run without "
+                              "physics, or one stopped before the robots flew)")
         return out
     trajs = [_with_fall(tr, events) for tr in trajs]
     out["trajectory_png"] = trajectory_png(trajs, report_dir / "trajectories.png", functions)
