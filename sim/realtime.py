@@ -72,7 +72,10 @@ from sim.netfilter import partition_windows
 START_MARGIN = 0.3
 """s between the last robot's `ready` and t0: enough to deliver `go` to 50 processes."""
 READY_TIMEOUT = 20.0
-"""s allowed for every robot process to load its config and open its transport."""
+"""s allowed for every robot process to load its config and open its transport, plus
+`READY_PER_ROBOT` for each robot: an overloaded machine starts a big swarm slowly (80
+robots on one busy core took 25 s) and must be waited for, not refused."""
+READY_PER_ROBOT = 0.5
 STARTED_GRACE = 3.0
 """s a live robot process has, from its start, to log `started` before that is a problem."""
 
@@ -307,6 +310,7 @@ class Orchestrator:
         self.group = group
         self.port = port or free_udp_port()
         self.robots = robot_ids(swarm_path)
+        self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
         # Absolute: the robot files written below name their state_dir, and a relative
         # path in a robot file is read relative to that file (docs/config.md), so
         # `--report out/demo` put the trajectories under out/demo/realtime/robots/out/...
@@ -534,11 +538,11 @@ class Orchestrator:
             for robot in self.robots:
                 self.procs[robot] = self._spawn(robot, None)
             self._ready_check()
-            ready = await self._until(self._ready, READY_TIMEOUT)
+            ready = await self._until(self._ready, self.ready_timeout)
             if not ready and self.interrupted is None:
                 slow = [r for r, p in self.procs.items() if not p.ready]
                 raise RuntimeError(
-                    f"robots {slow} not ready after {READY_TIMEOUT:g} s: "
+                    f"robots {slow} not ready after {self.ready_timeout:g} s: "
                     + "; ".join(f"robot {r}: {self._log_tail(self.procs[r])}" for r in slow))
             startup = time.monotonic() - started
             failed = [p for p in self.procs.values() if not p.ready]

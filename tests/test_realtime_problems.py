@@ -239,6 +239,7 @@ async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
 
     monkeypatch.setattr(realtime, "write_robot_file", robot_file)
     monkeypatch.setattr(realtime, "READY_TIMEOUT", 1.5)
+    monkeypatch.setattr(realtime, "READY_PER_ROBOT", 0.0)
     with pytest.raises(RuntimeError, match=r"robots \[3\] not ready after 1.5 s"):
         await asyncio.wait_for(run_realtime_async(PAPER, duration=2.0, report_dir=tmp_path),
                                30.0)
