@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
+import os
+import threading
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -144,3 +147,82 @@ async def test_missing_radio_at_start_keeps_running_and_retries(tmp_path: Path) 
             assert tr.up
         finally:
             await tr.close()
+
+
+def emulator_killed(medium: Medium, n: int) -> None:
+    """What SIGKILL of `swarmd xbee emulate` does to radio n: the pty master closes and
+    nobody removes the symlink (the node stays while our transport holds it open)."""
+    with medium._lock:
+        port = medium._ports.pop(n)
+        medium._selector.unregister(port.master)
+        os.close(port.master)
+        os.close(port.slave)
+
+
+async def watched(port: str) -> tuple[XBeeTransport, Sink]:
+    """A started transport with a fast watchdog and reopen, and its sink."""
+    tr = XBeeTransport(port=port, reopen_min=0.05, reopen_max=0.1, watchdog_interval=0.05)
+    sink = Sink()
+    await tr.start(sink.frame, sink.event)
+    return tr, sink
+
+
+async def test_hung_up_port_is_reported_without_a_log_flood(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    # Audit reproducer: the emulator SIGKILLed under an idle daemon. digi-xbee's reader
+    # logged ~30,000 warnings a second (the daemon's stdout pipe filled, every logging
+    # thread blocked, SIGTERM hung) and no transport_down came.
+    caplog.set_level(logging.WARNING, logger="digi.xbee.reader")
+    with Medium(2, directory=tmp_path) as medium:
+        tr, sink = await watched(medium.path(2))
+        try:
+            emulator_killed(medium, 2)
+            await sink.until(lambda: "transport_down" in sink.names())
+            assert not tr.up
+            down = dict(sink.events)["transport_down"]
+            assert "hung up" in down["reason"]
+            assert not [r for r in caplog.records if r.name == "digi.xbee.reader"]
+            medium.replug(2)  # a new emulator on the same path
+            await sink.until(lambda: sink.names().count("transport_up") == 2)
+        finally:
+            await asyncio.wait_for(tr.close(), 5)
+
+
+async def test_hung_up_port_is_noticed_by_the_watchdog_alone(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The POLLHUP check does not depend on digi-xbee's log text: with the reader's
+    # signal ignored, the watchdog still reports the port within an interval.
+    monkeypatch.setattr(XBeeTransport, "_reader_hung_up", lambda self: None)
+    with Medium(1, directory=tmp_path) as medium:
+        tr, sink = await watched(medium.path(1))
+        try:
+            emulator_killed(medium, 1)
+            await sink.until(lambda: "transport_down" in sink.names())
+            assert "hung up (radio or emulator gone?)" in dict(sink.events)[
+                "transport_down"]["reason"]
+        finally:
+            await asyncio.wait_for(tr.close(), 5)
+
+
+async def test_close_is_bounded_when_the_library_hangs(tmp_path: Path) -> None:
+    # digi-xbee's close blocking for good must not hold the daemon's stop (nor the
+    # interpreter's exit: the device thread is a daemon thread).
+    gate = threading.Event()
+    with Medium(1, directory=tmp_path) as medium:
+        tr = XBeeTransport(port=medium.path(1), close_timeout=0.2)
+        await tr.start(lambda _: None, lambda *_: None)
+        dev = tr._device
+        real_close = dev.close
+
+        def stuck_close() -> None:
+            gate.wait(10)
+            real_close()
+
+        dev.close = stuck_close
+        device_threads = [t for t in threading.enumerate() if t.name.startswith("xbee-")]
+        try:
+            await asyncio.wait_for(tr.close(), 5)
+            assert tr.counters["close_timeout"] == 1
+            assert device_threads and all(t.daemon for t in device_threads)
+        finally:
+            gate.set()

@@ -20,7 +20,17 @@ arm's length from the event loop (STYLE.md point 8):
   with the config and every difference is named (TransportError);
 - a radio that is pulled or stops answering is reported (`transport_down`) and reopened
   with exponential back-off (`reopen.py`) while the daemon keeps running (`transport_up`
-  when back).
+  when back). A port that hung up (a pty whose emulator died, a USB adapter that lost
+  its radio) is noticed even while the device node stays (we hold it open): the
+  watchdog polls the fd for POLLHUP, and digi-xbee's reader, which spins logging
+  "device reports readiness to read but returned no data" thousands of times a
+  second, is muted for our ports and taken as the same sign (`_ReaderHangups`). That
+  flood once filled the daemon's stdout pipe and blocked every thread that logged,
+  the SIGTERM handler included;
+- nothing here can hang the daemon's stop: the device thread is a daemon thread,
+  `close()` gives digi-xbee's close `close_timeout` seconds and then abandons the
+  thread (logged), and writes have a serial write timeout, so a radio that stopped
+  reading its UART fails a write instead of blocking the thread forever.
 """
 
 from __future__ import annotations
@@ -29,12 +39,15 @@ import asyncio
 import contextlib
 import logging
 import os
+import queue
+import select
 import threading
 import time
 from collections import Counter, deque
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from swarmd.transport.base import (
     ChannelEvents,
@@ -50,6 +63,74 @@ PROTOCOLS = ("zigbee", "802.15.4", "digimesh")
 MAX_PAYLOAD = {"zigbee": 92, "802.15.4": 100, "digimesh": 73}
 MAX_PAYLOAD_ENCRYPTED = {"zigbee": 74, "802.15.4": 95, "digimesh": 65}
 BROADCAST64 = 0x000000000000FFFF
+HANGUP_EVENTS = select.POLLHUP | select.POLLERR | select.POLLNVAL
+_T = TypeVar("_T")
+
+
+class _DeviceThread(Executor):
+    """The one thread that talks to a radio: an executor like
+    `ThreadPoolExecutor(1)` but on a *daemon* thread, never joined at exit.
+    digi-xbee's close or open can block for good on a device in a bad state; a
+    `ThreadPoolExecutor` thread stuck like that keeps `asyncio.run` (its default
+    executor shutdown) and the interpreter's exit waiting forever, i.e. a daemon that
+    needs SIGKILL. Abandoning a stuck daemon thread lets the process exit."""
+
+    def __init__(self, name: str) -> None:
+        self._jobs: queue.SimpleQueue[tuple[Future[Any], Callable[..., Any], tuple[Any, ...]]
+                                      | None] = queue.SimpleQueue()
+        self._closed = False
+        self.thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self.thread.start()
+
+    def submit(self, fn: Callable[..., _T], /, *args: Any, **kwargs: Any) -> Future[_T]:
+        if self._closed:
+            raise RuntimeError("device thread closed")
+        future: Future[_T] = Future()
+        self._jobs.put((future, fn, args))
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop after the queued jobs; never waits (a stuck job would wait forever)."""
+        self._closed = True
+        self._jobs.put(None)
+
+    def _run(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            future, fn, args = job
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                future.set_result(fn(*args))
+            except BaseException as exc:
+                future.set_exception(exc)
+
+
+class _ReaderHangups(logging.Filter):
+    """Mutes digi-xbee's reader on a hung-up port and tells our transport.
+
+    On a port whose other end is gone (pty master closed, USB adapter lost its
+    device) every read returns no data and the library's reader logs a warning and
+    loops: ~30,000 lines in half a second measured. The record arrives here on the
+    listener thread; when that thread belongs to one of our open radios the record is
+    dropped (counted as `hangup_reads`) and the transport is woken up to report the
+    radio down. Other threads' records pass unchanged."""
+
+    MESSAGE = "returned no data"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.listeners: dict[threading.Thread, XBeeTransport] = {}
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        owner = self.listeners.get(threading.current_thread())
+        if owner is None or self.MESSAGE not in record.getMessage():
+            return True
+        owner._reader_hung_up()
+        return False
+
+
+_HANGUPS = _ReaderHangups()
+logging.getLogger("digi.xbee.reader").addFilter(_HANGUPS)
 
 
 class RadioMismatch(TransportError):
@@ -97,6 +178,7 @@ class XBeeTransport:
         reopen_min: float = 0.5,
         reopen_max: float = 10.0,
         watchdog_interval: float = 0.5,
+        close_timeout: float = 3.0,
     ) -> None:
         if protocol not in PROTOCOLS:
             raise TransportError(f"unknown XBee protocol {protocol!r}; one of {PROTOCOLS}")
@@ -119,11 +201,13 @@ class XBeeTransport:
         self.reopen_min = reopen_min
         self.reopen_max = reopen_max
         self.watchdog_interval = watchdog_interval
+        self.close_timeout = close_timeout
+        """s. How long `close()` waits for digi-xbee's close before abandoning it."""
         self.info: RadioInfo | None = None
         self.counters: Counter[str] = Counter()
         self._events = ChannelEvents("xbee", self.counters, log)
         self._max_payload = MAX_PAYLOAD[protocol]
-        self._executor: ThreadPoolExecutor | None = None
+        self._executor: _DeviceThread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
         self._device: Any = None
@@ -143,6 +227,9 @@ class XBeeTransport:
         self._rx: deque[bytes] = deque()
         self._rx_max = receive_queue
         self._rx_scheduled = False
+        # Hang-ups seen by digi-xbee's reader thread (_ReaderHangups), for this device.
+        self._hangup_reads = 0
+        self._hangup_reported = False
 
     @classmethod
     def from_config(cls, cfg: Any) -> XBeeTransport:
@@ -166,7 +253,7 @@ class XBeeTransport:
         `transport_down` and retried in the background (the daemon keeps running)."""
         self._loop = asyncio.get_running_loop()
         self._on_frame, self._events.callback = on_frame, on_event
-        self._executor = ThreadPoolExecutor(1, thread_name_prefix=f"xbee-{self.port}")
+        self._executor = _DeviceThread(f"xbee-{self.port}")
         self._reopener = Reopener(f"XBee {self.port}", self._open, self.counters,
                                   minimum=self.reopen_min, maximum=self.reopen_max,
                                   describe=_describe, on_failure=self._reopen_failed,
@@ -174,7 +261,7 @@ class XBeeTransport:
         try:
             await self._open()
         except RadioMismatch:
-            await self._shutdown_executor()
+            self._shutdown_executor()
             raise
         except Exception as exc:  # no device, timeout, wrong mode: keep running, retry
             self._went_down(f"cannot open {self.port}: {_describe(exc)}")
@@ -190,13 +277,23 @@ class XBeeTransport:
         self._drop_in_flight("closed")
         self._up = False
         if self._executor is not None:
-            await asyncio.get_running_loop().run_in_executor(self._executor, self._close_device)
-        await self._shutdown_executor()
+            closing = asyncio.get_running_loop().run_in_executor(self._executor,
+                                                                 self._close_device)
+            try:
+                # Bounded: the daemon's stop must not wait on a wedged library (module
+                # docstring); the device thread is a daemon thread, left behind.
+                await asyncio.wait_for(closing, self.close_timeout)
+            except TimeoutError:
+                self.counters["close_timeout"] += 1
+                log.error("XBee %s: closing the radio did not finish in %.1f s; "
+                          "abandoned (its thread is left behind)", self.port,
+                          self.close_timeout)
+        self._shutdown_executor()
 
-    async def _shutdown_executor(self) -> None:
+    def _shutdown_executor(self) -> None:
         if self._executor is not None:
             executor, self._executor = self._executor, None
-            await asyncio.get_running_loop().run_in_executor(None, executor.shutdown)
+            executor.shutdown(wait=False)
 
     async def _open(self) -> None:
         assert self._executor is not None and self._loop is not None
@@ -250,7 +347,29 @@ class XBeeTransport:
                 self._went_down("serial port closed")
             elif os.path.realpath(self.port) != self._device_node:
                 self._went_down(f"{self.port} disappeared (radio unplugged?)")
+            elif _hung_up(dev):
+                # The node stays while we hold it open: a pty whose emulator died, a
+                # USB adapter whose radio is gone. POLLHUP is the sign.
+                self._went_down(f"{self.port} hung up (radio or emulator gone?)")
         self._arm_watchdog()
+
+    def _reader_hung_up(self) -> None:
+        """On digi-xbee's reader thread (`_ReaderHangups`): a read found the port hung
+        up. Counted; the loop is told once per opened device."""
+        self._hangup_reads += 1
+        if self._hangup_reported:
+            return
+        self._hangup_reported = True
+        loop, dev = self._loop, self._device
+        if loop is not None and not loop.is_closed():
+            with contextlib.suppress(RuntimeError):  # loop closing under us
+                loop.call_soon_threadsafe(self._reader_reported_hangup, dev)
+
+    def _reader_reported_hangup(self, dev: Any) -> None:
+        self.counters["hangup_reads"] = self._hangup_reads
+        if self._up and dev is not None and dev is self._device and not self._closing:
+            self._went_down(f"{self.port} hung up (reads return no data: radio or "
+                            "emulator gone?)")
 
     # -- executor-thread side -----------------------------------------------------------
     def _open_device(self) -> RadioInfo:
@@ -272,12 +391,21 @@ class XBeeTransport:
                              self.port, my.hex().upper())
             dev.add_data_received_callback(self._on_data)
             dev.add_packet_received_callback(self._on_packet)
+            serial_port = getattr(dev, "serial_port", None)
+            if serial_port is not None:
+                # A radio that stops reading its UART fails the write (-> down, reopen)
+                # instead of blocking this thread, and with it close(), for good.
+                serial_port.write_timeout = self.status_timeout
         except BaseException:
             with contextlib.suppress(Exception):
                 dev.close()
             raise
+        self._hangup_reported = False
         self._device = dev
         self._device_node = os.path.realpath(self.port)
+        listener = getattr(dev, "_packet_listener", None)  # digi-xbee's reader thread
+        if isinstance(listener, threading.Thread):
+            _HANGUPS.listeners[listener] = self
         return info
 
     def _inspect(self, dev: Any, operating_mode: Any) -> RadioInfo:
@@ -320,6 +448,9 @@ class XBeeTransport:
         if dev is not None:
             with contextlib.suppress(Exception):
                 dev.close()
+            listener = getattr(dev, "_packet_listener", None)
+            if isinstance(listener, threading.Thread):
+                _HANGUPS.listeners.pop(listener, None)
 
     def _write(self, frame_id: int, frame: bytes) -> None:
         from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
@@ -460,6 +591,19 @@ def _port_open(dev: Any) -> bool:
         return bool(dev.comm_iface.is_interface_open)
     except Exception:
         return False
+
+
+def _hung_up(dev: Any) -> bool:
+    """The serial port's fd reports a hang-up (poll, no wait; on the loop thread)."""
+    fd = getattr(getattr(dev, "serial_port", None), "fd", None)
+    if not isinstance(fd, int):
+        return False
+    poller = select.poll()
+    poller.register(fd, select.POLLIN)
+    try:
+        return any(ev & HANGUP_EVENTS for _, ev in poller.poll(0))
+    except OSError:
+        return True
 
 
 def _describe(exc: BaseException) -> str:
