@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
+import socket
 import sys
 from pathlib import Path
 
@@ -185,3 +187,39 @@ async def test_run_command_list_without_shell_string_with_one(tmp_path: Path) ->
         await run_command([str(tmp_path / "no-such-program")], {}, 10.0)
     with pytest.raises(TimeoutError):
         await run_command("sleep 30", {}, 0.1)
+
+
+async def test_socket_link_keeps_the_health_line_of_a_client_that_resets(
+        tmp_path: Path) -> None:
+    # Audit reproducer: with a task assigned, every connection is sent it at once; a
+    # robot that writes its health and closes without reading resets the connection,
+    # and a StreamReader raised the reset before returning the line it had buffered:
+    # the health was lost and the robot timed out to FAULTY.
+    path = tmp_path / "r.sock"
+    link = SocketLink(path, health_timeout=30.0)
+    health = HealthLog()
+    await link.start(health)
+    link.assign("f2", 1, {})
+    clients = 200
+
+    def write_and_leave() -> None:
+        for _ in range(clients):
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+                s.connect(str(path))
+                s.sendall(b'{"health": "ok"}\n')
+                # Closed without reading: the assignment sent to us resets the link.
+
+    try:
+        # A thread, so the clients race the daemon's loop as separate programs do.
+        await asyncio.to_thread(write_and_leave)
+
+        async def all_seen() -> None:
+            while link.counters["health"] < clients:
+                await asyncio.sleep(0.01)
+
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(all_seen(), 3.0)
+        assert link.counters["health"] == clients
+        assert health.values == [Health.OK] * clients
+    finally:
+        await link.close()

@@ -16,6 +16,15 @@ next good health line clears it.
 Bad input never takes the daemon down: a line that is not JSON, not an object, too long,
 or with an unknown health value is counted in `counters["bad_lines"]`, logged, and
 ignored (it does not refresh the health timer).
+
+Each connection is an `asyncio.Protocol` (`_Connection`) whose lines are handled in
+`data_received`, as they arrive. A robot that writes its health and closes without
+reading what we sent (the assignment, sent on connect) resets the connection, or makes
+our write fail first; a `StreamReader` raised that before returning the line it had
+buffered, and a failed write closes the transport without reading again. Either way
+the health was lost (about 180 of 200 such clients, tests/test_link.py) and the robot
+timed out to FAULTY. Now the lines still queued on the socket are read in
+`connection_lost` (`_Connection._drain`).
 """
 
 from __future__ import annotations
@@ -58,8 +67,7 @@ class SocketLink:
                                          "connections": 0, "write_errors": 0}
         self._on_health: HealthCallback | None = None
         self._server: asyncio.AbstractServer | None = None
-        self._writers: set[asyncio.StreamWriter] = set()
-        self._tasks: set[asyncio.Task[None]] = set()
+        self._connections: set[_Connection] = set()
         self._timer: asyncio.TimerHandle | None = None
         self._timed_out = False
         self._current: dict[str, Any] | None = None
@@ -70,8 +78,8 @@ class SocketLink:
         self._remove_stale()
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._server = await asyncio.start_unix_server(
-                self._client, path=str(self.path), limit=LINE_LIMIT)
+            self._server = await asyncio.get_running_loop().create_unix_server(
+                lambda: _Connection(self), path=str(self.path))
             # Only the daemon's user and group may drive the robot's task.
             os.chmod(self.path, 0o660)
         except OSError as exc:
@@ -105,35 +113,18 @@ class SocketLink:
             if self._on_health is not None:
                 self._on_health(Health.FAULTY)
 
-    # -- clients --------------------------------------------------------------------------
-    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        if task is not None:
-            self._tasks.add(task)
+    # -- clients (called by _Connection) --------------------------------------------------
+    def _connected(self, conn: _Connection) -> None:
         self.counters["connections"] += 1
-        self._writers.add(writer)
+        self._connections.add(conn)
         if self._current is not None:
-            self._write(writer, self._current)
-        try:
-            while True:
-                try:
-                    line = await reader.readline()
-                except (asyncio.LimitOverrunError, ValueError):
-                    self._bad(f"line longer than {LINE_LIMIT} bytes; dropping connection")
-                    break
-                except OSError as exc:
-                    log.warning("robot socket read failed", extra={"error": str(exc)})
-                    break
-                if not line:
-                    break
-                self._line(line)
-        finally:
-            self._writers.discard(writer)
-            writer.close()
-            with contextlib.suppress(OSError, asyncio.CancelledError):
-                await writer.wait_closed()
-            if task is not None:
-                self._tasks.discard(task)
+            self._write(conn, self._current)
+
+    def _disconnected(self, conn: _Connection, exc: Exception | None) -> None:
+        self._connections.discard(conn)
+        if exc is not None and not isinstance(exc, ConnectionResetError | BrokenPipeError):
+            # A reset is a robot that wrote and left without reading: normal.
+            log.warning("robot socket read failed", extra={"error": str(exc)})
 
     def _bad(self, why: str) -> None:
         self.counters["bad_lines"] += 1
@@ -161,20 +152,23 @@ class SocketLink:
         if self._on_health is not None:
             self._on_health(health)
 
-    def _write(self, writer: asyncio.StreamWriter, msg: Mapping[str, Any]) -> None:
+    def _write(self, conn: _Connection, msg: Mapping[str, Any]) -> None:
+        transport = conn.transport
+        if transport is None or transport.is_closing():
+            return
         try:
-            if writer.transport.get_write_buffer_size() > WRITE_BUFFER_LIMIT:
+            if transport.get_write_buffer_size() > WRITE_BUFFER_LIMIT:
                 log.warning("robot is not reading its socket; disconnecting it")
-                writer.close()
+                transport.close()
                 return
-            writer.write((json.dumps(msg, separators=(",", ":")) + "\n").encode())
+            transport.write((json.dumps(msg, separators=(",", ":")) + "\n").encode())
         except (OSError, RuntimeError) as exc:
             self.counters["write_errors"] += 1
             log.warning("robot socket write failed", extra={"error": str(exc)})
 
     def _send(self, msg: dict[str, Any]) -> None:
-        for writer in list(self._writers):
-            self._write(writer, msg)
+        for conn in list(self._connections):
+            self._write(conn, msg)
 
     # -- the daemon's output --------------------------------------------------------------
     def assign(self, function: str, epoch: int, params: Mapping[str, Any]) -> None:
@@ -194,14 +188,73 @@ class SocketLink:
         self._on_health = None
         if self._server is not None:
             self._server.close()
-            for writer in list(self._writers):
-                writer.close()
-            for task in list(self._tasks):
-                task.cancel()
-            if self._tasks:
-                await asyncio.gather(*self._tasks, return_exceptions=True)
+            for conn in list(self._connections):
+                if conn.transport is not None:
+                    conn.transport.abort()  # connection_lost runs on the next loop pass
             await self._server.wait_closed()
+            await asyncio.sleep(0)
             self._server = None
         with contextlib.suppress(OSError):
             if stat.S_ISSOCK(os.lstat(self.path).st_mode):
                 os.unlink(self.path)
+
+
+class _Connection(asyncio.Protocol):
+    """One robot controller's connection: lines are handled as they arrive (see the
+    module docstring for why not a StreamReader)."""
+
+    def __init__(self, link: SocketLink) -> None:
+        self.link = link
+        self.transport: asyncio.WriteTransport | None = None
+        self._buffer = bytearray()
+        self._fd = -1
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.WriteTransport)
+        self.transport = transport
+        sock = transport.get_extra_info("socket")
+        self._fd = sock.fileno() if sock is not None else -1
+        self.link._connected(self)
+
+    def data_received(self, data: bytes) -> None:
+        self._buffer += data
+        start = 0
+        while (end := self._buffer.find(b"\n", start)) >= 0:
+            self.link._line(bytes(self._buffer[start : end + 1]))
+            start = end + 1
+        del self._buffer[:start]
+        if len(self._buffer) > LINE_LIMIT:
+            self.link._bad(f"line longer than {LINE_LIMIT} bytes; dropping connection")
+            self._buffer.clear()
+            if self.transport is not None:
+                self.transport.close()
+
+    def eof_received(self) -> bool:
+        self._rest()
+        return False  # close our side too
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if exc is not None:
+            self._drain()
+        self._rest()  # a last line without a newline, also after a reset
+        self.transport = None
+        self.link._disconnected(self, exc)
+
+    def _drain(self) -> None:
+        """What the kernel still holds for us. A write that failed (the robot already
+        closed: EPIPE) makes the transport close without reading again, though the
+        robot's last lines are queued on our socket; the socket itself is closed only
+        after `connection_lost` returns, so read them now (non-blocking)."""
+        for _ in range(LINE_LIMIT // 4096 + 1):
+            try:
+                data = os.read(self._fd, 65536)
+            except OSError:  # EAGAIN: nothing more; ECONNRESET after the data; EBADF
+                return
+            if not data:
+                return
+            self.data_received(data)
+
+    def _rest(self) -> None:
+        if self._buffer:
+            line, self._buffer = bytes(self._buffer), bytearray()
+            self.link._line(line)
