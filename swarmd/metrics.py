@@ -15,6 +15,8 @@ Exported series (``swarmd_`` prefix):
 ``frames_received_total``                   frames taken off the channel (before checks)
 ``frames_dropped_total{reason}``            frames dropped, by reason (core: malformed,
                                             version, auth, replay, ...; runtime: its own)
+``duplicate_id_frames_total``               frames with this robot's id it did not send:
+                                            another daemon runs with the same id
 ``events_total{event}``                     event-log records by name (DESIGN section 3):
                                             ``suspect``, ``vote``, ``takeover``, ...
 ``role{swarmd_role}``                       1 for the current role (ACTIVE, STANDBY, ...)
@@ -111,6 +113,11 @@ class Metrics:
         )
         self._drops = _Drops()
         reg.register(self._drops)
+        self._duplicate_id = Counter(
+            "swarmd_duplicate_id_frames",
+            "Frames with this robot's id that it did not send (a second daemon with the "
+            "same id).", registry=reg,
+        )
         self._events = Counter(
             "swarmd_events", "Event-log records by event name (DESIGN section 3).",
             ["event"], registry=reg,
@@ -152,6 +159,10 @@ class Metrics:
         """The runtime dropped `n` frames itself (e.g. a transport-level error)."""
         with self._drops.lock:
             self._drops.local[reason] = self._drops.local.get(reason, 0) + n
+
+    def duplicate_id(self, n: int = 1) -> None:
+        """`n` frames carried this robot's id but were not sent by it."""
+        self._duplicate_id.inc(n)
 
     def set_drops(self, drops: Mapping[str, int]) -> None:
         """The core's cumulative drop counts (`Snapshot.drops`), replacing the last."""

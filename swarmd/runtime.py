@@ -24,6 +24,14 @@ Nothing raised by the transport, the link, the event sink or even the node propa
 it is logged, counted in `counters`, and the daemon goes on (common rule: bad input never
 takes the daemon down). A node exception is a bug; the timer is re-armed regardless so
 heartbeats continue.
+
+Duplicate robot id. The core drops every frame carrying our own id as `own`: on UDP
+multicast those are our loopback echoes. But a second daemon started with this robot's
+id (a copied robot file) is dropped the same way, silently, and two robots may then
+execute one function (DESIGN rule 2). The runtime remembers the digests of the last
+`SENT_MEMORY` frames it sent; an `own` frame that is not one of them is an impostor's:
+counted as `duplicate_id` (and in the metrics) and logged as an ERROR at most every
+`DUPLICATE_REPORT_S`, in both daemons (each hears the other).
 """
 
 from __future__ import annotations
@@ -63,6 +71,11 @@ without a metrics endpoint still sees a robot with the wrong key (`auth`), anoth
 on the group (`swarm`) or garbage on the channel, without a line per frame."""
 QUIET_DROPS = frozenset({"own"})
 """Drop reasons never reported: `own` is this robot's multicast echo, every frame."""
+SENT_MEMORY = 512
+"""Frames whose digests are kept to recognise our own echoes: many seconds of our own
+traffic, far more than can be in flight or queued (QUEUE_SIZE frames of all robots)."""
+DUPLICATE_REPORT_S = 10.0
+"""s. The duplicate-id ERROR is logged at most this often (counted every frame)."""
 _RATE_LIMIT_S = 1.0  # per name, for channel condition reports (send errors can be per frame)
 
 
@@ -107,7 +120,7 @@ class Runtime:
         self.counters: dict[str, int] = {
             "received": 0, "filtered": 0, "queue_overflow": 0, "sent": 0, "ticks": 0,
             "node_errors": 0, "transport_errors": 0, "link_errors": 0, "sink_errors": 0,
-            "filter_errors": 0, "persist_errors": 0, "state_writes": 0,
+            "filter_errors": 0, "persist_errors": 0, "state_writes": 0, "duplicate_id": 0,
         }
         self.max_lateness = 0.0
         """s. Largest delay seen between a deadline and the tick that served it."""
@@ -129,6 +142,9 @@ class Runtime:
         self.drop_report_interval = DROP_REPORT_S
         self._drops_reported: dict[str, int] = {}
         self._drop_reported_at = -DROP_REPORT_S
+        # hash(frame) of the last SENT_MEMORY frames sent, oldest first (an ordered set).
+        self._sent_digests: dict[int, None] = {}
+        self._duplicate_logged_at = -DUPLICATE_REPORT_S
         self._running = False
         self._loop: asyncio.AbstractEventLoop | None = None
 
@@ -230,6 +246,10 @@ class Runtime:
             log.exception("transport send raised")
             return
         self.counters["sent"] += 1
+        digests = self._sent_digests
+        digests[hash(frame)] = None
+        if len(digests) > SENT_MEMORY:
+            del digests[next(iter(digests))]
         if self.metrics is not None:
             self.metrics.frame_sent()
         if not self.first_broadcast.is_set():
@@ -354,14 +374,18 @@ class Runtime:
         if not self._running:
             return
         node, queue, loop = self.node, self._queue, self.loop
+        drops = node.drops
         for _ in range(min(self.batch, len(queue))):
             data = queue.popleft()
+            own = drops["own"]
             try:
                 actions = node.receive(data, loop.time())
             except Exception:
                 self.counters["node_errors"] += 1
                 log.exception("core node raised on a frame (a bug); frame dropped")
                 continue
+            if drops["own"] != own and hash(bytes(data)) not in self._sent_digests:
+                self._duplicate_id()
             if actions:
                 self._execute(actions)
         self._rearm()
@@ -369,6 +393,18 @@ class Runtime:
             # Yield: timers due meanwhile (our heartbeat) run before the next batch.
             self._drain_scheduled = True
             loop.call_soon(self._drain)
+
+    def _duplicate_id(self) -> None:
+        """A valid frame with our id that we did not send (module docstring)."""
+        self.counters["duplicate_id"] += 1
+        if self.metrics is not None:
+            self.metrics.duplicate_id()
+        now = self.loop.time()
+        if now - self._duplicate_logged_at >= DUPLICATE_REPORT_S:
+            self._duplicate_logged_at = now
+            log.error(f"another daemon is sending as robot {self.robot_id}: two robot "
+                      "files with the same id?",
+                      extra={"robot": self.robot_id, "frames": self.counters["duplicate_id"]})
 
     # ---------------------------------------------------------------- robot health
     def _on_health(self, health: Health) -> None:

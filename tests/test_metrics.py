@@ -89,6 +89,13 @@ def test_two_daemons_in_one_process_do_not_share_counters() -> None:
     assert b"swarmd_frames_sent_total 1.0" in a.render()
 
 
+def test_duplicate_id_frames_are_exported() -> None:
+    m = Metrics()
+    assert b"swarmd_duplicate_id_frames_total 0.0" in m.render()
+    m.duplicate_id(3)
+    assert b"swarmd_duplicate_id_frames_total 3.0" in m.render()
+
+
 @pytest.mark.parametrize("host", ["0.0.0.0", "192.0.2.1", "::"])
 def test_non_loopback_endpoint_is_refused(host: str) -> None:
     with pytest.raises(MetricsError, match="not a loopback address"):

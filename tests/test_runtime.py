@@ -432,3 +432,30 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
         os.kill(pid, 0)  # killed and reaped, not left running
     assert [r.getMessage() for r in caplog.records if r.name == "swarmd.daemon"
             and r.levelname == "ERROR"] == ["alert hook failed", "alert hook timed out; killed"]
+
+
+async def test_runtime_second_daemon_with_our_id_is_reported_not_our_echo(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    # A copied robot file: two daemons as robot 1. Each drops the other's frames as
+    # `own` (as it drops its multicast echoes), so it used to go unnoticed while both
+    # could hold f1 (DESIGN rule 2).
+    port = free_port()
+    a = await launch(robot_cfg(tmp_path / "a", 1, port))
+    try:
+        rt_a = runtime_of(a)
+        await wait_until(lambda: rt_a.node.drops["own"] >= 3, 3.0, "own echoes")
+        assert rt_a.counters["duplicate_id"] == 0  # our echoes are recognised
+        b = await launch(robot_cfg(tmp_path / "b", 1, port))
+        try:
+            rt_b = runtime_of(b)
+            await wait_until(lambda: rt_a.counters["duplicate_id"] > 0
+                             and rt_b.counters["duplicate_id"] > 0, 3.0, "duplicate id")
+        finally:
+            assert await b.finish() == 0
+    finally:
+        assert await a.finish() == 0
+    errors = [r.getMessage() for r in caplog.records if r.name == "swarmd.runtime"
+              and r.levelname == "ERROR"]
+    # Both report, once each (rate-limited to one line per 10 s).
+    assert errors == ["another daemon is sending as robot 1: two robot files with the "
+                      "same id?"] * 2
