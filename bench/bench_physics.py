@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import importlib.util
 import json
 import math
 import multiprocessing
@@ -32,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.path)
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
@@ -143,19 +143,6 @@ def bench_links(n: int, seconds: float) -> dict[str, Any]:
 
 
 # -- 3. swarmd sim with physics -----------------------------------------------------------
-
-
-def grid_swarm(n: int, directory: Path) -> Path:
-    """A grid swarm of exactly n robots (configs/make_grid.py `write_grid`)."""
-    spec = importlib.util.spec_from_file_location("make_grid", ROOT / "configs" / "make_grid.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    try:
-        path: Path = module.write_grid(n, directory)
-    except ValueError as exc:
-        raise SystemExit(str(exc)) from None
-    return path
 
 
 async def bench_sim(n: int, seconds: float) -> dict[str, Any]:

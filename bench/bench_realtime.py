@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import importlib.util
 import itertools
 import json
 import os
@@ -29,6 +28,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.path)
 
 from sim.faults import Fault, parse_fault
 from sim.invariants import check_events
@@ -93,19 +94,6 @@ async def bench_takeover(cycles: int) -> dict[str, Any]:
 
 
 # -- 2. how many robots ----------------------------------------------------------------------
-
-
-def grid_swarm(n: int, directory: Path) -> Path:
-    """A grid swarm of exactly n robots (configs/make_grid.py `write_grid`)."""
-    spec = importlib.util.spec_from_file_location("make_grid", ROOT / "configs" / "make_grid.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    try:
-        path: Path = module.write_grid(n, directory)
-    except ValueError as exc:
-        raise SystemExit(str(exc)) from None
-    return path
 
 
 def pss_mb(pids: list[int]) -> float:
