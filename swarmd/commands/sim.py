@@ -68,7 +68,7 @@ def register(app: typer.Typer) -> None:
             "$SWARMD_QUAD_PRESET, else x2.")] = None,
         transport: Annotated[str, typer.Option(
             "--transport", help="Channel in real time: udp (multicast on loopback), xbee "
-            "or serial (emulated radios on pseudo-terminals). Not used with --virtual.")]
+            "or serial (emulated radios on pseudo-terminals). Refused with --virtual.")]
         = "udp",
     ) -> None:
         """Run the whole swarm on this machine, inject faults, print a summary.
