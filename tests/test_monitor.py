@@ -9,6 +9,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
+from sim.realtime import free_udp_port
 from swarmd.cli import app
 from swarmd.config import load_swarm
 from swarmd.core import params, wire
@@ -162,16 +163,9 @@ def test_monitor_table_renders() -> None:
     assert "f2" in text and "STANDBY" in text
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
 def test_monitor_cli_once_json_hears_the_loopback_channel() -> None:
     swarm = load_swarm(PAPER)
-    port = _free_port()
+    port = free_udp_port()
     group = "239.255.77.7"
     stop = threading.Event()
     tx = Sender()

@@ -16,17 +16,12 @@ from typing import IO, Any
 
 import pytest
 
+from sim.realtime import free_udp_port
 from swarmd.core import wire
 from swarmd.core.actions import EVENT_FIELDS
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
 GROUP = "239.255.77.7"
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def listener(port: int) -> socket.socket:
@@ -75,7 +70,7 @@ def start(config: Path) -> subprocess.Popen[str]:
 
 @pytest.mark.slow
 def test_start_logs_json_reloads_and_leaves_on_sigterm(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     config = tmp_path / "robot.yaml"
     events = tmp_path / "events.jsonl"
     config.write_text(

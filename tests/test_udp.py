@@ -10,15 +10,10 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
+from sim.realtime import free_udp_port
 from swarmd.config.robot import UdpTransportConfig
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Sink:
@@ -36,7 +31,7 @@ class Sink:
 
 
 async def test_udp_two_transports_exchange_frames_on_loopback() -> None:
-    port = free_port()
+    port = free_udp_port()
     a, b = UdpTransport(port=port), UdpTransport(port=port)
     sa, sb = Sink(), Sink()
     await a.start(sa.frame, sa.event)
@@ -57,7 +52,7 @@ async def test_udp_two_transports_exchange_frames_on_loopback() -> None:
 
 
 async def test_udp_other_group_on_same_port_is_not_heard() -> None:
-    port = free_port()
+    port = free_udp_port()
     a = UdpTransport(port=port, group="239.255.77.8")
     b = UdpTransport(port=port)
     sa, sb = Sink(), Sink()
@@ -75,7 +70,7 @@ async def test_udp_other_group_on_same_port_is_not_heard() -> None:
 
 
 async def test_udp_socket_options_default_to_loopback_ttl_1() -> None:
-    t = UdpTransport(port=free_port())
+    t = UdpTransport(port=free_udp_port())
     sink = Sink()
     await t.start(sink.frame, sink.event)
     try:
@@ -91,7 +86,7 @@ async def test_udp_socket_options_default_to_loopback_ttl_1() -> None:
 
 
 async def test_udp_send_errors_are_counted_not_raised() -> None:
-    t = UdpTransport(port=free_port())
+    t = UdpTransport(port=free_udp_port())
     sink = Sink()
     t.send(b"before start")  # not open yet
     await t.start(sink.frame, sink.event)
