@@ -28,8 +28,8 @@ from rich.table import Table
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sim.faults import Fault  # noqa: E402
-from sim.virtual import run_virtual  # noqa: E402
+from sim.shared.faults import Fault  # noqa: E402
+from sim.virtual.simulator import run_virtual  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
 from swarmd.core import wire  # noqa: E402
 from swarmd.core.params import Params  # noqa: E402

@@ -61,8 +61,8 @@ def table(rows: list[dict[str, Any]], title: str) -> None:
 
 
 def bench_single(sim_seconds: float = 60.0) -> list[dict[str, Any]]:
-    from sim.quad.model import PHYSICS_DT, crazyflie, x2
-    from sim.quad.robot import QuadRobot
+    from sim.physics.model import PHYSICS_DT, crazyflie, x2
+    from sim.physics.robot import QuadRobot
 
     rows = []
     for p in (x2(), crazyflie()):
@@ -89,7 +89,7 @@ def bench_single(sim_seconds: float = 60.0) -> list[dict[str, Any]]:
 
 
 def _link_worker(rid: int, seconds: float, t_start: float, conn: Connection) -> None:
-    from sim.quad.link import QuadLink
+    from sim.physics.link import QuadLink
 
     async def run() -> dict[str, Any]:
         link = QuadLink(rid, (1.5 * rid, 0.0, 0.0))
@@ -98,7 +98,7 @@ def _link_worker(rid: int, seconds: float, t_start: float, conn: Connection) -> 
         await link.start(lambda h: None)
         link.assign("f", 1, {"kind": "slot", "position": [1.5 * rid, 0.0, 1.5]})
         await asyncio.sleep(seconds)
-        # Measured before close(): it lands the craft, fast-forwarded (sim/quad/link.py).
+        # Measured before close(): it lands the craft, fast-forwarded (sim/physics/link.py).
         cpu, z = time.process_time() - cpu0, link.robot.position[2]
         await link.close()
         return {"late": list(link.lateness), "cpu": cpu, "z": z}
@@ -109,10 +109,10 @@ def _link_worker(rid: int, seconds: float, t_start: float, conn: Connection) -> 
 
 def bench_links(n: int, seconds: float) -> dict[str, Any]:
     ctx = multiprocessing.get_context("forkserver")
-    # The same preload as `swarmd sim` with physics (sim/realtime.py): the forkserver is
+    # The same preload as `swarmd sim` with physics (sim.realtime): the forkserver is
     # one per process and keeps its first preload list, so preloading less here made
     # part 3's robots import the daemon themselves (20 robots ready in 4.7 s, not ~1 s).
-    ctx.set_forkserver_preload(["sim.robot_proc", "sim.quad.link"])
+    ctx.set_forkserver_preload(["sim.realtime.robot_proc", "sim.physics.link"])
     t0 = time.perf_counter()
     t_start = time.time() + 1.0 + 0.03 * n
     pipes, procs = [], []
@@ -146,10 +146,10 @@ def bench_links(n: int, seconds: float) -> dict[str, Any]:
 
 
 async def bench_sim(n: int, seconds: float) -> dict[str, Any]:
-    from sim.quad.link import read_stats
-    from sim.quad.robot import load_trajectory
-    from sim.realtime import run_realtime_async
-    from sim.render import trajectory_files
+    from sim.physics.link import read_stats
+    from sim.physics.render import trajectory_files
+    from sim.physics.robot import load_trajectory
+    from sim.realtime.orchestrator import run_realtime_async
     from swarmd.config import load_swarm
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -190,9 +190,9 @@ async def bench_sim(n: int, seconds: float) -> dict[str, Any]:
 
 
 async def bench_e2e(fault: str, duration: float = 16.0) -> dict[str, Any]:
-    from sim.faults import parse_fault
-    from sim.quad.robot import load_trajectory
-    from sim.realtime import run_realtime_async
+    from sim.physics.robot import load_trajectory
+    from sim.realtime.orchestrator import run_realtime_async
+    from sim.shared.faults import parse_fault
     from swarmd.config import load_swarm
 
     slot = np.array(load_swarm(PAPER).function_spec("f2")["position"])

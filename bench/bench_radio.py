@@ -19,12 +19,12 @@ import statistics
 import tempfile
 import time
 
+from sim.xbee_emu import Medium
+from sim.xbee_emu.swarm import RadioSwarm, paper_plan
 from swarmd.budget import budget_for, largest_swarm
 from swarmd.core.params import radio
 from swarmd.transport.base import Transport
 from swarmd.transport.xbee import XBeeTransport
-from swarmd.xbee_emu import Medium
-from swarmd.xbee_emu.swarm import RadioSwarm, paper_plan
 
 
 async def one_run(protocol: str, api_mode: int, victim: int) -> tuple[float | None, int]:

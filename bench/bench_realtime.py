@@ -9,7 +9,7 @@
    grid swarms (configs/make_grid.py) of N = 10, 20, 50 robots with no fault; a passive
    listener in this process timestamps every HEARTBEAT and reports how late each one is
    against its sender's period (gap - interval), plus false suspicions from the events,
-   the robots' own event-loop lateness (sim.robot_proc.LatenessProbe), their CPU and
+   the robots' own event-loop lateness (sim.realtime.robot_proc.LatenessProbe), their CPU and
    their memory (sum of PSS: forked robots share the preloaded pages, so the sum of RSS
    overstates it several times).
 
@@ -31,11 +31,11 @@ from typing import Any
 
 from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.path)
 
-from sim.faults import Fault, parse_fault
-from sim.invariants import check_events
-from sim.realtime import free_udp_port, run_realtime_async
-from sim.summary import lateness_figures
-from sim.summary import percentile as pct
+from sim.realtime.orchestrator import free_udp_port, run_realtime_async
+from sim.shared.faults import Fault, parse_fault
+from sim.shared.invariants import check_events
+from sim.shared.summary import lateness_figures
+from sim.shared.summary import percentile as pct
 from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.roles import Role

@@ -1,7 +1,7 @@
 """A small in-memory network of core nodes on virtual time (h11's ConnectionPair, for N).
 
 For node-level tests that need a few robots talking but not the full simulator
-(`sim.virtual`): every broadcast goes through `Net.deliver` to all other live nodes
+(`sim.virtual.simulator`): every broadcast goes through `Net.deliver` to all other live nodes
 after `delay`, dropped with probability `loss` by a seeded `random.Random`, so a test
 is a pure function of its seed (STYLE.md point 7: no sleeps, virtual time only).
 """

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from sim.xbee_emu.swarm import paper_plan
 from swarmd.budget import (
     airtime,
     budget_for,
@@ -13,7 +14,6 @@ from swarmd.budget import (
     largest_swarm,
 )
 from swarmd.core.params import radio, udp
-from swarmd.xbee_emu.swarm import paper_plan
 
 
 def test_paper_swarm_on_802154_by_hand() -> None:

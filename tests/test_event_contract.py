@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 import yaml
 
-from sim.faults import parse_fault
-from sim.virtual import VirtualResult, run_virtual
+from sim.shared.faults import parse_fault
+from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.config import load_swarm
 from swarmd.core.actions import EVENT_FIELDS
 

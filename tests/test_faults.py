@@ -1,4 +1,4 @@
-"""`sim.faults`: the --fault SPEC grammar of DESIGN section 3 (CLI) and its checks."""
+"""`sim.shared.faults`: the --fault SPEC grammar of DESIGN section 3 (CLI) and its checks."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.faults import KINDS, Fault, FaultSpecError, check_faults, fault_record, parse_fault
-from sim.virtual import run_virtual
+from sim.shared.faults import KINDS, Fault, FaultSpecError, check_faults, fault_record, parse_fault
+from sim.virtual.simulator import run_virtual
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 

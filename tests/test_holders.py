@@ -1,4 +1,4 @@
-"""The one fold of the event log into who executes what (sim/holders.py) and its readers:
+"""The one fold of the event log into who executes what (sim/shared/holders.py) and its readers:
 the timeline spans, the live table, the summary and the invariant checker."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ from typing import Any
 
 import pytest
 
-from sim.faults import parse_fault
-from sim.holders import HolderFold, Holding, role_name
-from sim.invariants import check_events
-from sim.plots import role_spans
-from sim.realtime import SwarmView
-from sim.summary import holders_at_end, summarize
-from sim.virtual import run_virtual
+from sim.physics.plots import role_spans
+from sim.realtime.orchestrator import SwarmView
+from sim.shared.faults import parse_fault
+from sim.shared.holders import HolderFold, Holding, role_name
+from sim.shared.invariants import check_events
+from sim.shared.summary import holders_at_end, summarize
+from sim.virtual.simulator import run_virtual
 from swarmd.config import load_swarm
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"

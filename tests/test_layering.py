@@ -1,4 +1,12 @@
-"""DESIGN section 1: swarmd/core is sans-IO and imports nothing else of the project."""
+"""DESIGN section 1: imports point one way.
+
+    core  <-  edge (runtime, transports, links, config, state)  <-  daemon (daemon, monitor,
+    check)  <-  simulators (sim.shared <- sim.virtual / sim.physics / sim.xbee_emu <-
+    sim.realtime <- sim.run)  <-  commands (swarmd.commands, swarmd.cli)
+
+and `swarmd/core` is sans-IO: no I/O module, nothing else of the project. Every import
+counts, also one inside a function (a lazy import is still a dependency of the module).
+"""
 
 from __future__ import annotations
 
@@ -7,13 +15,58 @@ from pathlib import Path
 
 import pytest
 
-CORE = Path(__file__).resolve().parent.parent / "swarmd" / "core"
+ROOT = Path(__file__).resolve().parent.parent
+CORE = ROOT / "swarmd" / "core"
 BANNED = {"asyncio", "socket", "time", "random", "serial", "logging", "threading",
           "select", "selectors", "subprocess", "os"}
 
+GROUPS: dict[str, tuple[str, ...]] = {
+    "core": ("swarmd.core",),
+    "edge": ("swarmd.transport", "swarmd.link", "swarmd.config", "swarmd.keys",
+             "swarmd.budget", "swarmd.state", "swarmd.eventlog", "swarmd.logs",
+             "swarmd.metrics", "swarmd.notify", "swarmd.functions", "swarmd.launch",
+             "swarmd.runtime"),
+    "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.check"),
+    "sim.shared": ("sim.shared",),
+    "sim.virtual": ("sim.virtual",),
+    "sim.physics": ("sim.physics",),
+    "sim.xbee_emu": ("sim.xbee_emu",),
+    "sim.realtime": ("sim.realtime",),
+    "sim.run": ("sim.run",),
+    "commands": ("swarmd.commands", "swarmd.cli", "swarmd.__main__"),
+}
+"""Every project module belongs to exactly one group (longest prefix wins)."""
 
-def imported_modules(path: Path) -> list[str]:
+_BELOW_SIM = {"core", "edge", "daemon"}
+MAY_IMPORT: dict[str, set[str]] = {
+    "core": {"core"},
+    "edge": {"core", "edge"},
+    "daemon": {"core", "edge", "daemon"},
+    "sim.shared": _BELOW_SIM | {"sim.shared"},
+    "sim.virtual": _BELOW_SIM | {"sim.shared", "sim.virtual"},
+    "sim.physics": _BELOW_SIM | {"sim.shared", "sim.physics"},
+    "sim.xbee_emu": _BELOW_SIM | {"sim.shared", "sim.xbee_emu"},
+    "sim.realtime": _BELOW_SIM | {"sim.shared", "sim.physics", "sim.xbee_emu",
+                                  "sim.realtime"},
+    "sim.run": _BELOW_SIM | {"sim.shared", "sim.virtual", "sim.physics", "sim.xbee_emu",
+                             "sim.realtime", "sim.run"},
+    "commands": set(GROUPS),
+}
+"""Which groups a group may import: its own and those below it, never one above."""
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imported_modules(path: Path, module: str | None = None) -> list[str]:
     """Absolute names of every module a file imports (relative imports resolved)."""
+    module = module or module_name(path)
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
     tree = ast.parse(path.read_text(), filename=str(path))
     out: list[str] = []
     for node in ast.walk(tree):
@@ -21,13 +74,54 @@ def imported_modules(path: Path) -> list[str]:
             out.extend(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                base = ["swarmd", "core"][: max(0, 2 - (node.level - 1))]
-                out.append(".".join([*base, node.module] if node.module else base))
+                base = package[: len(package) - (node.level - 1)]
+                if node.module:
+                    out.append(".".join([*base, node.module]))
+                else:
+                    out.extend(".".join([*base, a.name]) for a in node.names)
             elif node.module:
-                out.append(node.module)
+                if node.module in {"swarmd", "sim"}:
+                    # `from swarmd import daemon` imports a module, `from swarmd import
+                    # __version__` the package root.
+                    out.extend(f"{node.module}.{a.name}"
+                               if _is_module(f"{node.module}.{a.name}") else node.module
+                               for a in node.names)
+                else:
+                    out.append(node.module)
     return out
 
 
+def _is_module(name: str) -> bool:
+    path = ROOT.joinpath(*name.split("."))
+    return path.is_dir() or path.with_suffix(".py").exists()
+
+
+def group_of(module: str) -> str | None:
+    """The group of a project module; None for the bare package roots and outside modules."""
+    best: tuple[int, str] | None = None
+    for group, prefixes in GROUPS.items():
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and (
+                    best is None or len(prefix) > best[0]):
+                best = (len(prefix), group)
+    return best[1] if best else None
+
+
+def wrong_way(module: str, imports: list[str]) -> list[str]:
+    """The imports of `module` that point up or sideways (DESIGN section 1)."""
+    source = group_of(module)
+    assert source is not None, f"{module} belongs to no layer: add it to GROUPS"
+    bad = []
+    for name in imports:
+        if name.split(".")[0] not in {"swarmd", "sim"} or name in {"swarmd", "sim"}:
+            continue
+        target = group_of(name)
+        if target is None or target not in MAY_IMPORT[source]:
+            bad.append(f"{name} ({target})")
+    return bad
+
+
+PROJECT_FILES = sorted(p for d in ("swarmd", "sim") for p in (ROOT / d).rglob("*.py"))
 CORE_FILES = sorted(CORE.glob("*.py"))
 
 
@@ -37,17 +131,39 @@ def test_core_has_modules() -> None:
 
 @pytest.mark.parametrize("path", CORE_FILES, ids=lambda p: p.name)
 def test_core_module_is_sans_io(path: Path) -> None:
-    bad = []
-    for name in imported_modules(path):
-        top = name.split(".")[0]
-        outside_core = top in {"swarmd", "sim"} and not name.startswith("swarmd.core.") \
-            and name != "swarmd.core"
-        if top in BANNED or outside_core:
-            bad.append(name)
+    bad = [name for name in imported_modules(path)
+           if name.split(".")[0] in BANNED or group_of(name) not in {None, "core"}]
     assert not bad, f"{path.name} imports {bad} (DESIGN section 1: core does no I/O)"
+
+
+@pytest.mark.parametrize("path", PROJECT_FILES, ids=lambda p: module_name(p))
+def test_imports_point_one_way(path: Path) -> None:
+    module = module_name(path)
+    if module in {"swarmd", "sim"}:
+        assert not [m for m in imported_modules(path) if m.split(".")[0] in {"swarmd", "sim"}]
+        return
+    bad = wrong_way(module, imported_modules(path))
+    assert not bad, f"{module} ({group_of(module)}) imports {bad}: DESIGN section 1 layering"
 
 
 def test_checker_catches_a_banned_import(tmp_path: Path) -> None:
     sample = tmp_path / "x.py"
     sample.write_text("import time\nfrom swarmd import daemon\nfrom ..transport import udp\n")
-    assert imported_modules(sample) == ["time", "swarmd", "swarmd.transport"]
+    assert imported_modules(sample, "swarmd.core.x") == [
+        "time", "swarmd.daemon", "swarmd.transport"]
+
+
+def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
+    # The shape of the mistake the layout exists to prevent: the daemon's config check
+    # reaching into the physics simulator (a robot install has no MuJoCo), a shared
+    # summary importing the real-time orchestrator, a transport importing the emulator.
+    sample = tmp_path / "check.py"
+    sample.write_text("def f():\n    from sim.physics.model import CRAFTS\n")
+    assert wrong_way("swarmd.check", imported_modules(sample, "swarmd.check")) == [
+        "sim.physics.model (sim.physics)"]
+    assert wrong_way("sim.shared.summary", ["sim.realtime.orchestrator"]) == [
+        "sim.realtime.orchestrator (sim.realtime)"]
+    assert wrong_way("swarmd.transport.xbee", ["sim.xbee_emu.radio"]) == [
+        "sim.xbee_emu.radio (sim.xbee_emu)"]
+    assert wrong_way("sim.virtual.simulator", ["sim.physics.robot"]) != []
+    assert wrong_way("sim.realtime.orchestrator", ["sim.physics.link", "swarmd.core"]) == []

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from sim.realtime import free_udp_port
+from sim.realtime.orchestrator import free_udp_port
 from swarmd.cli import app
 from swarmd.config import load_swarm
 from swarmd.core import params, wire

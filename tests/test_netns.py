@@ -106,7 +106,7 @@ def test_netns_multicast_failover_across_real_interfaces(
             path.write_text(yaml.safe_dump(cfg))
             log = open(tmp_path / f"robot{r}.log", "wb")  # noqa: SIM115
             procs[r] = subprocess.Popen(
-                ["ip", "netns", "exec", ns, sys.executable, "-m", "sim.robot_proc",
+                ["ip", "netns", "exec", ns, sys.executable, "-m", "sim.realtime.robot_proc",
                  "--config", str(path), "--events", str(tmp_path / f"events{r}.jsonl"),
                  "--t0", repr(t0)],
                 cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,

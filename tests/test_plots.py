@@ -1,4 +1,4 @@
-"""Report pictures: the role timeline and the top-down trajectories (sim/plots.py)."""
+"""Report pictures: the role timeline and the top-down trajectories (sim/physics/plots.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from typing import Any
 
 from PIL import Image
 
-from sim.plots import Span, role_at, role_spans, timeline_png, trajectory_png
-from sim.quad.robot import QuadRobot, trajectory_of
+from sim.physics.plots import Span, role_at, role_spans, timeline_png, trajectory_png
+from sim.physics.robot import QuadRobot, trajectory_of
 
 EVENTS: list[dict[str, Any]] = [
     {"t": 0.0, "robot": 1, "event": "started", "role": "active", "function": "f1"},

@@ -4,7 +4,7 @@ Issue 2 "Must show". A swarm is a ring of active slots, each watching `k` slots 
 each side plus a few random extra edges (so every slot has >= quorum watchers, the
 condition `swarmd check` enforces, DESIGN rule 3), and 1-3 standbys covering random
 slots (rule 6). Faults are any of DESIGN section 3's kinds at random times, on a
-channel with 0-20 % loss. The invariants are sim.invariants' (takeover within its
+channel with 0-20 % loss. The invariants are sim.shared.invariants' (takeover within its
 bound, single holder, no false takeover by a liar without loss, every warning
 resolved, no node raises); they are never weakened here.
 
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.faults import Fault, parse_fault
-from sim.virtual import VirtualResult, run_virtual
+from sim.shared.faults import Fault, parse_fault
+from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.core.params import Params, udp
 from swarmd.core.plan import RobotPlan, SwarmPlan
 
@@ -85,7 +85,7 @@ def cases(draw: st.DrawFn, spaced: bool = False) -> Case:
                 break
         else:
             at = round(draw(st.floats(1.0, duration - 2.0)), 2)
-        # Distinct instants: sim.invariants excuses a missed takeover only for a fault
+        # Distinct instants: sim.shared.invariants excuses a missed takeover only for a fault
         # strictly after the crash, so two faults at one instant are judged in list
         # order (reported; see the final report of this test suite).
         while at in times:
@@ -169,7 +169,7 @@ def test_standby_behind_on_epoch_still_replaces_a_dead_new_holder() -> None:
 
 
 def test_one_standby_two_overlapping_failures() -> None:
-    """Regression (sim.invariants f9266fa): one standby, two failures 0.5 s apart; the
+    """Regression (sim.shared.invariants f9266fa): one standby, two failures 0.5 s apart; the
     standby takes one slot, the other raises an alert and is no violation."""
     res = run_virtual(_full_mesh(5), udp(), duration=8.0, seed=0,
                       faults=[parse_fault("crash:3@1.01"), parse_fault("crash:1@1.5")])

@@ -8,9 +8,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.quad.controller import Command, SE3Controller, mixer
-from sim.quad.model import GRAVITY, Preset, crazyflie, preset, quad_xml, x2
-from sim.quad.robot import QuadRobot
+from sim.physics.controller import Command, SE3Controller, mixer
+from sim.physics.model import GRAVITY, Preset, crazyflie, preset, quad_xml, x2
+from sim.physics.robot import QuadRobot
 
 PRESETS = [crazyflie(), x2()]
 

@@ -1,4 +1,4 @@
-"""Function specs and their setpoints, without physics (sim/quad/functions.py)."""
+"""Function specs and their setpoints, without physics (swarmd/functions.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.quad.functions import (
+from swarmd.functions import (
     FunctionSpecError,
     PatrolFlight,
     PatrolSpec,
@@ -37,7 +37,7 @@ def test_parse_slot_and_patrol() -> None:
 
 
 def test_parse_ignores_runtime_extras() -> None:
-    # A spec may carry the run's t0 for the link (sim/quad/link.py): not a field.
+    # A spec may carry the run's t0 for the link (sim/physics/link.py): not a field.
     assert parse_function("f", {"kind": "slot", "position": [0, 0, 1], "t0": 5.0}) == SlotSpec(
         (0.0, 0.0, 1.0)
     )

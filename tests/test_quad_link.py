@@ -15,10 +15,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from sim.quad.functions import PatrolFlight
-from sim.quad.link import QuadLink, default_home, read_stats
-from sim.quad.robot import Mode, QuadRobot, load_trajectory
+from sim.physics.link import QuadLink, default_home, read_stats
+from sim.physics.robot import Mode, QuadRobot, load_trajectory
 from swarmd.core.roles import Health
+from swarmd.functions import PatrolFlight
 from swarmd.link.base import RobotLink
 
 
@@ -32,7 +32,7 @@ async def _until(cond: Callable[[], bool], timeout: float = 5.0) -> None:
 async def test_reports_health_and_flies_what_it_is_assigned(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("sim.quad.link.STATS_PERIOD", 0.2)
+    monkeypatch.setattr("sim.physics.link.STATS_PERIOD", 0.2)
     link = QuadLink(4, (0.5, -3.5, 0.0), traj_path=tmp_path / "traj-4.jsonl", wake=0.02,
                     health_period=0.1)
     _: RobotLink = link  # it is a RobotLink

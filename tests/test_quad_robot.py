@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from sim.quad.functions import PatrolFlight, PatrolSpec, next_waypoint, parse_function
-from sim.quad.robot import Mode, QuadRobot, load_trajectory, trajectory_of
+from sim.physics.robot import Mode, QuadRobot, load_trajectory, trajectory_of
 from swarmd.core.roles import Health
+from swarmd.functions import PatrolFlight, PatrolSpec, next_waypoint, parse_function
 
 SLOT = {"kind": "slot", "position": [1.0, 1.0, 1.5]}
 PATROL = {"kind": "patrol", "speed": 1.0,

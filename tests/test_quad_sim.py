@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
-from sim.faults import parse_fault
-from sim.quad.robot import load_trajectory
-from sim.realtime import run_realtime_async
-from sim.render import report_pictures, run_origin, trajectory_files
+from sim.physics.render import report_pictures, run_origin, trajectory_files
+from sim.physics.robot import load_trajectory
+from sim.realtime.orchestrator import run_realtime_async
+from sim.shared.faults import parse_fault
 from swarmd.config import load_swarm
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -2,7 +2,7 @@
 
 Each test is one short run of the paper's swarm (a few seconds of real time), bounded by
 `asyncio.wait_for`; what happened is read from the merged event log and judged by the
-same invariant checker as the virtual simulator (sim/invariants.py).
+same invariant checker as the virtual simulator (sim/shared/invariants.py).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from typing import Any
 
 import pytest
 
-from sim.faults import parse_fault
-from sim.invariants import check_events
-from sim.realtime import RealtimeResult, SwarmView, run_realtime_async
+from sim.realtime.orchestrator import RealtimeResult, SwarmView, run_realtime_async
+from sim.shared.faults import parse_fault
+from sim.shared.invariants import check_events
 from swarmd.config import load_swarm
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -162,7 +162,7 @@ def _descendants(pid: int) -> set[int]:
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
 def test_realtime_interrupt_leaves_no_process_behind(tmp_path: Path, sig: int) -> None:
     code = (
-        "import sys; from pathlib import Path; from sim.realtime import run_realtime\n"
+        "import sys; from pathlib import Path; from sim.realtime.orchestrator import run_realtime\n"
         "if __name__ == '__main__':\n"
         f"    run_realtime(Path({str(PAPER)!r}), duration=60, report_dir=Path(sys.argv[1]),"
         " live=False)\n"

@@ -1,10 +1,10 @@
-"""sim.netfilter: the per-process receive filter (loss, partitions), on an injected clock."""
+"""sim.realtime.netfilter: per-process receive filter (loss, partitions), on an injected clock."""
 
 from __future__ import annotations
 
 import pytest
 
-from sim.netfilter import ReceiveFilter, partition_windows
+from sim.realtime.netfilter import ReceiveFilter, partition_windows
 from swarmd.core import wire
 
 

@@ -25,15 +25,15 @@ from rich.console import Console
 from test_realtime import _alive, _descendants
 from typer.testing import CliRunner
 
-import sim.realtime as realtime
-from sim.faults import parse_fault
-from sim.realtime import Orchestrator, RealtimeResult, run_realtime_async
-from sim.summary import (
+import sim.realtime.orchestrator as realtime
+from sim.realtime.orchestrator import Orchestrator, RealtimeResult, run_realtime_async
+from sim.realtime.summary import summarize_realtime
+from sim.shared.faults import parse_fault
+from sim.shared.summary import (
     lateness_figures,
     lateness_warning,
     render_summary,
     summarize,
-    summarize_realtime,
 )
 from swarmd.cli import app
 from swarmd.config import load_swarm

@@ -1,4 +1,4 @@
-"""Rendering the swarm from recorded trajectories (sim/render.py).
+"""Rendering the swarm from recorded trajectories (sim/physics/render.py).
 
 Skips with the reason where no headless GL backend loads (CI installs libegl1,
 libegl-mesa0, libgl1-mesa-dri and libosmesa6: scripts/system-deps.sh)."""
@@ -11,8 +11,8 @@ import imageio.v3 as iio
 import pytest
 from PIL import Image
 
-from sim.quad.robot import QuadRobot, trajectory_of
-from sim.render import gl_available, key_times, render_swarm
+from sim.physics.render import gl_available, key_times, render_swarm
+from sim.physics.robot import QuadRobot, trajectory_of
 
 EVENTS = [
     {"t": 0.0, "robot": 1, "event": "started", "role": "active", "function": "f1"},
@@ -55,13 +55,13 @@ def test_render_writes_a_video_and_keyframes(tmp_path: Path) -> None:
 
 def test_no_backend_is_an_error_not_an_exception(tmp_path: Path,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("sim.render.gl_available", lambda: (False, "no GL here"))
+    monkeypatch.setattr("sim.physics.render.gl_available", lambda: (False, "no GL here"))
     res = render_swarm([], [], tmp_path)
     assert res.error == "no GL here" and res.video is None
 
 
 def test_a_killed_robot_is_drawn_falling_to_the_ground() -> None:
-    from sim.render import _with_fall
+    from sim.physics.render import _with_fall
 
     a = QuadRobot(2, (0.0, 0.0, 0.0))
     a.assign("f2", {"kind": "slot", "position": [0.0, 1.0, 1.5]})

@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 
 import swarmd.daemon as daemon_mod
-from sim.realtime import free_udp_port
+from sim.realtime.orchestrator import free_udp_port
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node

@@ -1,7 +1,7 @@
 """Issue 2 "Must show": scenarios on the paper's swarm in the virtual-time simulator.
 
-Each run is a pure function of (plan, params, faults, seed) (sim.virtual), so these are
-deterministic; every one also checks the event-log invariants (sim.invariants).
+Each run is a pure function of (plan, params, faults, seed) (sim.virtual.simulator), so these are
+deterministic; every one also checks the event-log invariants (sim.shared.invariants).
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from sim.faults import parse_fault
-from sim.virtual import VirtualResult, run_virtual
+from sim.shared.faults import parse_fault
+from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.config import load_swarm
 from swarmd.core.params import Params
 from swarmd.core.plan import RobotPlan, SwarmPlan
@@ -233,8 +233,8 @@ def test_checker_a_slow_restart_after_a_takeover_is_not_a_dual_execution(
         paper: tuple[SwarmPlan, Params]) -> None:
     # Real time on a loaded machine: robot 2's new process logs `started` 1.5 s after
     # 6 took f2 over, then is fenced. Before, the checker held 2 on f2 all that time.
-    from sim.faults import parse_fault
-    from sim.invariants import check_events
+    from sim.shared.faults import parse_fault
+    from sim.shared.invariants import check_events
 
     plan, params = paper
     start: list[dict[str, Any]] = [

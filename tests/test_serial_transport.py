@@ -121,7 +121,7 @@ async def test_lost_port_is_reported_and_reopened(tmp_path: Path) -> None:
 
 
 async def test_serial_transports_over_transparent_emulated_radios(tmp_path: Path) -> None:
-    from swarmd.xbee_emu import Medium
+    from sim.xbee_emu import Medium
 
     with Medium(3, directory=tmp_path, transparent=True) as medium:
         sinks = {n: Sink() for n in (1, 2, 3)}

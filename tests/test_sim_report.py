@@ -19,7 +19,7 @@ import pytest
 from PIL import Image
 from test_event_contract import check_records
 
-from sim.render import gl_available
+from sim.physics.render import gl_available
 from swarmd.config import load_swarm
 from swarmd.state import state_path
 

@@ -16,7 +16,7 @@ from typing import IO, Any
 
 import pytest
 
-from sim.realtime import free_udp_port
+from sim.realtime.orchestrator import free_udp_port
 from swarmd.core import wire
 from swarmd.core.actions import EVENT_FIELDS
 

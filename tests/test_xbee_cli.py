@@ -7,8 +7,8 @@ from pathlib import Path
 import typer
 from typer.testing import CliRunner
 
+from sim.xbee_emu import Medium
 from swarmd.commands import xbee as xbee_cmd
-from swarmd.xbee_emu import Medium
 
 
 def _app() -> typer.Typer:

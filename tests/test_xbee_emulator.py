@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from swarmd.xbee_emu import Medium, api
-from swarmd.xbee_emu.radio import EmulatedRadio, Reply, Transmit
+from sim.xbee_emu import Medium, api
+from sim.xbee_emu.radio import EmulatedRadio, Reply, Transmit
 
 NASTY = bytes([0x7E, 0x7D, 0x11, 0x13]) * 20  # every byte API mode 2 must escape
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
+from sim.xbee_emu import Medium
+from sim.xbee_emu.swarm import RadioSwarm, paper_plan
 from swarmd.core.params import radio
 from swarmd.transport.base import Transport
 from swarmd.transport.xbee import XBeeTransport
-from swarmd.xbee_emu import Medium
-from swarmd.xbee_emu.swarm import RadioSwarm, paper_plan
 
 # radio() shapes the protocol; times shrunk 5x so the test takes a second or two.
 FAST = dict(heartbeat_interval=0.1, standby_heartbeat_interval=0.3, t_max=0.4,

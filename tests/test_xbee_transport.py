@@ -13,8 +13,8 @@ from typing import Any
 
 import pytest
 
+from sim.xbee_emu import Medium
 from swarmd.transport.xbee import RadioMismatch, XBeeTransport
-from swarmd.xbee_emu import Medium
 
 NASTY = bytes([0x7E, 0x7D, 0x11, 0x13]) * 25
 

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 if TYPE_CHECKING:
-    from sim.summary import Summary
+    from sim.shared.summary import Summary
 
 FAULT_HELP = (
     "Inject a fault (repeatable): crash:R@T, restart:R@T, pause:R@T+D, "
@@ -26,7 +26,7 @@ FAULT_HELP = (
 
 
 TRANSPORTS = ("udp", "xbee", "serial")
-"""Channels of the real-time mode (sim.realtime)."""
+"""Channels of the real-time mode (sim.realtime.orchestrator)."""
 
 
 def register(app: typer.Typer) -> None:
@@ -85,7 +85,7 @@ def register(app: typer.Typer) -> None:
         """
         from rich.console import Console
 
-        from sim.faults import FaultSpecError, check_faults, parse_fault
+        from sim.shared.faults import FaultSpecError, check_faults, parse_fault
         from swarmd.config import ConfigError, load_swarm
 
         # Problems are plain text: no rich markup (a `[x, y, z]` in a message is not a
@@ -128,9 +128,9 @@ def register(app: typer.Typer) -> None:
         if not virtual and not no_physics:
             import os
 
-            from sim.quad.model import PRESETS
+            from sim.physics.model import PRESETS
 
-            # The robot processes read the preset from their environment (sim.quad.link),
+            # The robot processes read the preset from their environment (sim.physics.link),
             # which the forkserver, started below, inherits.
             chosen = craft or os.environ.get("SWARMD_QUAD_PRESET", "x2")
             if chosen not in PRESETS:
@@ -140,7 +140,7 @@ def register(app: typer.Typer) -> None:
             os.environ["SWARMD_QUAD_PRESET"] = chosen
             # What a craft cannot fly (a waypoint under the ground...) is refused before
             # any robot starts, not logged by a robot that then stays parked.
-            from sim.quad.functions import flight_problems
+            from swarmd.functions import flight_problems
 
             flight = flight_problems({n: cfg.function_spec(n) for n in plan.functions})
             for p in flight:
@@ -173,7 +173,7 @@ def register(app: typer.Typer) -> None:
             _write_report(report, events_list, summary, summary.duration)
             if not virtual and not no_physics:
                 # Trajectory plot, video and key frames from the robots' trajectory files.
-                from sim.render import report_pictures
+                from sim.physics.render import report_pictures
 
                 pictures = report_pictures(report, events_list,
                                            {n: cfg.function_spec(n) for n in plan.functions},
@@ -181,7 +181,7 @@ def register(app: typer.Typer) -> None:
         if json_out:
             typer.echo(summary.to_json())
         else:
-            from sim.summary import render_summary
+            from sim.shared.summary import render_summary
 
             render_summary(summary, out)
         if report is not None:
@@ -198,8 +198,8 @@ def _run_virtual(cfg: Any, plan: Any, params: Any, faults: list[Any], *, duratio
                  seed: int, loss: float) -> Summary:
     import time
 
-    from sim.summary import summarize
-    from sim.virtual import run_virtual
+    from sim.shared.summary import summarize
+    from sim.virtual.simulator import run_virtual
 
     key = cfg.key()
     t0 = time.perf_counter()
@@ -218,8 +218,8 @@ def _run_virtual(cfg: Any, plan: Any, params: Any, faults: list[Any], *, duratio
 def _run_realtime(swarm: Path, plan: Any, params: Any, faults: list[Any], *, duration: float,
                   seed: int, loss: float, report: Path | None, physics: bool, transport: str,
                   live: bool) -> Summary:
-    from sim.realtime import run_realtime
-    from sim.summary import summarize_realtime
+    from sim.realtime.orchestrator import run_realtime
+    from sim.realtime.summary import summarize_realtime
 
     try:
         result = run_realtime(swarm, duration=duration, faults=faults, loss=loss, seed=seed,
@@ -285,7 +285,7 @@ def _write_report(report: Path, events: list[dict[str, Any]], summary: Summary,
                   duration: float) -> None:
     _write_events(report / "events.jsonl", events)
     (report / "summary.json").write_text(summary.to_json() + "\n", encoding="utf-8")
-    from sim.plots import timeline_png
+    from sim.physics.plots import timeline_png
 
     timeline_png(events, report / "timeline.png", end=duration,
                  title=f"swarmd sim ({summary.mode})")

@@ -6,7 +6,7 @@
   and on 802.15.4 MY=0xFFFE (64-bit source addresses: the digi-xbee 0x81 stall). It
   prints every setting before and after; `--write` saves to flash (WR).
 - `info --port P` prints protocol, firmware, address and the settings above.
-- `emulate N` runs N software radios on ptys until Ctrl-C (swarmd.xbee_emu); lines on
+- `emulate N` runs N software radios on ptys until Ctrl-C (sim.xbee_emu); lines on
   stdin such as `unplug 2`, `replug 2`, `loss 2 0.3`, `delay 2 0.05` change them live.
 """
 
@@ -224,7 +224,7 @@ def register(app: typer.Typer) -> None:
         """
         import sys
 
-        from swarmd.xbee_emu import PROTOCOLS, Medium
+        from sim.xbee_emu import PROTOCOLS, Medium
 
         if protocol not in PROTOCOLS:
             raise typer.BadParameter(f"--protocol must be one of {', '.join(PROTOCOLS)}")

@@ -38,9 +38,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmd.budget import airtime
-from swarmd.xbee_emu import api
-from swarmd.xbee_emu.radio import (
+from sim.xbee_emu import api
+from sim.xbee_emu.radio import (
     BROADCAST64,
     TX_OK,
     TX_PAYLOAD_TOO_LARGE,
@@ -48,6 +47,7 @@ from swarmd.xbee_emu.radio import (
     Reply,
     Transmit,
 )
+from swarmd.budget import airtime
 
 DEFAULT_DIR = "/tmp/swarmd-xbee"
 REPLY_DELAY = 0.002

@@ -4,7 +4,7 @@ trajectory plot. matplotlib with the Agg backend (no display needed).
 The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records
 `{"t", "robot", "event", ...}`), so it works for `--virtual` runs without physics too.
 `role_spans` turns the log into per-robot spans of (role, function), from the one fold of
-the log (`sim.holders`); `sim/render.py` colours the crafts of the video with the same
+the log (`sim.shared.holders`); `render` colours the crafts of the video with the same
 spans.
 """
 
@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sim.holders import HolderFold
+from sim.shared.holders import HolderFold
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from sim.quad.robot import Trajectory
+    from sim.physics.robot import Trajectory
 
 ROLE_COLORS: dict[str, str] = {
     "active": "#2ca02c",
@@ -57,7 +57,7 @@ def role_spans(
 ) -> dict[int, list[Span]]:
     """Per robot, the spans of (role, function) the event log implies, in time order.
 
-    The roles are `sim.holders.HolderFold`'s (claiming shows the claimed function,
+    The roles are `sim.shared.holders.HolderFold`'s (claiming shows the claimed function,
     fenced the one stopped), with a crash or motor failure shown as crashed until the
     robot starts again. Two things are drawn only here: fenced lasts FENCE_SHOW s and
     then the robot is a standby again; stopped ends the robot's lane (no span)."""

@@ -3,7 +3,7 @@
 The checker reads the same JSON Lines records users get (DESIGN section 3) plus the
 injected faults, so the virtual simulator and the multi-process `swarmd sim` are judged
 by one piece of code. What a robot executes is reconstructed from its events
-(sim/holders.py): `started{role: active}` and `takeover` start a function; `fenced`,
+(sim/shared/holders.py): `started{role: active}` and `takeover` start a function; `fenced`,
 `leave`, `stopped`, a `started` as standby and a crash stop it; a paused robot executes
 nothing until it resumes.
 
@@ -29,8 +29,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.faults import Fault
-from sim.holders import HolderFold
+from sim.shared.faults import Fault
+from sim.shared.holders import HolderFold
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
@@ -85,7 +85,7 @@ class Checker:
     loss: float = 0.0
     bounds: Bounds = field(init=False)
     violations: list[Violation] = field(default_factory=list)
-    # Who executes what comes from the shared fold of the log (sim/holders.py), built
+    # Who executes what comes from the shared fold of the log (sim/shared/holders.py), built
     # so that it can judge: it is per robot, so two robots on one slot both show (the
     # dual-execution check needs them); and with no `down` faults it counts every event
     # a robot logs, even one after its injected crash. Deaths, pauses and health come

@@ -21,8 +21,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.faults import Fault, fault_record
-from sim.invariants import Checker, Violation
+from sim.shared.faults import Fault, fault_record
+from sim.shared.invariants import Checker, Violation
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
 from swarmd.core.node import Node, Restored

@@ -12,7 +12,7 @@ transmission reaches some neighbours and not others.
   process happened to start first.
 - partition (`partition:1,2|3,4@T+D`): during [T, T+D] a robot drops frames whose
   sender is in a different group than its own. A robot named in no group is in the first
-  group (sim/faults.py). The sender id is read from the header without verifying the
+  group (sim/shared/faults.py). The sender id is read from the header without verifying the
   frame (`wire.HEADER`): fine for an emulated link; a frame too short to carry a header
   passes, so the daemon still counts it as garbage.
 

@@ -6,7 +6,7 @@ Theory of operation
 --config` takes: UDP multicast on 127.0.0.1, TTL 1, a port picked for this run so runs
 never hear each other) and starts one process per robot from a forkserver that preloads
 swarmd (50 robots are up in about a second, where a fresh interpreter each would take
-several). Each process (`sim/robot_proc.py`) loads its file, says `ready`, and waits for
+several). Each process (`sim/realtime/robot_proc.py`) loads its file, says `ready`, and waits for
 `go` with a run origin t0 a little in the future, so that every daemon starts at the same
 wall-clock instant and event times (seconds since t0) are comparable across processes.
 
@@ -14,7 +14,7 @@ Faults happen to real processes at their times (DESIGN section 3):
 crash = SIGKILL of the robot's process group; pause = SIGSTOP, then SIGCONT after D;
 restart = a new process on the same state dir (so persisted epochs fence it, rule 2);
 leave / unhealthy / liar / motor = a control message to the robot process; loss and
-partition = the per-process receive filter (`sim/netfilter.py`), set at spawn. Every
+partition = the per-process receive filter (`sim/realtime/netfilter.py`), set at spawn. Every
 injected fault is logged as `fault{kind}` with robot = its target (0 for a partition).
 
 The run ends at t0 + duration with a SIGKILL of every robot at once: a graceful stop
@@ -31,7 +31,7 @@ What can go wrong with the processes themselves is reported, never silently pass
 process that ends on its own during the run (`deaths`: the time its pipe closed, so the
 checker treats it as a crash rather than calling its replacement a false takeover), a
 live robot whose daemon never logged `started`. Each robot also reports how late its
-event loop runs (`sim.robot_proc.LatenessProbe`), so a summary can say when the machine
+event loop runs (`sim.realtime.robot_proc.LatenessProbe`), so a summary can say when the machine
 could not keep up.
 
 Events from every robot arrive over pipes and are merged by t into one log.
@@ -42,7 +42,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from swarmd.xbee_emu.medium import Medium
+    from sim.xbee_emu.medium import Medium
 
 import asyncio
 import contextlib
@@ -65,9 +65,9 @@ from typing import Any, ParamSpec
 
 import yaml
 
-from sim.faults import Fault, fault_record
-from sim.holders import HolderFold
-from sim.netfilter import partition_windows
+from sim.realtime.netfilter import partition_windows
+from sim.shared.faults import Fault, fault_record
+from sim.shared.holders import HolderFold
 
 START_MARGIN = 0.3
 """s between the last robot's `ready` and t0: enough to deliver `go` to 50 processes."""
@@ -133,7 +133,7 @@ class RobotView:
 class SwarmView:
     """Folds events into the per-robot view shown live (role, function, last event).
 
-    Role, function and epoch come from the one fold of the log (`sim.holders`); the
+    Role, function and epoch come from the one fold of the log (`sim.shared.holders`); the
     process column from the injected faults, which only the orchestrator knows."""
 
     def __init__(self, robots: Sequence[int]) -> None:
@@ -242,7 +242,8 @@ def _context(physics: bool) -> Any:
     # physics, MuJoCo and the quadrotor link are preloaded too, or every robot imports
     # them after the fork (notes/mujoco.md: 50 robots ready in 1.6 s preloaded, 8 s not).
     # The forkserver is one per parent process and keeps the list it started with.
-    ctx.set_forkserver_preload(["sim.robot_proc"] + (["sim.quad.link"] if physics else []))
+    preload = ["sim.realtime.robot_proc"] + (["sim.physics.link"] if physics else [])
+    ctx.set_forkserver_preload(preload)
     return ctx
 
 
@@ -252,7 +253,7 @@ def _main_not_reimported() -> Iterator[None]:
 
     A forkserver child re-imports the parent's main script (as `__mp_main__`) before it
     runs its target. The robots need nothing from it (their entry is in
-    sim/robot_proc.py, preloaded in the forkserver), and re-importing it costs each
+    sim/realtime/robot_proc.py, preloaded in the forkserver), and re-importing it costs each
     robot the whole CLI's imports, or re-runs a script that has no main guard."""
     main = sys.modules.get("__main__")
     if main is None:
@@ -342,7 +343,7 @@ class Orchestrator:
         self.medium: Medium | None = None
         self.radio_of = {r: i + 1 for i, r in enumerate(self.robots)}
         if transport in ("xbee", "serial"):
-            from swarmd.xbee_emu.medium import Medium
+            from sim.xbee_emu.medium import Medium
 
             self.medium = Medium(len(self.robots), protocol="802.15.4",
                                  directory=self.run_dir / "radios", seed=seed,
@@ -362,7 +363,7 @@ class Orchestrator:
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, robot: int, t0: float | None) -> _Proc:
-        from sim.robot_proc import RobotSpec, child_main
+        from sim.realtime.robot_proc import RobotSpec, child_main
 
         cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
                                port=self.port, transport=self._transport_doc(robot))

@@ -1,12 +1,12 @@
 """One robot of the real-time `swarmd sim`: a real `swarmd start` daemon in its own process.
 
-The orchestrator (`sim/realtime.py`) writes a robot file per robot (so each process runs
+The orchestrator (`orchestrator.py`) writes a robot file per robot (so each process runs
 exactly what `swarmd start --config` runs: `swarmd.daemon.run_daemon`) and starts this
 module's `child_main` in a forkserver child. What the simulator adds around the daemon:
 
-- a receive filter (`sim/netfilter.py`): seeded loss and partitions, per receiver;
+- a receive filter (`sim/realtime/netfilter.py`): seeded loss and partitions, per receiver;
 - a robot link chosen by name (`LINK_FACTORIES`): the bare `none` link today, the MuJoCo
-  quadrotor (`sim.quad.link.QuadLink`) when physics is on, so a new robot plugs in here;
+  quadrotor (`sim.physics.link.QuadLink`) when physics is on, so a new robot plugs in here;
 - the `liar` fault: forged WARN frames about its neighbours, sent through the daemon's
   own runtime so they are signed and sequenced like its real frames (`Liar`);
 - two pipes to the orchestrator: events out (one JSON object a message, t relative to
@@ -22,7 +22,7 @@ in its own process group (so the terminal's SIGINT reaches only the orchestrator
 decides) and asks the kernel to SIGKILL it if its parent (the forkserver, which exits
 with the orchestrator) dies.
 
-`python -m sim.robot_proc --config robot.yaml [--events FILE] [--t0 UNIX]` runs the same
+`python -m sim.realtime.robot_proc --config robot.yaml [--events FILE] [--t0 UNIX]` runs the same
 thing without an orchestrator (used by the network-namespace test).
 """
 
@@ -43,7 +43,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from sim.netfilter import FilterStats, PartitionWindow, ReceiveFilter
+from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
 from swarmd.config import load_robot
 from swarmd.core import wire
 from swarmd.core.node import Snapshot
@@ -89,7 +89,7 @@ def _none_link(spec: RobotSpec, cfg: Any) -> RobotLink:
 
 
 def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
-    from sim.quad.link import QuadLink
+    from sim.physics.link import QuadLink
 
     # spec.t0 set: this process restarts a robot of a running swarm; its craft resumes
     # where the killed process left it instead of reappearing parked at home.
@@ -370,7 +370,7 @@ def _report_stats(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Stand-alone robot process (no orchestrator): `python -m sim.robot_proc`."""
+    """Stand-alone robot process (no orchestrator): `python -m sim.realtime.robot_proc`."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", required=True, help="robot file")
     ap.add_argument("--events", help="append the event log (JSON lines) here")

@@ -10,7 +10,7 @@ frames `key-*.png` at the faults and takeovers.
 
 MuJoCo picks its GL backend when it is imported (`MUJOCO_GL`), and a robot or test
 process has usually imported it already without one; so rendering always runs in a
-child process (`python -m sim.render JOB`) with `MUJOCO_GL` set to a backend that
+child process (`python -m sim.physics.render JOB`) with `MUJOCO_GL` set to a backend that
 `gl_available()` proved loads (egl, then osmesa).
 """
 
@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from sim.plots import ROLE_COLORS, Span, role_at, role_spans
-from sim.quad.robot import Trajectory
+from sim.physics.plots import ROLE_COLORS, Span, role_at, role_spans
+from sim.physics.robot import Trajectory
 
 BACKENDS = ("egl", "osmesa")
 WIDTH, HEIGHT = 640, 480
@@ -147,7 +147,7 @@ def render_swarm(
         job_path.write_text(json.dumps(job))
         try:
             proc = subprocess.run(
-                [sys.executable, "-m", "sim.render", str(job_path)], env=_gl_env(backend),
+                [sys.executable, "-m", "sim.physics.render", str(job_path)], env=_gl_env(backend),
                 capture_output=True, text=True, timeout=timeout,
             )
         except subprocess.TimeoutExpired:
@@ -167,7 +167,7 @@ def render_swarm(
 
 def trajectory_files(report_dir: Path) -> list[Path]:
     """The robots' trajectory files a real-time run left under `report_dir`
-    (`realtime/state/<id>/traj-<id>.jsonl`, written by `sim.quad.link.QuadLink`)."""
+    (`realtime/state/<id>/traj-<id>.jsonl`, written by `sim.physics.link.QuadLink`)."""
     return sorted(report_dir.glob("realtime/state/*/traj-*.jsonl"))
 
 
@@ -202,8 +202,8 @@ def report_pictures(
     trajectory files the robots wrote: `trajectories.png` always, and where a GL backend
     loads `swarm.mp4` (or `.gif`) and `key-*.png`. Returns what was written, and why
     not (`"video_error"`); never raises for a robot's broken trajectory file."""
-    from sim.plots import trajectory_png
-    from sim.quad.robot import load_trajectory
+    from sim.physics.plots import trajectory_png
+    from sim.physics.robot import load_trajectory
 
     paths = trajectory_files(report_dir)
     origin = t0 if t0 is not None else run_origin(paths)
@@ -281,7 +281,7 @@ class _Scene:
     def __init__(self, trajs: list[Trajectory], preset_name: str) -> None:
         import mujoco
 
-        from sim.quad.model import preset, scene_xml
+        from sim.physics.model import preset, scene_xml
 
         self.mj = mujoco
         self.trajs = trajs

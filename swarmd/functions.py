@@ -31,7 +31,7 @@ Vec3 = tuple[float, float, float]
 MIN_ALTITUDE = 0.2
 """Lowest height a function may ask for, m. A parked X2 rests with its centre 4 cm up
 and a move overshoots by a few cm; ground contact after take-off is a crash
-(`sim.quad.robot`), so a slot or waypoint lower than this (or under the ground) would
+(`sim.physics.robot`), so a slot or waypoint lower than this (or under the ground) would
 fly the craft into the ground: refused before the run, not found out in a robot."""
 MAX_SPEED = 50.0
 """Patrol speed bound, m/s (exclusive): far above what the presets fly (~2-4 m/s)."""

@@ -32,13 +32,13 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, Any
 
-from sim.quad.functions import FunctionSpecError, parse_function
-from sim.quad.model import Preset, Vec3, preset, x2
-from sim.quad.robot import Mode, QuadRobot, last_state
+from sim.physics.model import Preset, Vec3, preset, x2
+from sim.physics.robot import Mode, QuadRobot, last_state
 from swarmd.core.roles import Health
+from swarmd.functions import FunctionSpecError, parse_function
 from swarmd.link.base import HealthCallback
 
-log = logging.getLogger("swarmd.sim.quad")
+log = logging.getLogger("swarmd.sim.physics")
 
 WAKE = 0.04
 """s between physics catch-ups (see the module docstring)."""

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.quad.model import GRAVITY, Preset
+from sim.physics.model import GRAVITY, Preset
 
 Array = NDArray[np.float64]
 

@@ -7,8 +7,8 @@ what the node did; `HolderFold` replays it into one `Holding` per robot, the rol
 node is in (roles.py: active, standby, claiming, fenced) and the function that role is
 about. Every reader of "who holds what" uses this one fold: the invariant checker
 (`Checker.executing`), the summary (holder when a fault hit, holders at the end), the
-timeline and the video colours (`sim.plots.role_spans`) and the live table
-(`sim.realtime.SwarmView`).
+timeline and the video colours (`sim.physics.plots.role_spans`) and the live table
+(`sim.realtime.orchestrator.SwarmView`).
 
 The transitions, by event (the node's own, roles.py TRANSITIONS):
   started{role,function} -> that role; it executes `function` only when active
@@ -26,7 +26,7 @@ The transitions, by event (the node's own, roles.py TRANSITIONS):
 Which injected faults take a robot down is the caller's choice: a crash kills the
 process; a motor failure grounds the craft (the video shows it black) while the process
 lives on and leaves by itself. The invariant checker passes none: it takes faults from
-the injector's list, never from the log (see sim/invariants.py).
+the injector's list, never from the log (see sim/shared/invariants.py).
 
 The fold is per robot on purpose: two robots can hold one function (a stale holder
 before it is fenced), and `holders()` lists them all rather than picking one.

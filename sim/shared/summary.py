@@ -5,7 +5,7 @@ thing: per injected fault the detection latency (fault -> first `suspect` of the
 or its own `leave` when it handed over), the takeover latency (fault -> `takeover` of
 its slot), who took over; the counts of false takeovers and invariant violations.
 
-A real-time run adds what only processes on a real machine have (`summarize_realtime`):
+A real-time run adds what only processes on a real machine have (`sim.realtime.summary`):
 robot processes that failed or ended on their own (`problems`: the run is not ok, the
 command exits non-zero), and how late the robots' event loops ran. When they were late
 enough to be suspected, `warnings` says so first, so that false suspicions and takeovers
@@ -18,20 +18,17 @@ import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from sim.faults import Fault
-from sim.holders import HolderFold
-from sim.invariants import Violation, check_events
+from sim.shared.faults import Fault
+from sim.shared.holders import HolderFold
+from sim.shared.invariants import Violation, check_events
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-
-if TYPE_CHECKING:
-    from sim.realtime import RealtimeResult
 
 _REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor")
 """Faults whose row says who took the robot's slot over. In real time `restart` kills the
@@ -229,7 +226,7 @@ def lateness_figures(
 ) -> dict[str, Any]:
     """p50 / p99 / max of how late the robots' event loops woke up (ms), from the probes'
     late wake-ups `(robot, t, ms)` and the count of all wake-ups (the others were on time,
-    under `sim.robot_proc.LATE_MS`). A paused robot's own lateness during and just after
+    under `sim.realtime.robot_proc.LATE_MS`). A paused robot's own lateness during and just after
     its pause is left out: it is the fault, not the machine."""
     frozen = [(f.robot, f.at, (f.end or f.at) + PAUSE_AFTERMATH) for f in faults
               if f.kind == "pause"]
@@ -278,43 +275,6 @@ def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
             first.setdefault(int(e["robot"]), float(e["t"]))
     return {r: t for r, t in sorted(first.items()) if t > grace
             and not any(f.kind != "partition" and f.robot == r and f.at <= t for f in faults)}
-
-
-def summarize_realtime(
-    result: RealtimeResult, faults: list[Fault], plan: SwarmPlan, params: Params, *,
-    loss: float,
-) -> Summary:
-    """The summary of a real-time run (`sim.realtime`): `summarize` over the merged log,
-    up to the time the run really ended (earlier when interrupted), with the robots that
-    died on their own as crashes, plus what only real processes have: their problems,
-    start-up time, lateness and the load of the machine."""
-    end = result.ended_at if result.ended_at is not None else result.duration
-    summary = summarize(result.events, [f for f in faults if f.at <= end], plan, params,
-                        loss=loss, duration=round(end, 2), mode="real time",
-                        deaths=result.deaths)
-    summary.problems = list(result.problems)
-    figures = lateness_figures(result.late, result.wakes, faults)
-    warning = lateness_warning(figures, params, summary.violations, summary.false_suspicions)
-    if warning is not None:
-        summary.warnings.append(warning)
-    summary.warnings.extend(result.log_errors)
-    slow = slow_starts(result.events, faults, params.startup_grace)
-    if slow:
-        late_robots = ", ".join(f"{r} at {t:.2f} s" for r, t in list(slow.items())[:10])
-        summary.warnings.append(
-            f"{len(slow)} robot(s) started after the start-up grace of "
-            f"{params.startup_grace:g} s ({late_robots}{', ...' if len(slow) > 10 else ''})"
-            ": this machine could not start the swarm in time, and the swarm rightly took "
-            "them for dead (their takeovers are no protocol failure)")
-        summary.extra["slow_starts"] = {str(r): round(t, 3) for r, t in slow.items()}
-    if result.interrupted is not None:
-        summary.warnings.append(f"interrupted by {result.interrupted} at t={end:.2f} s of "
-                                f"{result.duration:g} s: a partial run")
-        summary.extra["interrupted"] = {"signal": result.interrupted, "at": round(end, 3)}
-    summary.extra["startup_s"] = round(result.startup_s, 2)
-    summary.extra["lateness_ms"] = figures
-    summary.extra["loadavg"] = [round(x, 2) for x in os.getloadavg()]
-    return summary
 
 
 def render_summary(summary: Summary, console: Console) -> None:

@@ -27,16 +27,16 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.quad.controller import Command, SE3Controller
-from sim.quad.functions import (
+from sim.physics.controller import Command, SE3Controller
+from sim.physics.model import GRAVITY, PHYSICS_DT, Preset, Vec3, quad_xml, x2
+from swarmd.core.roles import Health
+from swarmd.functions import (
     FunctionSpec,
     PatrolFlight,
     SlotFlight,
     flight_for,
     parse_function,
 )
-from sim.quad.model import GRAVITY, PHYSICS_DT, Preset, Vec3, quad_xml, x2
-from swarmd.core.roles import Health
 
 Array = NDArray[np.float64]
 

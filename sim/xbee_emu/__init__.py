@@ -1,4 +1,4 @@
-"""Software XBee radios for running swarmd without hardware (issue 5 point 4).
+"""Software XBee radios for running swarmd without hardware.
 
     with Medium(6, protocol="802.15.4", directory=tmp) as medium:
         XBeeDevice(medium.path(1), 9600).open()   # the real digi-xbee library
@@ -7,7 +7,7 @@
 `swarmd xbee emulate N` runs the same thing from the command line.
 """
 
-from swarmd.xbee_emu.medium import DEFAULT_DIR, Medium
-from swarmd.xbee_emu.radio import MAX_PAYLOAD, PROTOCOLS, EmulatedRadio
+from sim.xbee_emu.medium import DEFAULT_DIR, Medium
+from sim.xbee_emu.radio import MAX_PAYLOAD, PROTOCOLS, EmulatedRadio
 
 __all__ = ["DEFAULT_DIR", "MAX_PAYLOAD", "PROTOCOLS", "EmulatedRadio", "Medium"]

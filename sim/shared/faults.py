@@ -186,7 +186,7 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
 def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
                  duration: float | None = None) -> list[str]:
     """Problems with a fault list against a swarm: unknown robots, motor without
-    physics (`physics` is True for --virtual too: sim.virtual turns a motor fault into
+    physics (`physics` is True for --virtual too: sim.virtual.simulator turns a motor fault into
     `unhealthy`), and (given the run's `duration`) a fault that would start after the end."""
     problems = []
     for f in faults:

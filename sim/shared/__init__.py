@@ -1,0 +1,1 @@
+"""What both simulators share: fault specs, who executes what, invariants, the summary."""
