@@ -46,7 +46,6 @@ from typing import Any
 from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
 from sim.shared.liar import liar_warnings
 from swarmd.config import load_robot
-from swarmd.core import wire
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health
 from swarmd.daemon import Daemon, run_daemon
