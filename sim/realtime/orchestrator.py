@@ -105,8 +105,10 @@ class Orchestrator:
         group: str = DEFAULT_GROUP,
         port: int | None = None,
         transport: str = "udp",
+        craft: str | None = None,
     ) -> None:
         self.swarm_path = swarm_path
+        self.craft = craft
         self.transport = transport
         self.duration = duration
         self.faults = sorted(faults, key=lambda f: f.at)
@@ -178,6 +180,7 @@ class Orchestrator:
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
             loss=self.loss, seed=self.seed, partitions=self.partitions, link=self.link, t0=t0,
+            craft=self.craft,
         )
         ev_r, ev_w = self._ctx.Pipe(duplex=False)
         ctl_r, ctl_w = self._ctx.Pipe(duplex=False)
@@ -473,13 +476,15 @@ async def run_realtime_async(
     live: bool = False,
     port: int | None = None,
     handle_signals: bool = False,
+    craft: str | None = None,
 ) -> RealtimeResult:
     """Run the swarm in real time (see the module docstring); awaitable form for tests.
     `handle_signals`: SIGINT and SIGTERM end the run early with a partial result
-    (`interrupted`) instead of raising; only one run per process may ask for that."""
+    (`interrupted`) instead of raising; only one run per process may ask for that.
+    `craft`: the quadrotor preset every robot flies (physics; None: the link's default)."""
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
                         physics=physics, live=live, report_dir=report_dir, port=port,
-                        transport=transport)
+                        transport=transport, craft=craft)
     try:
         result = await orch.run(handle_signals=handle_signals)
     finally:

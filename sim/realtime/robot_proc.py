@@ -78,6 +78,8 @@ class RobotSpec:
     link: str = "none"
     t0: float | None = None
     """Start at once with this run origin (a restart); None: wait for the `go` message."""
+    craft: str | None = None
+    """Quadrotor preset of the `quad` link (sim.physics.model.PRESETS); None: its default."""
 
 
 # -- robot links ----------------------------------------------------------------------------
@@ -92,7 +94,7 @@ def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
 
     # spec.t0 set: this process restarts a robot of a running swarm; its craft resumes
     # where the killed process left it instead of reappearing parked at home.
-    link: RobotLink = QuadLink.for_robot(cfg, restart_of=spec.t0)
+    link: RobotLink = QuadLink.for_robot(cfg, restart_of=spec.t0, craft=spec.craft)
     return link
 
 
