@@ -167,7 +167,7 @@ def test_report_that_cannot_be_written_is_refused_before_the_run(tmp_path: Path)
     result = CliRunner().invoke(app, ["sim", str(PAPER), "--no-physics", "--report",
                                       str(blocker / "out")])
     assert result.exit_code == 2, result.output
-    assert "cannot be written" in result.output and "Not a directory" in result.output
+    assert "cannot be written" in result.output and "is not a directory" in result.output
 
 
 # -- real processes -----------------------------------------------------------------------
