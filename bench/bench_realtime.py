@@ -31,7 +31,8 @@ from typing import Any
 
 from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.path)
 
-from sim.realtime.orchestrator import free_udp_port, run_realtime_async
+from sim.realtime.orchestrator import run_realtime_async
+from sim.realtime.robotfiles import free_udp_port
 from sim.shared.faults import Fault, parse_fault
 from sim.shared.invariants import check_events
 from sim.shared.summary import lateness_figures

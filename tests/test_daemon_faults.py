@@ -20,7 +20,7 @@ import pytest
 from test_runtime import GROUP, PAPER, launch, robot_cfg, runtime_of, wait_until
 from test_start import listener
 
-from sim.realtime.orchestrator import free_udp_port
+from sim.realtime.robotfiles import free_udp_port
 from swarmd.config import load_robot
 from swarmd.core import wire
 from swarmd.daemon import EXIT_FAILURE, Daemon, run_daemon

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from sim.physics.plots import role_spans
-from sim.realtime.orchestrator import SwarmView
+from sim.realtime.view import SwarmView
 from sim.shared.faults import parse_fault
 from sim.shared.holders import HolderFold, Holding, role_name
 from sim.shared.invariants import check_events

@@ -9,13 +9,14 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from sim.realtime.orchestrator import free_udp_port
+from sim.realtime.robotfiles import free_udp_port
 from swarmd.cli import app
 from swarmd.config import load_swarm
 from swarmd.core import params, wire
 from swarmd.core.plan import RobotPlan, SwarmPlan
 from swarmd.core.roles import Health, Role
 from swarmd.monitor import MonitorState
+from swarmd.transport.addresses import DEFAULT_GROUP
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
 SWARM = 1543
@@ -166,7 +167,7 @@ def test_monitor_table_renders() -> None:
 def test_monitor_cli_once_json_hears_the_loopback_channel() -> None:
     swarm = load_swarm(PAPER)
     port = free_udp_port()
-    group = "239.255.77.7"
+    group = DEFAULT_GROUP
     stop = threading.Event()
     tx = Sender()
 

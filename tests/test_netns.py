@@ -28,6 +28,8 @@ from typing import Any
 import pytest
 import yaml
 
+from swarmd.transport.addresses import DEFAULT_GROUP
+
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
 ROBOTS = (1, 2, 3, 4, 5, 6)
@@ -97,7 +99,7 @@ def test_netns_multicast_failover_across_real_interfaces(
         for r, ns in namespaces.items():
             cfg = {
                 "robot": r, "swarm": str(PAPER),
-                "transport": {"kind": "udp", "group": "239.255.77.7", "port": port,
+                "transport": {"kind": "udp", "group": DEFAULT_GROUP, "port": port,
                               "interface": f"10.77.0.{r}", "ttl": 1, "loopback": True},
                 "link": {"kind": "none"}, "event_log": None,
                 "state_dir": str(tmp_path / "state" / str(r)), "handover_on_stop": False,

@@ -19,7 +19,8 @@ from typing import Any
 
 import pytest
 
-from sim.realtime.orchestrator import RealtimeResult, SwarmView, run_realtime_async
+from sim.realtime.orchestrator import RealtimeResult, run_realtime_async
+from sim.realtime.view import SwarmView
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import check_events
 from swarmd.config import load_swarm

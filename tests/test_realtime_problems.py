@@ -26,6 +26,7 @@ from test_realtime import _alive, _descendants
 from typer.testing import CliRunner
 
 import sim.realtime.orchestrator as realtime
+import sim.realtime.robotfiles as robotfiles
 from sim.realtime.orchestrator import Orchestrator, RealtimeResult, run_realtime_async
 from sim.realtime.summary import summarize_realtime
 from sim.shared.faults import parse_fault
@@ -166,7 +167,7 @@ def test_report_that_cannot_be_written_is_refused_before_the_run(tmp_path: Path)
     result = CliRunner().invoke(app, ["sim", str(PAPER), "--no-physics", "--report",
                                       str(blocker / "out")])
     assert result.exit_code == 2, result.output
-    assert "cannot be written" in result.output and "Not a directory" in result.output
+    assert "cannot be written" in result.output and "is not a directory" in result.output
 
 
 # -- real processes -----------------------------------------------------------------------
@@ -190,7 +191,7 @@ async def test_robot_processes_that_end_on_their_own_are_reported(
 ) -> None:
     # Robot 4's daemon cannot start (its state_dir is under a file): it exits non-zero
     # right after `go`. Robot 2 is killed from outside the orchestrator.
-    write = realtime.write_robot_file
+    write = robotfiles.write_robot_file
     (tmp_path / "blocker").write_text("a file")
 
     def robot_file(run_dir: Path, swarm: Path, robot: int, **kw: Any) -> Path:
@@ -228,7 +229,7 @@ async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # Robot 3's robot file is a FIFO nobody writes: its process blocks reading it.
-    write = realtime.write_robot_file
+    write = robotfiles.write_robot_file
 
     def robot_file(run_dir: Path, swarm: Path, robot: int, **kw: Any) -> Path:
         path = write(run_dir, swarm, robot, **kw)

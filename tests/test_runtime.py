@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 
 import swarmd.daemon as daemon_mod
-from sim.realtime.orchestrator import free_udp_port
+from sim.realtime.robotfiles import free_udp_port
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node
@@ -34,10 +34,11 @@ from swarmd.link.none import NoneLink
 from swarmd.link.socket import SocketLink
 from swarmd.runtime import Runtime
 from swarmd.state import state_path
+from swarmd.transport.addresses import DEFAULT_GROUP
 from swarmd.transport.base import EventCallback, FrameCallback
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
-GROUP = "239.255.77.7"
+GROUP = DEFAULT_GROUP
 
 
 def robot_cfg(tmp: Path, robot: int, port: int, *, handover: bool = True,

@@ -16,12 +16,13 @@ from typing import IO, Any
 
 import pytest
 
-from sim.realtime.orchestrator import free_udp_port
+from sim.realtime.robotfiles import free_udp_port
 from swarmd.core import wire
 from swarmd.core.actions import EVENT_FIELDS
+from swarmd.transport.addresses import DEFAULT_GROUP
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
-GROUP = "239.255.77.7"
+GROUP = DEFAULT_GROUP
 
 
 def listener(port: int) -> socket.socket:

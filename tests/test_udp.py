@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from sim.realtime.orchestrator import free_udp_port
+from sim.realtime.robotfiles import free_udp_port
 from swarmd.config.robot import UdpTransportConfig
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport

@@ -106,19 +106,21 @@ class QuadLink:
         self._last_stats = 0.0
 
     @classmethod
-    def for_robot(cls, cfg: Any, restart_of: float | None = None) -> QuadLink:
+    def for_robot(cls, cfg: Any, restart_of: float | None = None,
+                  craft: str | None = None) -> QuadLink:
         """Build from a loaded robot file (`swarmd.config.RobotConfig`): home from the
         swarm entry, trajectory next to the robot's state (`<state_dir>/traj-<id>.jsonl`).
-        The craft is the X2 unless `SWARMD_QUAD_PRESET` names another preset.
+        The craft is the preset `craft` names; without one, `SWARMD_QUAD_PRESET`'s, else
+        the X2 (a robot process started by hand, `python -m sim.realtime.robot_proc`).
         `restart_of`: the run's t0 when this process restarts the robot (see __init__)."""
         import os
 
         rid = int(cfg.robot_id)
         home2 = getattr(cfg.entry, "home", None)
         home = (float(home2[0]), float(home2[1]), 0.0) if home2 is not None else None
-        craft = preset(os.environ.get("SWARMD_QUAD_PRESET", "x2"))
+        chosen = preset(craft or os.environ.get("SWARMD_QUAD_PRESET", "x2"))
         traj = Path(cfg.state_dir) / f"traj-{rid}.jsonl"
-        return cls(rid, home, craft=craft, traj_path=traj, restart_of=restart_of)
+        return cls(rid, home, craft=chosen, traj_path=traj, restart_of=restart_of)
 
     # -- RobotLink -----------------------------------------------------------------------
     async def start(self, on_health: HealthCallback) -> None:

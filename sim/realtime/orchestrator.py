@@ -48,26 +48,32 @@ import asyncio
 import contextlib
 import functools
 import json
-import multiprocessing
 import os
 import shutil
 import signal
-import socket
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Coroutine, Iterator, Sequence
-from dataclasses import dataclass, field
-from multiprocessing.connection import Connection
-from multiprocessing.process import BaseProcess
+from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
 from typing import Any, ParamSpec
 
-import yaml
-
+from sim.realtime.logscan import log_errors, log_tail
 from sim.realtime.netfilter import partition_windows
+from sim.realtime.procs import (
+    RobotProcess,
+    forkserver_context,
+    kill_group,
+    main_not_reimported,
+)
+from sim.realtime.result import RealtimeResult
+from sim.realtime.robotfiles import free_udp_port, robot_ids, write_robot_file
+from sim.realtime.view import SwarmView
+from sim.shared.eventlog import write_events
 from sim.shared.faults import Fault, fault_record
-from sim.shared.holders import HolderFold
+from swarmd.transport.addresses import DEFAULT_GROUP
+
+__all__ = ["Orchestrator", "RealtimeResult", "run_realtime", "run_realtime_async"]
 
 START_MARGIN = 0.3
 """s between the last robot's `ready` and t0: enough to deliver `go` to 50 processes."""
@@ -80,205 +86,6 @@ STARTED_GRACE = 3.0
 """s a live robot process has, from its start, to log `started` before that is a problem."""
 
 P = ParamSpec("P")
-
-
-@dataclass(slots=True)
-class RealtimeResult:
-    """What a real-time run produced. `events` is the merged log, sorted by t."""
-
-    events: list[dict[str, Any]]
-    robots: tuple[int, ...]
-    duration: float
-    t0: float
-    startup_s: float
-    """s from the first process start to every robot ready (forkserver start-up)."""
-    run_dir: Path | None
-    """Robot files, per-robot logs and pids; kept only when `report_dir` was given."""
-    problems: list[str] = field(default_factory=list)
-    """Robot processes that failed to start, ended on their own, or never started their
-    daemon: a run with problems is not a trustworthy test of the protocol."""
-    stats: dict[int, dict[str, int]] = field(default_factory=dict)
-    """Receive-filter counters of robots that exited gracefully (leave)."""
-    deaths: dict[int, float] = field(default_factory=dict)
-    """robot -> run time (s) its process ended on its own (not by a fault or a leave)."""
-    late: list[tuple[int, float, float]] = field(default_factory=list)
-    """(robot, run time s, ms) of every event-loop wake-up `LATE_MS` or more late."""
-    wakes: int = 0
-    """Wake-ups of every robot's lateness probe (the late ones and the others)."""
-    log_errors: list[str] = field(default_factory=list)
-    """Per robot whose log has error lines (swarmd.logs JSON, level error): how many and
-    the first one. A daemon logs an error for what it survives (a link that raised, a
-    node bug): the run went on, but a summary must not pass over it."""
-    interrupted: str | None = None
-    """The signal that ended the run early (SIGINT, SIGTERM), None if it ran to the end."""
-    ended_at: float | None = None
-    """Run time (s) the robots were killed: `duration`, or earlier when interrupted."""
-
-
-# -- live view ------------------------------------------------------------------------------
-
-
-@dataclass(slots=True)
-class RobotView:
-    """One robot's line in the live table, folded from its events."""
-
-    role: str = "?"
-    function: str | None = None
-    epoch: int | None = None
-    process: str = "starting"
-    last_event: str = ""
-    last_t: float = 0.0
-
-
-class SwarmView:
-    """Folds events into the per-robot view shown live (role, function, last event).
-
-    Role, function and epoch come from the one fold of the log (`sim.shared.holders`); the
-    process column from the injected faults, which only the orchestrator knows."""
-
-    def __init__(self, robots: Sequence[int]) -> None:
-        self.robots = {r: RobotView() for r in robots}
-        self.fold = HolderFold()
-
-    def feed(self, rec: dict[str, Any]) -> None:
-        view = self.robots.get(int(rec.get("robot", 0)))
-        if view is None:
-            return
-        holding = self.fold.feed(rec)
-        if holding is not None:
-            # The process column says killed or stopped; the role column shows none.
-            view.role = "-" if holding.role in ("crashed", "stopped") else holding.role.upper()
-            view.function = holding.executing
-            view.epoch = holding.epoch if holding.role in ("active", "claiming") else None
-        name = str(rec.get("event", ""))
-        if name == "started":
-            view.process = "running"
-        elif name == "stopped":
-            view.process = "stopped"
-        elif name == "fault":
-            view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
-                            "leave": "leaving"}.get(str(rec.get("kind", "")), view.process)
-        view.last_event = name if name != "fault" else f"fault {rec.get('kind')}"
-        view.last_t = float(rec.get("t", 0.0))
-
-    def table(self, now: float) -> Any:
-        """A rich Table of the swarm at run time `now`."""
-        from rich.table import Table
-
-        table = Table(title=f"swarmd sim (real time)  t = {now:6.1f} s")
-        for col in ("robot", "process", "role", "function", "epoch", "last event", "at"):
-            table.add_column(col)
-        for rid, v in sorted(self.robots.items()):
-            table.add_row(str(rid), v.process, v.role, v.function or "-",
-                          "-" if v.epoch is None else str(v.epoch), v.last_event,
-                          f"{v.last_t:.2f}")
-        return table
-
-
-# -- orchestration --------------------------------------------------------------------------
-
-
-@dataclass(slots=True)
-class _Proc:
-    robot_id: int
-    process: BaseProcess
-    events: Connection
-    control: Connection
-    ready: bool = False
-    alive: bool = True
-    """Not killed by the orchestrator, nor seen to end."""
-    eof: bool = False
-    error: str | None = None
-    spawned_at: float = 0.0
-    """Run time the process was started (0 for the robots started before t0)."""
-    left: bool = False
-    """Told to leave: its own exit is the expected end."""
-    died_at: float | None = None
-    """Run time its event pipe closed although nobody killed it."""
-
-
-def free_udp_port() -> int:
-    """A UDP port nothing on 127.0.0.1 uses now: each run gets its own channel."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
-def robot_ids(swarm_path: Path) -> tuple[int, ...]:
-    """Robot ids of a swarm file, validated by the config layer."""
-    from swarmd.config import load_swarm
-
-    cfg = load_swarm(swarm_path)
-    return tuple(sorted(int(r.id) for r in cfg.robots))
-
-
-def write_robot_file(
-    run_dir: Path, swarm_path: Path, robot: int, *, group: str, port: int,
-    interface: str = "127.0.0.1", transport: dict[str, Any] | None = None,
-) -> Path:
-    """The robot file of one simulated robot: literally what `swarmd start` would take.
-    `transport` replaces the default UDP multicast section (emulated radios)."""
-    doc = {
-        "robot": robot,
-        "swarm": str(swarm_path.resolve()),
-        "transport": transport or {"kind": "udp", "group": group, "port": port,
-                                   "interface": interface, "ttl": 1, "loopback": True},
-        "link": {"kind": "none"},
-        "event_log": None,
-        "state_dir": str(run_dir / "state" / str(robot)),
-        "handover_on_stop": True,
-    }
-    path = run_dir / "robots" / f"robot{robot}.yaml"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return path
-
-
-def _context(physics: bool) -> Any:
-    ctx = multiprocessing.get_context("forkserver")
-    # Preloading swarmd in the forkserver makes each robot a cheap fork (~20 ms instead
-    # of a ~0.5 s interpreter start-up): 50 robots start within about a second. With
-    # physics, MuJoCo and the quadrotor link are preloaded too, or every robot imports
-    # them after the fork (notes/mujoco.md: 50 robots ready in 1.6 s preloaded, 8 s not).
-    # The forkserver is one per parent process and keeps the list it started with.
-    preload = ["sim.realtime.robot_proc"] + (["sim.physics.link"] if physics else [])
-    ctx.set_forkserver_preload(preload)
-    return ctx
-
-
-@contextlib.contextmanager
-def _main_not_reimported() -> Iterator[None]:
-    """Hide `__main__`'s file from multiprocessing while a robot process is started.
-
-    A forkserver child re-imports the parent's main script (as `__mp_main__`) before it
-    runs its target. The robots need nothing from it (their entry is in
-    sim/realtime/robot_proc.py, preloaded in the forkserver), and re-importing it costs each
-    robot the whole CLI's imports, or re-runs a script that has no main guard."""
-    main = sys.modules.get("__main__")
-    if main is None:
-        yield
-        return
-    saved: dict[str, Any] = {
-        k: main.__dict__[k] for k in ("__file__", "__spec__") if k in main.__dict__
-    }
-    main.__dict__.pop("__file__", None)
-    main.__dict__["__spec__"] = None
-    try:
-        yield
-    finally:
-        main.__dict__.pop("__spec__", None)
-        main.__dict__.update(saved)
-
-
-def _kill(pid: int, sig: int) -> None:
-    # Robots lead their own process group (robot_proc); signal the group so anything a
-    # robot link started dies with it. Before setpgid ran, fall back to the pid.
-    try:
-        os.killpg(pid, sig)
-    except (ProcessLookupError, PermissionError):
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, sig)
 
 
 class Orchestrator:
@@ -295,11 +102,13 @@ class Orchestrator:
         physics: bool,
         live: bool,
         report_dir: Path | None,
-        group: str = "239.255.77.7",
+        group: str = DEFAULT_GROUP,
         port: int | None = None,
         transport: str = "udp",
+        craft: str | None = None,
     ) -> None:
         self.swarm_path = swarm_path
+        self.craft = craft
         self.transport = transport
         self.duration = duration
         self.faults = sorted(faults, key=lambda f: f.at)
@@ -324,8 +133,8 @@ class Orchestrator:
         self.partitions = partition_windows(
             [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
         )
-        self.procs: dict[int, _Proc] = {}
-        self.retired: list[_Proc] = []
+        self.procs: dict[int, RobotProcess] = {}
+        self.retired: list[RobotProcess] = []
         self.events: list[dict[str, Any]] = []
         self.stats: dict[int, dict[str, int]] = {}
         self.problems: list[str] = []
@@ -336,7 +145,7 @@ class Orchestrator:
         self._ready = asyncio.Event()
         self._stop = asyncio.Event()
         self.interrupted: str | None = None
-        self._ctx = _context(physics)
+        self._ctx = forkserver_context(physics)
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
         # same radios in transparent mode, AP=0, under the serial transport).
@@ -362,7 +171,7 @@ class Orchestrator:
                 "role": role}
 
     # -- processes --------------------------------------------------------------------------
-    def _spawn(self, robot: int, t0: float | None) -> _Proc:
+    def _spawn(self, robot: int, t0: float | None) -> RobotProcess:
         from sim.realtime.robot_proc import RobotSpec, child_main
 
         cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
@@ -371,22 +180,23 @@ class Orchestrator:
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
             loss=self.loss, seed=self.seed, partitions=self.partitions, link=self.link, t0=t0,
+            craft=self.craft,
         )
         ev_r, ev_w = self._ctx.Pipe(duplex=False)
         ctl_r, ctl_w = self._ctx.Pipe(duplex=False)
         process = self._ctx.Process(target=child_main, args=(spec, ev_w, ctl_r),
                                     name=f"swarmd-robot{robot}", daemon=False)
-        with _main_not_reimported():
+        with main_not_reimported():
             process.start()
         ev_w.close()
         ctl_r.close()
-        proc = _Proc(robot, process, ev_r, ctl_w, ready=t0 is not None,
+        proc = RobotProcess(robot, process, ev_r, ctl_w, ready=t0 is not None,
                      spawned_at=self.run_time() if t0 is not None else 0.0)
         asyncio.get_running_loop().add_reader(ev_r.fileno(), self._on_events, proc)
         self._write_pids(proc)
         return proc
 
-    def _write_pids(self, latest: _Proc) -> None:
+    def _write_pids(self, latest: RobotProcess) -> None:
         pids = {str(p.robot_id): p.process.pid for p in self.procs.values()}
         pids[str(latest.robot_id)] = latest.process.pid
         doc = {"orchestrator": os.getpid(), "robots": pids,
@@ -395,7 +205,7 @@ class Orchestrator:
         tmp.write_text(json.dumps(doc))
         os.replace(tmp, self.run_dir / "pids.json")
 
-    def _on_events(self, proc: _Proc) -> None:
+    def _on_events(self, proc: RobotProcess) -> None:
         try:
             while proc.events.poll():
                 self._record(proc, json.loads(proc.events.recv_bytes()))
@@ -404,7 +214,7 @@ class Orchestrator:
         except ValueError as exc:  # a robot wrote something that is not JSON: count it
             self.problems.append(f"robot {proc.robot_id}: bad event message: {exc}")
 
-    def _close_events(self, proc: _Proc) -> None:
+    def _close_events(self, proc: RobotProcess) -> None:
         if not proc.eof:
             proc.eof = True
             with contextlib.suppress(ValueError, OSError):
@@ -415,11 +225,9 @@ class Orchestrator:
                 # Its pipe closed and nobody killed it: the process ended on its own.
                 proc.alive = False
                 proc.died_at = self.run_time()
-                view = self.view.robots.get(proc.robot_id)
-                if view is not None:
-                    view.process = "left" if proc.left else "exited"
+                self.view.set_process(proc.robot_id, "left" if proc.left else "exited")
 
-    def _record(self, proc: _Proc, rec: dict[str, Any]) -> None:
+    def _record(self, proc: RobotProcess, rec: dict[str, Any]) -> None:
         ctl = rec.get("_ctl")
         if ctl == "ready":
             proc.ready = True
@@ -440,15 +248,15 @@ class Orchestrator:
         if all(p.ready or p.eof or p.error for p in self.procs.values()):
             self._ready.set()
 
-    def _send(self, proc: _Proc, msg: dict[str, Any]) -> None:
+    def _send(self, proc: RobotProcess, msg: dict[str, Any]) -> None:
         try:
             proc.control.send_bytes(json.dumps(msg).encode())
         except OSError as exc:  # the robot is gone; the fault still goes in the log
             self.problems.append(f"robot {proc.robot_id}: control {msg.get('cmd')}: {exc}")
 
-    def _kill_proc(self, proc: _Proc) -> None:
+    def _kill_proc(self, proc: RobotProcess) -> None:
         if proc.alive and proc.process.pid is not None:
-            _kill(proc.process.pid, signal.SIGKILL)
+            kill_group(proc.process.pid, signal.SIGKILL)
         proc.alive = False
 
     def kill_all(self) -> None:
@@ -484,7 +292,7 @@ class Orchestrator:
             case "pause":
                 if proc is not None and proc.alive and proc.process.pid is not None:
                     pid = proc.process.pid
-                    _kill(pid, signal.SIGSTOP)
+                    kill_group(pid, signal.SIGSTOP)
                     loop.call_later(fault.duration or 0.0, self._resume, proc)
             case "restart":
                 if proc is not None:
@@ -498,12 +306,10 @@ class Orchestrator:
             case _:
                 self.problems.append(f"fault kind {fault.kind} is not supported in real time")
 
-    def _resume(self, proc: _Proc) -> None:
+    def _resume(self, proc: RobotProcess) -> None:
         if proc.alive and proc.process.pid is not None:
-            _kill(proc.process.pid, signal.SIGCONT)
-            view = self.view.robots.get(proc.robot_id)
-            if view is not None:
-                view.process = "running"
+            kill_group(proc.process.pid, signal.SIGCONT)
+            self.view.set_process(proc.robot_id, "running")
 
     # -- the run ----------------------------------------------------------------------------
     def interrupt(self, reason: str) -> None:
@@ -593,7 +399,7 @@ class Orchestrator:
             log_errors=[e for e in log_errors if e],
         )
 
-    def _all(self) -> list[_Proc]:
+    def _all(self) -> list[RobotProcess]:
         return [*self.retired, *self.procs.values()]
 
     def _check_started(self, end: float) -> None:
@@ -639,38 +445,14 @@ class Orchestrator:
             with contextlib.suppress(OSError):
                 p.events.close()
 
-    def _log_tail(self, proc: _Proc, lines: int = 3) -> str:
-        """The last lines of a robot's log, for a problem report: a JSON log line
-        (swarmd.logs) as its message and error, anything else (a traceback) as is."""
-        path = self.run_dir / "logs" / f"robot{proc.robot_id}.log"
-        try:
-            text = path.read_text(errors="replace").strip()
-        except OSError:
-            return "(no log)"
-        out = []
-        for line in text.splitlines()[-lines:]:
-            try:
-                rec = json.loads(line)
-                line = f"{rec['msg']}" + (f": {rec['error']}" if "error" in rec else "")
-            except (ValueError, TypeError, KeyError):
-                pass
-            out.append(line)
-        return " | ".join(out) or "(empty log)"
+    def _log(self, robot: int) -> Path:
+        return self.run_dir / "logs" / f"robot{robot}.log"
+
+    def _log_tail(self, proc: RobotProcess) -> str:
+        return log_tail(self._log(proc.robot_id))
 
     def _log_errors(self, robot: int) -> str:
-        """'robot R: N error(s) in its log, first: ...' or '' (see `log_errors`)."""
-        path = self.run_dir / "logs" / f"robot{robot}.log"
-        errors = []
-        with contextlib.suppress(OSError), path.open(errors="replace") as lines:
-            for line in lines:
-                if '"level":"error"' in line or '"level":"critical"' in line:
-                    with contextlib.suppress(ValueError, TypeError, KeyError):
-                        rec = json.loads(line)
-                        errors.append(f"{rec['msg']}" + (f": {rec['error']}"
-                                                          if "error" in rec else ""))
-        if not errors:
-            return ""
-        return f"robot {robot}: {len(errors)} error(s) in its log, first: {errors[0]}"
+        return log_errors(self._log(robot), robot)
 
     def cleanup(self) -> None:
         if self.medium is not None:
@@ -694,22 +476,21 @@ async def run_realtime_async(
     live: bool = False,
     port: int | None = None,
     handle_signals: bool = False,
+    craft: str | None = None,
 ) -> RealtimeResult:
     """Run the swarm in real time (see the module docstring); awaitable form for tests.
     `handle_signals`: SIGINT and SIGTERM end the run early with a partial result
-    (`interrupted`) instead of raising; only one run per process may ask for that."""
+    (`interrupted`) instead of raising; only one run per process may ask for that.
+    `craft`: the quadrotor preset every robot flies (physics; None: the link's default)."""
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
                         physics=physics, live=live, report_dir=report_dir, port=port,
-                        transport=transport)
+                        transport=transport, craft=craft)
     try:
         result = await orch.run(handle_signals=handle_signals)
     finally:
         orch.cleanup()
     if events_path is not None:
-        events_path.parent.mkdir(parents=True, exist_ok=True)
-        with events_path.open("w") as out:
-            for rec in result.events:
-                out.write(json.dumps(rec, separators=(",", ":")) + "\n")
+        write_events(events_path, result.events)
     return result
 
 

@@ -44,9 +44,8 @@ from pathlib import Path
 from typing import Any
 
 from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
+from sim.shared.liar import liar_warnings
 from swarmd.config import load_robot
-from swarmd.core import wire
-from swarmd.core.node import Snapshot
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health
 from swarmd.daemon import Daemon, run_daemon
@@ -79,6 +78,8 @@ class RobotSpec:
     link: str = "none"
     t0: float | None = None
     """Start at once with this run origin (a restart); None: wait for the `go` message."""
+    craft: str | None = None
+    """Quadrotor preset of the `quad` link (sim.physics.model.PRESETS); None: its default."""
 
 
 # -- robot links ----------------------------------------------------------------------------
@@ -93,7 +94,7 @@ def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
 
     # spec.t0 set: this process restarts a robot of a running swarm; its craft resumes
     # where the killed process left it instead of reappearing parked at home.
-    link: RobotLink = QuadLink.for_robot(cfg, restart_of=spec.t0)
+    link: RobotLink = QuadLink.for_robot(cfg, restart_of=spec.t0, craft=spec.craft)
     return link
 
 
@@ -108,7 +109,8 @@ LINK_FACTORIES: dict[str, Callable[[RobotSpec, Any], RobotLink]] = {
 
 
 class Liar:
-    """Forges WARN frames about this robot's neighbours once `start()` is called.
+    """Forges WARN frames about this robot's neighbours once `start()` is called
+    (whom: `sim.shared.liar.liar_warnings`).
 
     They go out through the daemon's own runtime (`Runtime.inject`), so they carry the
     robot's sender id, its rising sequence numbers and its signature: receivers accept
@@ -127,24 +129,12 @@ class Liar:
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run())
 
-    def targets(self, snap: Snapshot) -> list[tuple[int, int, int]]:
-        """(suspect, slot, epoch) for each slot this robot's function watches; a robot
-        without a function lies about every slot it knows a holder of."""
-        functions = (self.plan.watched(snap.function) if snap.function is not None
-                     else tuple(snap.known))
-        out = []
-        for f in functions:
-            holder = snap.known.get(f)
-            if holder is not None and holder[0] != snap.robot_id:
-                out.append((holder[0], self.plan.slot(f), holder[1]))
-        return out
-
     async def _run(self) -> None:
         while True:
             rt = self.runtime
             if rt is not None:
-                for suspect, slot, epoch in self.targets(rt.node.snapshot()):
-                    rt.inject(wire.Warn(suspect=suspect, function=slot, epoch=epoch))
+                for warn in liar_warnings(self.plan, rt.node.snapshot()):
+                    rt.inject(warn)
                     self.forged += 1
             await asyncio.sleep(self.interval)
 

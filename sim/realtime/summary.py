@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 
-from sim.realtime.orchestrator import RealtimeResult
+from sim.realtime.result import RealtimeResult
 from sim.shared.faults import Fault
 from sim.shared.summary import (
     Summary,

@@ -8,7 +8,7 @@ node is in (roles.py: active, standby, claiming, fenced) and the function that r
 about. Every reader of "who holds what" uses this one fold: the invariant checker
 (`Checker.executing`), the summary (holder when a fault hit, holders at the end), the
 timeline and the video colours (`sim.physics.plots.role_spans`) and the live table
-(`sim.realtime.orchestrator.SwarmView`).
+(`sim.realtime.view.SwarmView`).
 
 The transitions, by event (the node's own, roles.py TRANSITIONS):
   started{role,function} -> that role; it executes `function` only when active

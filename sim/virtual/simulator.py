@@ -23,6 +23,7 @@ from typing import Any
 
 from sim.shared.faults import Fault, fault_record
 from sim.shared.invariants import Checker, Violation
+from sim.shared.liar import liar_warnings
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
 from swarmd.core.node import Node, Restored
@@ -340,18 +341,13 @@ class VirtualSwarm:
         r.timer_at = None
 
     def _lie(self, rid: int) -> None:
-        """`liar:R@T`: R warns about the holders of the slots its slot watches (or of
-        every slot, when it holds none) every warn interval, while they are alive."""
+        """`liar:R@T`: every warn interval while R is alive, the WARN frames
+        `sim.shared.liar.liar_warnings` names."""
         r = self.robots[rid]
         if not r.alive or r.paused or r.node is None:
             return
-        node = r.node
-        targets = self.plan.watched(node.function) if node.function else self.plan.functions
-        for g in targets:
-            holder, epoch = node.known[g]
-            if holder and holder != rid:
-                msg = wire.Warn(holder, self.plan.slot(g), epoch)
-                self._call(rid, _OP_SEND, msg)
+        for msg in liar_warnings(self.plan, r.node.snapshot()):
+            self._call(rid, _OP_SEND, msg)
         self._push(self.now + self.params.warn_interval, _LIAR, rid, None)
 
 

@@ -12,8 +12,7 @@ from typing import Annotated
 
 import typer
 
-DEFAULT_GROUP = "239.255.77.7"
-DEFAULT_PORT = 47007
+from swarmd.transport.addresses import DEFAULT_GROUP, DEFAULT_INTERFACE, DEFAULT_PORT
 
 
 def register(app: typer.Typer) -> None:
@@ -35,7 +34,7 @@ def register(app: typer.Typer) -> None:
             "--interface",
             help="IPv4 address of the interface to listen on (with --swarm; the default "
             "is loopback, a Wi-Fi swarm needs this machine's address on it).")] = (
-            "127.0.0.1"),
+            DEFAULT_INTERFACE),
         once: Annotated[bool, typer.Option(
             "--once", help="Listen for --duration seconds, print one table, exit.")] = False,
         as_json: Annotated[bool, typer.Option(

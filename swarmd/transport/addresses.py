@@ -1,10 +1,19 @@
-"""Checks of the UDP transport's addresses, shared by the transport's constructor and
-the robot file's validation (swarmd/config/robot.py), so both accept and refuse the same
-values with the same words. Plain functions raising `ValueError`; no I/O."""
+"""The UDP transport's addresses: its defaults, written once here for the transport, the
+robot file, `swarmd monitor` and the simulator, and the checks shared by the transport's
+constructor and the robot file's validation (swarmd/config/robot.py), so both accept and
+refuse the same values with the same words. Plain functions raising `ValueError`; no I/O."""
 
 from __future__ import annotations
 
 import ipaddress
+
+DEFAULT_GROUP = "239.255.77.7"
+"""An administratively scoped group (239.0.0.0/8, RFC 2365): never routed off-site."""
+DEFAULT_PORT = 47007
+DEFAULT_INTERFACE = "127.0.0.1"
+"""Loopback unless the robot file names this robot's address on the swarm's network."""
+DEFAULT_TTL = 1
+"""One hop: frames never leave the local network (the swarm is one broadcast domain)."""
 
 
 def multicast_group(value: str) -> str:

@@ -20,14 +20,17 @@ import socket
 from collections.abc import Mapping
 from typing import Any
 
-from swarmd.transport.addresses import interface_address, multicast_group
+from swarmd.transport.addresses import (
+    DEFAULT_GROUP,
+    DEFAULT_INTERFACE,
+    DEFAULT_PORT,
+    DEFAULT_TTL,
+    interface_address,
+    multicast_group,
+)
 from swarmd.transport.base import EventCallback, FrameCallback, TransportError
 
 log = logging.getLogger(__name__)
-
-DEFAULT_GROUP = "239.255.77.7"
-DEFAULT_PORT = 47007
-DEFAULT_INTERFACE = "127.0.0.1"
 
 # IPv4 minimum MTU on Ethernet (1500) minus IP (20) and UDP (8) headers: a frame this size
 # is never fragmented on any real link. swarmd frames are ~23 bytes, far below.
@@ -59,7 +62,7 @@ class UdpTransport:
         group: str = DEFAULT_GROUP,
         port: int = DEFAULT_PORT,
         interface: str = DEFAULT_INTERFACE,
-        ttl: int = 1,
+        ttl: int = DEFAULT_TTL,
         loopback: bool = True,
     ) -> None:
         try:

@@ -1,0 +1,74 @@
+"""The live view of a real-time run: one line per robot (process, role, function, epoch,
+last event), folded from the merged events and drawn as a rich table while the run goes."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from sim.shared.holders import HolderFold
+
+
+@dataclass(slots=True)
+class RobotView:
+    """One robot's line in the live table, folded from its events."""
+
+    role: str = "?"
+    function: str | None = None
+    epoch: int | None = None
+    process: str = "starting"
+    last_event: str = ""
+    last_t: float = 0.0
+
+
+class SwarmView:
+    """Folds events into the per-robot view shown live (role, function, last event).
+
+    Role, function and epoch come from the one fold of the log (`sim.shared.holders`); the
+    process column from the injected faults, which only the orchestrator knows."""
+
+    def __init__(self, robots: Sequence[int]) -> None:
+        self.robots = {r: RobotView() for r in robots}
+        self.fold = HolderFold()
+
+    def feed(self, rec: dict[str, Any]) -> None:
+        view = self.robots.get(int(rec.get("robot", 0)))
+        if view is None:
+            return
+        holding = self.fold.feed(rec)
+        if holding is not None:
+            # The process column says killed or stopped; the role column shows none.
+            view.role = "-" if holding.role in ("crashed", "stopped") else holding.role.upper()
+            view.function = holding.executing
+            view.epoch = holding.epoch if holding.role in ("active", "claiming") else None
+        name = str(rec.get("event", ""))
+        if name == "started":
+            view.process = "running"
+        elif name == "stopped":
+            view.process = "stopped"
+        elif name == "fault":
+            view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
+                            "leave": "leaving"}.get(str(rec.get("kind", "")), view.process)
+        view.last_event = name if name != "fault" else f"fault {rec.get('kind')}"
+        view.last_t = float(rec.get("t", 0.0))
+
+    def set_process(self, robot: int, process: str) -> None:
+        """The process column of `robot`, for what only the orchestrator sees (an exit,
+        a resume)."""
+        view = self.robots.get(robot)
+        if view is not None:
+            view.process = process
+
+    def table(self, now: float) -> Any:
+        """A rich Table of the swarm at run time `now`."""
+        from rich.table import Table
+
+        table = Table(title=f"swarmd sim (real time)  t = {now:6.1f} s")
+        for col in ("robot", "process", "role", "function", "epoch", "last event", "at"):
+            table.add_column(col)
+        for rid, v in sorted(self.robots.items()):
+            table.add_row(str(rid), v.process, v.role, v.function or "-",
+                          "-" if v.epoch is None else str(v.epoch), v.last_event,
+                          f"{v.last_t:.2f}")
+        return table
