@@ -24,7 +24,8 @@ from typing import Any
 from sim.shared.faults import Fault, fault_record
 from sim.shared.invariants import Checker, Violation
 from swarmd.core import wire
-from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.events import Event
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -345,10 +346,10 @@ class VirtualSwarm:
         r = self.robots[rid]
         if not r.alive or r.paused or r.node is None:
             return
-        node = r.node
-        targets = self.plan.watched(node.function) if node.function else self.plan.functions
+        snap = r.node.snapshot()
+        targets = self.plan.watched(snap.function) if snap.function else self.plan.functions
         for g in targets:
-            holder, epoch = node.known[g]
+            holder, epoch = snap.known[g]
             if holder and holder != rid:
                 msg = wire.Warn(holder, self.plan.slot(g), epoch)
                 self._call(rid, _OP_SEND, msg)

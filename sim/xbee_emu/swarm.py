@@ -16,7 +16,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from swarmd.core import wire
-from swarmd.core.actions import Action, Broadcast, Event
+from swarmd.core.actions import Action, Broadcast
+from swarmd.core.events import Event, Fault
 from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -39,8 +40,8 @@ class _Robot:
             match action:
                 case Broadcast(frame):
                     self.transport.send(frame)
-                case Event():
-                    self.swarm.record(action.record(self.swarm.elapsed(), self.robot_id))
+                case Event() as event:
+                    self.swarm.record(event.record(self.swarm.elapsed(), self.robot_id))
                 case _:
                     pass  # Assign / Release go to a robot link; none here
         self.rearm()
@@ -114,7 +115,7 @@ class RadioSwarm:
         robot.alive = False
         if robot.timer is not None:
             robot.timer.cancel()
-        self.record({"t": self.elapsed(), "robot": robot_id, "event": "fault", "kind": "crash"})
+        self.record(Fault("crash").record(self.elapsed(), robot_id))
         await robot.transport.close()
 
     async def wait_for(self, match: Callable[[Record], bool], timeout: float) -> Record | None:
