@@ -1,4 +1,4 @@
-"""Prometheus metrics for people who run Prometheus (issue 6 point 5).
+"""Prometheus metrics for people who run Prometheus.
 
 Optional: the daemon builds a `Metrics` only when the robot file asks for an endpoint,
 and the endpoint listens on loopback unless the operator explicitly allows otherwise

@@ -1,4 +1,4 @@
-"""The asyncio runtime: the one owner of a core `Node` (issue 3 point 1, STYLE.md point 8).
+"""The asyncio runtime: the one owner of a core `Node` (DESIGN section 2, sans-IO driver).
 
 Theory of operation. Everything that reaches the node goes through one step path, as in
 aioquic's asyncio layer:

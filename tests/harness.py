@@ -3,7 +3,7 @@
 For node-level tests that need a few robots talking but not the full simulator
 (`sim.virtual.simulator`): every broadcast goes through `Net.deliver` to all other live nodes
 after `delay`, dropped with probability `loss` by a seeded `random.Random`, so a test
-is a pure function of its seed (STYLE.md point 7: no sleeps, virtual time only).
+is a pure function of its seed (no sleeps, virtual time only).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The node's rarer branches, each reached by the protocol situation it exists for.
 
-STYLE.md (the sans-IO guide): every branch of `swarmd.core` exercised through its public
-API, no mocks. `tests/test_node.py` covers the main rules; this file covers the edges:
+Every branch of `swarmd.core` exercised through its public API (sans-IO: no mocks,
+DESIGN section 2). `tests/test_node.py` covers the main rules; this file covers the edges:
 misuse, a stopped node, late ticks, health changes while claiming, claim races that
 only a swarm with two standbys per slot produces, epoch saturation, stalls while
 claiming, restored state that no longer matches the plan, and the rejoin hold
@@ -19,8 +19,8 @@ from collections.abc import Sequence
 import pytest
 from test_node import Driven, events, frame, hb, sent, started
 
-from swarmd.core import wire
 from swarmd.core import events as ev
+from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Release
 from swarmd.core.node import Node, NodeError, Restored
 from swarmd.core.params import Params

@@ -15,8 +15,8 @@ from harness import Net
 from hypothesis import given
 from hypothesis import strategies as st
 
-from swarmd.core import wire
 from swarmd.core import events as ev
+from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.node import Node, NodeError, Restored, Snapshot
 from swarmd.core.params import Params

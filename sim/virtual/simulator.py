@@ -1,4 +1,4 @@
-"""Virtual-time swarm simulator: N protocol cores on one clock (issue 2, point 5).
+"""Virtual-time swarm simulator: N protocol cores on one clock.
 
 Every robot is a `swarmd.core.node.Node`, the same object the daemon drives; only time
 and the channel are simulated. The channel is a broadcast medium with per-receiver

@@ -1,7 +1,7 @@
 """A whole swarm of protocol nodes in one asyncio loop, each on its own radio transport.
 
-The smallest real-time driver of `swarmd.core.Node` (aioquic's pattern, STYLE.md point
-8): after every input the node's actions are executed (Broadcast -> the robot's
+The smallest real-time driver of `swarmd.core.Node` (aioquic's pattern, DESIGN
+section 2): after every input the node's actions are executed (Broadcast -> the robot's
 transport, Event -> the event list) and one `call_at` is re-armed at `next_deadline()`.
 Used by the radio tests and `bench/bench_radio.py` to run the paper swarm over emulated
 XBee or serial radios with the real transports in between; `swarmd start` uses the full
