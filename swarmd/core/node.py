@@ -168,6 +168,8 @@ class Node:
         self._start_time = now
         self._next_heartbeat = now
         self._last_heartbeat = -1e18
+        # The deadline the driver was last given (`_drain`): a call far past it is
+        # our own stall, not the neighbours' silence (`_advance`).
         self._armed: float | None = now
         self._stopped = False
         self._started = False
@@ -699,7 +701,7 @@ class Node:
             if self._claim is not None:
                 self._claim.until = max(self._claim.until, now + self._params.claim_hold)
             self._next_heartbeat = now
-            self._armed = None  # until the driver asks for the next deadline again
+            self._armed = None  # noticed once; `_drain` arms the next deadline
 
     def _clear_votes(self) -> None:
         for v in self._votes.values():
