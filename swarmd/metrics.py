@@ -1,4 +1,4 @@
-"""Prometheus metrics for people who run Prometheus (issue 6 point 5).
+"""Prometheus metrics for people who run Prometheus.
 
 Optional: the daemon builds a `Metrics` only when the robot file asks for an endpoint,
 and the endpoint listens on loopback unless the operator explicitly allows otherwise
@@ -50,7 +50,8 @@ from prometheus_client import (
 from prometheus_client.core import CounterMetricFamily
 from prometheus_client.registry import Collector
 
-from swarmd.core.actions import EVENT_FIELDS, Action, Event
+from swarmd.core.actions import Action
+from swarmd.core.events import CORE_EVENTS, Event
 from swarmd.core.roles import Role
 
 if TYPE_CHECKING:
@@ -63,7 +64,7 @@ if TYPE_CHECKING:
 DEFAULT_PORT = 9477
 """Port of the endpoint when the robot file enables it without naming one."""
 
-EVENT_NAMES = tuple(name for name in EVENT_FIELDS if name != "fault")
+EVENT_NAMES = tuple(cls.name for cls in CORE_EVENTS)
 """DESIGN section 3's event names, exported at 0 from the start so `rate()` works
 before the first occurrence (Prometheus best practice: avoid missing series)."""
 

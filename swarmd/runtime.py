@@ -1,4 +1,4 @@
-"""The asyncio runtime: the one owner of a core `Node` (issue 3 point 1, STYLE.md point 8).
+"""The asyncio runtime: the one owner of a core `Node` (DESIGN section 2, sans-IO driver).
 
 Theory of operation. Everything that reaches the node goes through one step path, as in
 aioquic's asyncio layer:
@@ -44,7 +44,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from swarmd.core import wire
-from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.events import Event
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
@@ -230,9 +231,9 @@ class Runtime:
                         self.counters["link_errors"] += 1
                         log.exception("robot link release failed",
                                       extra={"function": function})
-                case Event():
+                case Event() as event:
                     changed = True
-                    self._event(action)
+                    self._event(event)
         if self.metrics is not None and actions:
             self.metrics.observe_actions(actions)
         if changed:
@@ -420,7 +421,7 @@ class Runtime:
     def _on_transport_event(self, name: str, fields: Mapping[str, Any]) -> None:
         """A channel condition (radio up or down, a send error): counted and logged to
         the daemon's own log, not the event log, whose names are a contract (DESIGN
-        section 3, `EVENT_FIELDS`). The protocol itself notices a dead channel through
+        section 3, `swarmd.core.events`). The protocol itself notices a dead channel through
         missing heartbeats, as the paper's robots would."""
         now = self.loop.time()
         failed = name != "transport_up"

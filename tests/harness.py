@@ -3,7 +3,7 @@
 For node-level tests that need a few robots talking but not the full simulator
 (`sim.virtual.simulator`): every broadcast goes through `Net.deliver` to all other live nodes
 after `delay`, dropped with probability `loss` by a seeded `random.Random`, so a test
-is a pure function of its seed (STYLE.md point 7: no sleeps, virtual time only).
+is a pure function of its seed (no sleeps, virtual time only).
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.events import Event
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan

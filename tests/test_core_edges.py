@@ -1,7 +1,7 @@
 """The node's rarer branches, each reached by the protocol situation it exists for.
 
-STYLE.md (the sans-IO guide): every branch of `swarmd.core` exercised through its public
-API, no mocks. `tests/test_node.py` covers the main rules; this file covers the edges:
+Every branch of `swarmd.core` exercised through its public API (sans-IO: no mocks,
+DESIGN section 2). `tests/test_node.py` covers the main rules; this file covers the edges:
 misuse, a stopped node, late ticks, health changes while claiming, claim races that
 only a swarm with two standbys per slot produces, epoch saturation, stalls while
 claiming, restored state that no longer matches the plan, and the rejoin hold
@@ -19,8 +19,9 @@ from collections.abc import Sequence
 import pytest
 from test_node import Driven, events, frame, hb, sent, started
 
+from swarmd.core import events as ev
 from swarmd.core import wire
-from swarmd.core.actions import Action, Assign, Event, Release
+from swarmd.core.actions import Action, Assign, Release
 from swarmd.core.node import Node, NodeError, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import RobotPlan, SwarmPlan
@@ -68,7 +69,7 @@ def test_restored_state_about_a_function_the_plan_dropped_is_ignored(
     assert set(node.snapshot().known) == set(paper_plan.functions)
     assert node.snapshot().known["f2"] == (6, 3)  # the entry the plan still has is kept
     # no hold: it tells how it started at once, and executes nothing
-    assert [e.fields for e in events(actions, "started")] == [{"role": "standby",
+    assert [e.fields() for e in events(actions, ev.Started)] == [{"role": "standby",
                                                                "function": None}]
     assert not assigns(actions)
     assert node.next_deadline() == pytest.approx(udp_params.standby_heartbeat_interval)
@@ -79,14 +80,14 @@ def test_a_stopped_node_ignores_frames_time_and_a_second_stop(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 2)
     out = node.node.stop(1.0, handover=True)
-    assert len(events(out, "stopped")) == 1
+    assert len(events(out, ev.Stopped)) == 1
     newer = frame(paper_plan, 6, hb(paper_plan, "f1", epoch=3))
-    frames_in = node.node.frames_in
+    frames_in = node.snapshot().frames_in
     # what would fence a running node (f1 is a neighbour slot) changes nothing now
     assert node.node.receive(newer, 1.1) == []
     assert node.node.receive_frame(wire.decode(frame(paper_plan, 6, hb(paper_plan, "f2", 5))),
                                    1.2) == []
-    assert node.node.frames_in == frames_in
+    assert node.snapshot().frames_in == frames_in
     assert node.snapshot().known["f1"] == (1, 0)
     assert node.snapshot().known["f2"] == (2, 0)
     # neighbours silent far past t_max and the grace time: no warning, no heartbeat
@@ -101,11 +102,11 @@ def test_stop_releases_and_leaves_only_when_asked(paper_plan: SwarmPlan, udp_par
                                                   handover: bool) -> None:
     node, _ = started(paper_plan, udp_params, 2)
     out = node.node.stop(1.0, handover=handover)
-    assert Release("f2") in out and events(out, "stopped")
+    assert Release("f2") in out and events(out, ev.Stopped)
     leave = wire.Leave(paper_plan.slot("f2"), 0, wire.LeaveReason.SHUTDOWN)
     # without handover the neighbours find out by timeout (handover_on_stop: false)
     assert sent(out) == ([leave] if handover else [])
-    assert bool(events(out, "leave")) is handover
+    assert bool(events(out, ev.Leave)) is handover
 
 
 # ---------------------------------------------------------------------- heartbeats
@@ -150,13 +151,13 @@ def test_degraded_is_reported_without_changing_the_schedule(paper_plan: SwarmPla
 def test_a_fault_while_claiming_abandons_the_claim(paper_plan: SwarmPlan,
                                                    udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 6)
-    assert events(quorum_on(node, paper_plan, 2, "f2", 0, 0.1), "claim")
+    assert events(quorum_on(node, paper_plan, 2, "f2", 0, 0.1), ev.Claim)
     out = node.robot_health(Health.FAULTY, 0.15)
     assert not sent(out)  # nothing held, so no LEAVE
     assert node.snapshot().role is Role.STANDBY
     # a faulty robot must not take the slot over when the hold runs out (rule 7)
     out = node.tick(0.1 + udp_params.claim_hold) + node.run_to(3.0)
-    assert not assigns(out) and not events(out, "takeover") and not sent(out)
+    assert not assigns(out) and not events(out, ev.Takeover) and not sent(out)
 
 
 @pytest.mark.parametrize("epoch", [1, 2])
@@ -168,12 +169,12 @@ def test_a_heartbeat_at_the_claimed_epoch_supersedes_the_claim(
     quorum_on(node, shared_plan, 2, "f2", 0, 0.1)
     assert node.snapshot().role is Role.CLAIMING
     out = node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=epoch)), 0.15)
-    assert [e.fields for e in events(out, "backoff")] == [
+    assert [e.fields() for e in events(out, ev.Backoff)] == [
         {"subject": 2, "function": "f2", "winner": 5}]
     assert node.snapshot().role is Role.STANDBY
     assert node.snapshot().known["f2"] == (5, epoch)
     out = node.run_to(3.0)
-    assert not assigns(out) and not events(out, "takeover")
+    assert not assigns(out) and not events(out, ev.Takeover)
 
 
 def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
@@ -183,12 +184,12 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
     # heartbeats f2 at epoch 0. That is not the suspect answering: the claim goes on.
     node, _ = started(shared_plan, udp_params, 6)
     out = quorum_on(node, shared_plan, 5, "f2", 1, 0.1)
-    assert events(out, "claim")[0].fields == {"subject": 5, "function": "f2", "epoch": 2}
+    assert events(out, ev.Claim)[0].fields() == {"subject": 5, "function": "f2", "epoch": 2}
     out = node.receive(frame(shared_plan, 2, hb(shared_plan, "f2", epoch=0)), 0.15)
-    assert not events(out, "refute") and not events(out, "backoff")
+    assert not events(out, ev.Refute) and not events(out, ev.Backoff)
     assert node.snapshot().role is Role.CLAIMING
     out = node.run_to(0.11 + udp_params.claim_hold)
-    assert [e.fields for e in events(out, "takeover")] == [
+    assert [e.fields() for e in events(out, ev.Takeover)] == [
         {"function": "f2", "epoch": 2, "replaced": 5}]
     assert assigns(out) == [Assign("f2", 2)]
 
@@ -202,11 +203,11 @@ def test_warnings_about_an_older_holder_are_not_counted(shared_plan: SwarmPlan,
     # at the current epoch: both are about a holder that is no longer the slot's
     for stale in (wire.Warn(2, slot, 0), wire.Warn(2, slot, 1)):
         out = quorum_on(node, shared_plan, stale.suspect, "f2", stale.epoch, 0.2)
-        assert not events(out, "vote") and not events(out, "claim")
+        assert not events(out, ev.Vote) and not events(out, ev.Claim)
     assert node.snapshot().votes == {} and node.snapshot().role is Role.STANDBY
     # control: a warning about the current holder does count
     out = node.receive(frame(shared_plan, 1, wire.Warn(5, slot, 1)), 0.3)
-    assert [e.fields["count"] for e in events(out, "vote")] == [1]
+    assert [e.fields()["count"] for e in events(out, ev.Vote)] == [1]
 
 
 def test_the_epoch_saturates_instead_of_wrapping(paper_plan: SwarmPlan,
@@ -214,7 +215,7 @@ def test_the_epoch_saturates_instead_of_wrapping(paper_plan: SwarmPlan,
     # The 65536th takeover of one slot: the epoch field is 16 bits on the wire.
     node, _ = started(paper_plan, udp_params, 6)
     out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, 0.1)
-    assert events(out, "claim")[0].fields["epoch"] == 0xFFFF
+    assert events(out, ev.Claim)[0].fields()["epoch"] == 0xFFFF
     assert sent(out) == [wire.Claim(2, paper_plan.slot("f2"), 0xFFFF)]
     out = node.run_to(0.11 + udp_params.claim_hold)
     assert assigns(out) == [Assign("f2", 0xFFFF)]
@@ -230,11 +231,11 @@ def test_a_stall_while_claiming_listens_again_before_taking_over(
     # claimant, the suspect's refutation) is still queued: hold a full claim_hold again.
     resumed = 2.0
     out = node.tick(resumed)
-    assert not assigns(out) and not events(out, "takeover")
+    assert not assigns(out) and not events(out, ev.Takeover)
     assert wire.Claim(2, paper_plan.slot("f2"), 1) in sent(out)  # the claim is repeated
     if suspect_alive:
         out = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2")), resumed + 0.05)
-        assert events(out, "refute")
+        assert events(out, ev.Refute)
         assert not assigns(node.run_to(resumed + 2.0))
         assert node.snapshot().role is Role.STANDBY
     else:
@@ -253,10 +254,10 @@ def test_restored_knowledge_of_a_newer_holder_ends_the_hold_as_standby(
         held: tuple[str, int]) -> None:
     restored = Restored(known={"f2": known_f2}, held=held)
     node, out = started(paper_plan, udp_params, rid, restored=restored)
-    assert not events(out, "started")  # the hold still runs: others may know more
+    assert not events(out, ev.Started)  # the hold still runs: others may know more
     out += node.run_to(udp_params.rejoin_hold + 0.05)
     assert not assigns(out)
-    assert [e.fields for e in events(out, "started")] == [{"role": "standby",
+    assert [e.fields() for e in events(out, ev.Started)] == [{"role": "standby",
                                                            "function": None}]
     assert node.snapshot().role is Role.STANDBY
 
@@ -288,7 +289,7 @@ def _rejoin(plan: SwarmPlan, params: Params, rid: int, known: dict[str, tuple[in
 def _one_consistent_start(node: Driven, out: list[Action]) -> None:
     """Exactly one `started` per boot, told before the robot acts as a standby or holder,
     and the robot executes at most one function at a time, the one its state names."""
-    names = [e.name for e in out if isinstance(e, Event)]
+    names = [e.name for e in out if isinstance(e, ev.Event)]
     assert names.count("started") == 1, names
     first = names.index("started")
     assert not {"claim", "takeover"} & set(names[:first]), names
@@ -345,5 +346,5 @@ def test_a_claim_at_a_newer_epoch_ends_the_hold(paper_plan: SwarmPlan,
     feed: list[Feed] = [(0.1, 6, wire.Claim(2, paper_plan.slot("f2"), 1))]
     _, out = _rejoin(paper_plan, udp_params, 2, _base(paper_plan), ("f2", 0), feed)
     assert Assign("f2", 0) not in out
-    assert [e.fields for e in events(out, "started")] == [{"role": "standby",
+    assert [e.fields() for e in events(out, ev.Started)] == [{"role": "standby",
                                                            "function": None}]

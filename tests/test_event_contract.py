@@ -1,7 +1,7 @@
 """The event log is an outside contract (DESIGN section 3): clients parse it by name.
 
 Every record is `{"t", "robot", "event", ...}` with a DESIGN name and at least that
-name's fields (`swarmd.core.actions.EVENT_FIELDS`). Checked on virtual runs that make
+name's fields (`swarmd.core.events`, one class a name). Checked on virtual runs that make
 every event happen; the daemon's own log and the flown sim are checked in test_start.py
 and test_sim_report.py.
 """
@@ -9,6 +9,7 @@ and test_sim_report.py.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import yaml
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.config import load_swarm
-from swarmd.core.actions import EVENT_FIELDS
+from swarmd.core.events import EVENTS, Fault, Refute, Stopped, Vote
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -30,8 +31,8 @@ def check_records(records: Iterable[Mapping[str, Any]]) -> set[str]:
     for r in records:
         json.dumps(r)  # a record is plain JSON
         assert isinstance(r["t"], float | int) and isinstance(r["robot"], int), r
-        assert r["event"] in EVENT_FIELDS, r
-        missing = set(EVENT_FIELDS[r["event"]]) - r.keys()
+        assert r["event"] in EVENTS, r
+        missing = set(EVENTS[r["event"]].contract()) - r.keys()
         assert not missing, (r, missing)
         seen.add(r["event"])
     return seen
@@ -74,4 +75,28 @@ def test_every_event_name_happens_in_some_scenario(tmp_path: Path) -> None:
     seen: set[str] = set()
     for swarm, specs in SCENARIOS:
         seen |= {r["event"] for r in _run(swarm, specs, 1, tmp_path).events}
-    assert set(EVENT_FIELDS) <= seen, set(EVENT_FIELDS) - seen
+    assert set(EVENTS) <= seen, set(EVENTS) - seen
+
+
+def test_the_event_types_are_design_section_3() -> None:
+    # DESIGN section 3 lists `name{field,...}`; each type's contract() must say the same.
+    text = (ROOT / "docs" / "DESIGN.md").read_text()
+    section = text[text.index("### Event log"):text.index("## 4.")]
+    listed = {name: tuple(f for f in fields.split(",") if f)
+              for name, fields in re.findall(r"`(\w+)\{([\w,]*)\}`", section)}
+    assert listed == {name: cls.contract() for name, cls in EVENTS.items()}
+
+
+def test_a_record_is_the_json_object_in_contract_order() -> None:
+    vote = Vote(subject=2, function="f2", from_=4, count=1)
+    assert json.dumps(vote.record(1.5, 5)) == (
+        '{"t": 1.5, "robot": 5, "event": "vote", "subject": 2, "function": "f2", '
+        '"from": 4, "count": 1}')
+    assert Refute(subject=2, function="f2").record(0.0, 1) == {
+        "t": 0.0, "robot": 1, "event": "refute", "subject": 2, "function": "f2"}
+    assert Stopped().record(2.0, 3) == {"t": 2.0, "robot": 3, "event": "stopped"}
+    # a simulator's fault: the optional fields only when the fault has them
+    assert Fault("crash", "crash:2@3").record(3.0, 2) == {
+        "t": 3.0, "robot": 2, "event": "fault", "kind": "crash", "spec": "crash:2@3"}
+    assert Fault("partition", "p", 2.0, [[1], [2]]).fields() == {
+        "kind": "partition", "spec": "p", "duration": 2.0, "groups": [[1], [2]]}

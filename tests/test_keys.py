@@ -20,7 +20,8 @@ import pytest
 from typer.testing import CliRunner
 
 from swarmd.core import wire
-from swarmd.core.actions import Action, Broadcast, Event
+from swarmd.core.actions import Action, Broadcast
+from swarmd.core.events import Event
 from swarmd.core.node import Node
 from swarmd.core.params import udp
 from swarmd.core.plan import RobotPlan, SwarmPlan
@@ -160,7 +161,7 @@ class _Swarm:
 
     def restart(self, rid: int, keys: Sequence[bytes]) -> None:
         # A restarted daemon seeds seq from the clock, above what it sent before.
-        self.nodes[rid] = self._node(rid, keys, seq_start=self.nodes[rid].seq + 1_000)
+        self.nodes[rid] = self._node(rid, keys, seq_start=self.nodes[rid].snapshot().seq + 1_000)
 
     def _handle(self, rid: int, actions: list[Action]) -> None:
         queue = [(rid, a) for a in actions]
@@ -209,7 +210,7 @@ def test_switching_without_the_window_cuts_the_robot_off() -> None:
     swarm.restart(1, [NEW])  # step 1 skipped
     swarm.run(1.0)
     assert swarm.auth_drops() > 0
-    suspected = {e.fields.get("subject") for r, e in swarm.suspicions() if e.name == "suspect"}
+    suspected = {e.fields().get("subject") for r, e in swarm.suspicions() if e.name == "suspect"}
     assert 1 in suspected
 
 

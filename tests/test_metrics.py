@@ -8,7 +8,8 @@ import httpx
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from swarmd.core.actions import Assign, Broadcast, Event
+from swarmd.core import events as ev
+from swarmd.core.actions import Assign, Broadcast
 from swarmd.core.node import Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.metrics import Metrics, MetricsError, MetricsServer, check_loopback
@@ -40,8 +41,10 @@ def test_endpoint_serves_what_the_runtime_recorded(served: tuple[Metrics, Metric
     metrics.set_drops({"auth": 5, "replay": 1})  # cumulative from the core: replaces
     metrics.dropped("auth")  # the runtime's own drops add to the core's
     metrics.observe_actions([
-        Broadcast(b"x"), Event("suspect", {"subject": 2, "function": "f2"}),
-        Event("vote", {}), Event("vote", {}), Assign("f2", 1), Event("takeover", {}),
+        Broadcast(b"x"), ev.Suspect(subject=2, function="f2"),
+        ev.Vote(subject=2, function="f2", from_=1, count=1),
+        ev.Vote(subject=2, function="f2", from_=3, count=2), Assign("f2", 1),
+        ev.Takeover(function="f2", epoch=1, replaced=2),
     ])
     metrics.heartbeat_lateness(0.003)
     metrics.heartbeat_lateness(0.7)

@@ -8,15 +8,16 @@ the codec, so every rule is exercised through the public API only (sans-IO guide
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 from harness import Net
 from hypothesis import given
 from hypothesis import strategies as st
 
+from swarmd.core import events as ev
 from swarmd.core import wire
-from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.node import Node, NodeError, Restored, Snapshot
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -24,6 +25,7 @@ from swarmd.core.roles import Health, Role
 from swarmd.core.wire import KEY_LEN
 
 _seqs: dict[int, int] = {}
+E = TypeVar("E", bound=ev.Event)
 
 
 def frame(plan: SwarmPlan, sender: int, msg: wire.Message, *, seq: int | None = None,
@@ -42,20 +44,19 @@ def sent(actions: Sequence[Action]) -> list[wire.Message]:
     return [wire.decode(a.frame).msg for a in actions if isinstance(a, Broadcast)]
 
 
-def events(actions: Sequence[Action], name: str) -> list[Event]:
-    return [a for a in actions if isinstance(a, Event) and a.name == name]
+def events(actions: Sequence[Action], kind: type[E]) -> list[E]:
+    return [a for a in actions if isinstance(a, kind)]
 
 
 class Driven:
-    """A node driven as the runtime drives it (STYLE.md point 8): after every call the
-    driver asks `next_deadline()` to re-arm its timer. The node uses that armed time to
-    notice its own stalls, so tests must keep the same contract."""
+    """A node driven as the runtime drives it: after every call the driver asks
+    `next_deadline()` to re-arm its timer; `run_to` fires every deadline in order."""
 
     def __init__(self, node: Node) -> None:
         self.node = node
 
     def _rearm(self, actions: list[Action]) -> list[Action]:
-        self.node.next_deadline()
+        self.node.next_deadline()  # a pure query: the driver's timer only
         return actions
 
     def tick(self, now: float) -> list[Action]:
@@ -94,7 +95,7 @@ def test_active_starts_with_assign_and_heartbeat(paper_plan: SwarmPlan,
                                                  udp_params: Params) -> None:
     _, actions = started(paper_plan, udp_params, 2)
     assert Assign("f2", 0) in actions
-    assert events(actions, "started")[0].fields == {"role": "active", "function": "f2"}
+    assert events(actions, ev.Started)[0].fields() == {"role": "active", "function": "f2"}
     assert sent(actions) == [hb(paper_plan, "f2")]
 
 
@@ -137,7 +138,7 @@ def test_receive_never_raises_on_garbage(paper_plan: SwarmPlan, udp_params: Para
     node.tick(0.0)
     for i, data in enumerate(blobs):
         node.receive(data, 0.001 * i)
-    assert sum(node.snapshot().drops.values()) == len(blobs) - node.frames_in
+    assert sum(node.snapshot().drops.values()) == len(blobs) - node.snapshot().frames_in
 
 
 @given(st.lists(st.tuples(st.integers(0, 0xFFFF), st.integers(0, 255), st.integers(0, 0xFFFF),
@@ -166,7 +167,7 @@ def test_active_answers_a_warning_about_itself(paper_plan: SwarmPlan,
     node, _ = started(paper_plan, udp_params, 2)
     actions = node.receive(frame(paper_plan, 1, wire.Warn(2, paper_plan.slot("f2"), 0)), 0.05)
     assert sent(actions) == [hb(paper_plan, "f2")]  # at once, not at the next period
-    assert events(actions, "refute")
+    assert events(actions, ev.Refute)
 
 
 def test_standby_counts_only_witnesses(paper_plan: SwarmPlan, udp_params: Params) -> None:
@@ -175,13 +176,13 @@ def test_standby_counts_only_witnesses(paper_plan: SwarmPlan, udp_params: Params
     # 4 holds f4, which does not watch f2; 2 is the suspect itself (DESIGN rule 3)
     for t, sender in ((0.1, 4), (0.2, 2), (0.3, 4)):
         actions = node.receive(frame(paper_plan, sender, warn), t)
-        assert not events(actions, "vote") and not events(actions, "claim")
+        assert not events(actions, ev.Vote) and not events(actions, ev.Claim)
     assert node.snapshot().drops.get("not_witness") == 3
     assert node.snapshot().role is Role.STANDBY
     # control: the two real witnesses (holders of f1 and f3) do make it claim
     node.receive(frame(paper_plan, 1, warn), 0.4)
     actions = node.receive(frame(paper_plan, 3, warn), 0.45)
-    assert events(actions, "claim")[0].fields == {"subject": 2, "function": "f2", "epoch": 1}
+    assert events(actions, ev.Claim)[0].fields() == {"subject": 2, "function": "f2", "epoch": 1}
     assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
 
 
@@ -192,7 +193,7 @@ def test_suspect_heartbeat_refutes_a_claim(paper_plan: SwarmPlan, udp_params: Pa
     node.receive(frame(paper_plan, 3, warn), 0.12)
     assert node.snapshot().role is Role.CLAIMING
     actions = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2")), 0.15)
-    assert events(actions, "refute")
+    assert events(actions, ev.Refute)
     assert node.snapshot().role is Role.STANDBY
     later = node.tick(1.0)
     assert not [a for a in later if isinstance(a, Assign)]
@@ -204,7 +205,7 @@ def test_faulty_robot_leaves_and_goes_silent(paper_plan: SwarmPlan, udp_params: 
     actions = node.robot_health(Health.FAULTY, 0.05)
     assert sent(actions) == [wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.FAULT))]
     assert Release("f2") in actions
-    assert events(actions, "leave")[0].fields == {"function": "f2", "reason": "fault"}
+    assert events(actions, ev.Leave)[0].fields() == {"function": "f2", "reason": "fault"}
     assert node.snapshot().function is None
     later = node.run_to(5.0)
     for t in (1.0, 2.5, 5.0):
@@ -221,7 +222,7 @@ def test_leave_heard_makes_the_covering_standby_claim_at_once(
     assert node.snapshot().role is Role.CLAIMING
     actions = node.tick(0.3 + udp_params.claim_hold)
     assert Assign("f2", 1) in actions
-    assert events(actions, "takeover")[0].fields == {"function": "f2", "epoch": 1, "replaced": 2}
+    assert events(actions, ev.Takeover)[0].fields() == {"function": "f2", "epoch": 1, "replaced": 2}
 
 
 def test_leave_from_a_non_holder_is_ignored(paper_plan: SwarmPlan, udp_params: Params) -> None:
@@ -237,7 +238,7 @@ def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 2)
     actions = node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), 0.05)
-    assert events(actions, "fenced")[0].fields == {"function": "f2", "epoch": 1}
+    assert events(actions, ev.Fenced)[0].fields() == {"function": "f2", "epoch": 1}
     assert Release("f2") in actions
     assert node.snapshot().role is Role.FENCED
     node.tick(0.05 + udp_params.heartbeat_interval)
@@ -264,12 +265,12 @@ def _restored(plan: SwarmPlan) -> Restored:
 
 def test_rejoin_superseded_stays_standby(paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, actions = started(paper_plan, udp_params, 2, restored=_restored(paper_plan))
-    assert not events(actions, "started")  # the outcome is told after the hold
+    assert not events(actions, ev.Started)  # the outcome is told after the hold
     outputs = list(actions)
     outputs += node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), 0.1)
     outputs += node.run_to(3.0)
     assert not [a for a in outputs if isinstance(a, Assign)]
-    assert [e.fields for e in events(outputs, "started")] == [{"role": "standby",
+    assert [e.fields() for e in events(outputs, ev.Started)] == [{"role": "standby",
                                                                "function": None}]
     assert node.snapshot().role is Role.STANDBY
 
@@ -282,7 +283,7 @@ def test_rejoin_with_no_newer_holder_resumes(paper_plan: SwarmPlan, udp_params: 
     assert node.next_deadline() == pytest.approx(udp_params.rejoin_hold)
     actions = node.tick(udp_params.rejoin_hold)
     assert Assign("f2", 0) in actions
-    assert events(actions, "started")[0].fields == {"role": "active", "function": "f2"}
+    assert events(actions, ev.Started)[0].fields() == {"role": "active", "function": "f2"}
 
 
 # ---------------------------------------------------------------------- timing
@@ -301,11 +302,11 @@ def test_stalled_node_does_not_blame_its_neighbours(paper_plan: SwarmPlan,
         t += 0.1
     # the process froze for 10 s (SIGSTOP): neighbours kept heartbeating, we heard none
     actions = node.tick(11.0)
-    assert not events(actions, "suspect") and not events(actions, "warn")
+    assert not events(actions, ev.Suspect) and not events(actions, ev.Warn)
     assert not [m for m in sent(actions) if isinstance(m, wire.Warn)]
     # control: real silence after the stall is still detected, one t_max later
     out = node.run_to(11.0 + 2 * udp_params.t_max)
-    assert {e.fields["subject"] for e in events(out, "suspect")} == {2, 4}
+    assert {e.fields()["subject"] for e in events(out, ev.Suspect)} == {2, 4}
 
 
 def test_next_deadline_is_heartbeat_or_watch(paper_plan: SwarmPlan, udp_params: Params) -> None:
@@ -323,8 +324,8 @@ def test_next_deadline_is_heartbeat_or_watch(paper_plan: SwarmPlan, udp_params: 
     _feed_neighbours(node2, paper_plan, 0.15)
     node2.run_to(0.34)  # heartbeats at 0.2 and 0.3
     assert node2.next_deadline() == pytest.approx(0.35)
-    assert not events(node2.tick(0.349), "suspect")
-    assert len(events(node2.tick(0.35), "suspect")) == 2
+    assert not events(node2.tick(0.349), ev.Suspect)
+    assert len(events(node2.tick(0.35), ev.Suspect)) == 2
 
 
 def test_heartbeat_period_does_not_drift(paper_plan: SwarmPlan, udp_params: Params) -> None:
@@ -372,14 +373,18 @@ def test_set_keys_signs_with_the_first_and_accepts_only_the_listed(
     for i, key in enumerate((OLD_KEY, NEW_KEY)):
         node.receive(signed(paper_plan, 2, key), 0.01 * (i + 1))
     assert node.snapshot().drops == {}
-    beat = next(a.frame for a in node.tick(node.next_heartbeat) if isinstance(a, Broadcast))
+    beat_at = node.next_deadline()
+    assert beat_at is not None
+    assert beat_at == pytest.approx(udp_params.heartbeat_interval)  # its own heartbeat
+    beat = next(a.frame for a in node.tick(beat_at) if isinstance(a, Broadcast))
+    later = beat_at + udp_params.heartbeat_interval
     assert wire.decode(beat, [NEW_KEY]).sender == 1
     with pytest.raises(wire.CodecError):
         wire.decode(beat, [OLD_KEY])
     node.set_keys([NEW_KEY])  # step 3: the old key is no longer accepted
-    node.receive(signed(paper_plan, 2, OLD_KEY), node.next_heartbeat)
+    node.receive(signed(paper_plan, 2, OLD_KEY), later)
     assert node.snapshot().drops == {"auth": 1}
-    node.receive(signed(paper_plan, 2, NEW_KEY), node.next_heartbeat)
+    node.receive(signed(paper_plan, 2, NEW_KEY), later)
     assert node.snapshot().drops == {"auth": 1}
 
 

@@ -2,9 +2,20 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
-from swarmd.core.roles import TRANSITIONS, Role, TransitionError, Trigger, mermaid, transition
+from swarmd.core.roles import (
+    REGENERATE,
+    TRANSITIONS,
+    Role,
+    TransitionError,
+    Trigger,
+    markdown,
+    mermaid,
+    transition,
+)
 
 EXPECTED = {
     (Role.STANDBY, Trigger.QUORUM): Role.CLAIMING,
@@ -51,3 +62,16 @@ def test_mermaid_mentions_every_state_and_trigger() -> None:
         assert role.name in text
     for trig in Trigger:
         assert trig.name.lower() in text
+
+
+def test_docs_roles_md_is_generated_from_the_table() -> None:
+    path = Path(__file__).resolve().parent.parent / "docs" / "roles.md"
+    assert path.read_text() == markdown(), f"docs/roles.md is stale; run `{REGENERATE}`"
+
+
+def test_the_page_has_a_row_per_transition() -> None:
+    text = markdown()
+    for src, edges in TRANSITIONS.items():
+        for trig, dst in edges.items():
+            assert f"| {src.name} | `{trig.name.lower()}` | {dst.name} |" in text
+    assert mermaid() in text

@@ -122,7 +122,7 @@ async def test_runtime_two_daemons_hear_each_other(tmp_path: Path) -> None:
     b = await launch(robot_cfg(tmp_path, 2, port))
     try:
         await wait_until(lambda: 2 in a.heard and 1 in b.heard, 3.0, "heartbeats")
-        await wait_until(lambda: 2 in runtime_of(a).node.heard_at, 1.0, "node input")
+        await wait_until(lambda: 2 in runtime_of(a).node.snapshot().heard, 1.0, "node input")
         assert runtime_of(a).node.drops["own"] > 0  # loopback echo, dropped by sender id
         started = next(e for e in a.events if e["event"] == "started")
         assert (started["role"], started["function"]) == ("active", "f1")

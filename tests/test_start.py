@@ -18,7 +18,7 @@ import pytest
 
 from sim.realtime.robotfiles import free_udp_port
 from swarmd.core import wire
-from swarmd.core.actions import EVENT_FIELDS
+from swarmd.core.events import EVENTS
 from swarmd.transport.addresses import DEFAULT_GROUP
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
@@ -112,9 +112,9 @@ def test_start_logs_json_reloads_and_leaves_on_sigterm(tmp_path: Path) -> None:
     names = [r["event"] for r in records]
     assert names[0] == "started"
     # Only DESIGN's names reach the event log; channel conditions go to the JSON log.
-    assert set(names) <= set(EVENT_FIELDS), names
+    assert set(names) <= set(EVENTS), names
     for r in records:
-        assert set(EVENT_FIELDS[r["event"]]) <= r.keys(), r
+        assert set(EVENTS[r["event"]].contract()) <= r.keys(), r
     assert names[-2:] == ["leave", "stopped"]
     assert all(abs(r["t"] - time.time()) < 60 for r in records)  # Unix time in `start`
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from decimal import Decimal
 from typing import Any
 
+from swarmd.core import events
+
 KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor")
 _DURATION_KINDS = {"pause", "partition"}
 
@@ -68,14 +70,9 @@ def fault_record(fault: Fault, t: float) -> dict[str, Any]:
     section 3 `fault{kind}`; docs/sim.md): `robot` is the target, 0 for a partition;
     `spec` always, `duration` and `groups` when the fault has them. Both simulators log
     this, so a log reads the same whichever produced it."""
-    rec: dict[str, Any] = {"t": round(t, 6), "robot": 0 if fault.kind == "partition" else
-                           fault.robot, "event": "fault", "kind": fault.kind,
-                           "spec": fault.spec()}
-    if fault.duration is not None:
-        rec["duration"] = fault.duration
-    if fault.groups:
-        rec["groups"] = [list(g) for g in fault.groups]
-    return rec
+    groups = [list(g) for g in fault.groups] or None
+    record = events.Fault(fault.kind, fault.spec(), fault.duration, groups)
+    return record.record(round(t, 6), 0 if fault.kind == "partition" else fault.robot)
 
 
 def _num(x: float | None) -> str:

@@ -1,4 +1,4 @@
-"""Virtual-time swarm simulator: N protocol cores on one clock (issue 2, point 5).
+"""Virtual-time swarm simulator: N protocol cores on one clock.
 
 Every robot is a `swarmd.core.node.Node`, the same object the daemon drives; only time
 and the channel are simulated. The channel is a broadcast medium with per-receiver
@@ -25,7 +25,8 @@ from sim.shared.faults import Fault, fault_record
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
 from swarmd.core import wire
-from swarmd.core.actions import Action, Assign, Broadcast, Event, Release
+from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.events import Event
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan

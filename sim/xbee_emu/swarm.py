@@ -1,7 +1,7 @@
 """A whole swarm of protocol nodes in one asyncio loop, each on its own radio transport.
 
-The smallest real-time driver of `swarmd.core.Node` (aioquic's pattern, STYLE.md point
-8): after every input the node's actions are executed (Broadcast -> the robot's
+The smallest real-time driver of `swarmd.core.Node` (aioquic's pattern, DESIGN
+section 2): after every input the node's actions are executed (Broadcast -> the robot's
 transport, Event -> the event list) and one `call_at` is re-armed at `next_deadline()`.
 Used by the radio tests and `bench/bench_radio.py` to run the paper swarm over emulated
 XBee or serial radios with the real transports in between; `swarmd start` uses the full
@@ -16,7 +16,8 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from swarmd.core import wire
-from swarmd.core.actions import Action, Broadcast, Event
+from swarmd.core.actions import Action, Broadcast
+from swarmd.core.events import Event, Fault
 from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -39,8 +40,8 @@ class _Robot:
             match action:
                 case Broadcast(frame):
                     self.transport.send(frame)
-                case Event():
-                    self.swarm.record(action.record(self.swarm.elapsed(), self.robot_id))
+                case Event() as event:
+                    self.swarm.record(event.record(self.swarm.elapsed(), self.robot_id))
                 case _:
                     pass  # Assign / Release go to a robot link; none here
         self.rearm()
@@ -114,7 +115,7 @@ class RadioSwarm:
         robot.alive = False
         if robot.timer is not None:
             robot.timer.cancel()
-        self.record({"t": self.elapsed(), "robot": robot_id, "event": "fault", "kind": "crash"})
+        self.record(Fault("crash").record(self.elapsed(), robot_id))
         await robot.transport.close()
 
     async def wait_for(self, match: Callable[[Record], bool], timeout: float) -> Record | None:

@@ -1,15 +1,16 @@
 """What the core asks its driver to do: frozen dataclasses, one class a kind.
 
-The runtime executes them in order after every call into the node (STYLE.md point 8):
+The driver executes them in order after every call into the node (DESIGN section 2):
 `Broadcast` goes on the channel, `Assign` / `Release` go to the robot (the paper's single
-output: which task to perform, Fig. 4), `Event` goes to the event log (DESIGN section 3).
+output: which task to perform, Fig. 4), an `Event` (one class a kind, `events.py`) goes
+to the event log (DESIGN section 3).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
+
+from swarmd.core.events import Event
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,40 +31,6 @@ class Release:
     """Stop executing `function` at once."""
 
     function: str
-
-
-EVENT_FIELDS: Mapping[str, tuple[str, ...]] = {
-    "started": ("role", "function"),
-    "suspect": ("subject", "function"),
-    "warn": ("subject", "function"),
-    "vote": ("subject", "function", "from", "count"),
-    "claim": ("subject", "function", "epoch"),
-    "backoff": ("subject", "function", "winner"),
-    "takeover": ("function", "epoch", "replaced"),
-    "fenced": ("function", "epoch"),
-    "refute": (),
-    "leave": ("function", "reason"),
-    "alert": ("function", "reason"),
-    "fault": ("kind",),
-    "stopped": (),
-}
-"""The event log's names and the fields each one always carries (DESIGN section 3, an
-outside contract: clients parse it). A record may carry more fields (`refute` names its
-subject and function), never fewer, and no other name goes into the log: a channel's
-condition (radio up/down, send errors) goes to the daemon's own log and counters.
-`fault` is written by `swarmd sim` only."""
-
-
-@dataclass(frozen=True, slots=True)
-class Event:
-    """One event-log record: `name` and its fields as DESIGN section 3 lists them."""
-
-    name: str
-    fields: Mapping[str, Any] = field(default_factory=dict)
-
-    def record(self, t: float, robot: int) -> dict[str, Any]:
-        """The JSON Lines object: {"t", "robot", "event", ...fields}."""
-        return {"t": t, "robot": robot, "event": self.name, **self.fields}
 
 
 Action = Broadcast | Assign | Release | Event

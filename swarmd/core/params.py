@@ -1,7 +1,7 @@
 """Timing and quorum parameters of the protocol, one frozen dataclass with presets.
 
 Every field carries its unit and the rule it comes from (memberlist's config.go is the
-model, see STYLE.md). Two presets: `udp()` for loopback / Wi-Fi multicast, where frames
+model). Two presets: `udp()` for loopback / Wi-Fi multicast, where frames
 are cheap and latency is milliseconds, and `radio()` for XBee / SiK radios, where the
 air is shared at 250 kbps and a frame costs milliseconds of airtime.
 

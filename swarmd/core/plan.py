@@ -12,7 +12,8 @@ here that is turned into relations between function *slots*:
 Whoever holds `f` at any time inherits `watches[f]`, and the holders of the slots that
 watch `f` follow the new holder: nothing is re-configured after a takeover.
 
-The plan is built by the config layer (pydantic stays there, STYLE.md point 5).
+The plan is built by the config layer: validation (pydantic) stays there, so the core
+stays stdlib only (DESIGN section 2).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ the function at once, and after one heartbeat period rejoins as STANDBY (DESIGN 
 A robot that reports itself faulty sends LEAVE and drops to STANDBY (rule 7).
 
 Every transition the node makes goes through `transition()`, so this table is the whole
-state machine; `docs/roles.md` is drawn from it by `python -m swarmd.core.roles`.
+state machine; `docs/roles.md` is generated from it by `python -m swarmd.core.roles`.
 """
 
 from __future__ import annotations
@@ -95,5 +95,32 @@ def mermaid() -> str:
     return "\n".join(lines)
 
 
+REGENERATE = "python -m swarmd.core.roles > docs/roles.md"
+"""The command that writes `docs/roles.md` (tests/test_roles.py checks it is current)."""
+
+
+def markdown() -> str:
+    """The whole `docs/roles.md` page: the table of transitions and the diagram."""
+    lines = [
+        "# Roles and transitions",
+        "",
+        f"<!-- Generated from swarmd/core/roles.py by `{REGENERATE}`; do not edit. -->",
+        "",
+        "A robot's role (paper Fig. 5, with the wait state as `CLAIMING`) changes only "
+        "through this table: the node (`swarmd/core/node.py`) raises `TransitionError` on "
+        "any other change. A robot starts `ACTIVE` when the swarm file gives it a "
+        "function, `STANDBY` otherwise (a restarted holder first listens for "
+        "`rejoin_hold`, DESIGN rule 2).",
+        "",
+        "| from | trigger | to | when |",
+        "|---|---|---|---|",
+    ]
+    for src, edges in TRANSITIONS.items():
+        for trig, dst in edges.items():
+            lines.append(f"| {src.name} | `{trig.name.lower()}` | {dst.name} | {trig.value} |")
+    lines += ["", "```mermaid", mermaid(), "```", ""]
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    print(mermaid())
+    print(markdown(), end="")

@@ -8,10 +8,13 @@ Layout (big-endian)::
 - byte 0: version in the high nibble (1), message type in bits 0-2, bit 3 set when the
   frame carries a tag. A signed HEARTBEAT is 11 + 4 + 8 = 23 bytes (DESIGN: <= 24, so
   it fits any XBee broadcast payload: Zigbee 92 B, 802.15.4 100 B, DigiMesh 73 B).
-- seq: a per-sender counter that must rise. Senders seed it from their wall clock in
-  10 us units (as MAVLink 2 signing does), so a sender that restarted starts above
-  anything it sent before; receivers drop a frame whose seq is not above the last one
-  accepted from that sender (replay). The seeding is the runtime's job (`seq_seed`).
+- seq: a per-sender counter that rises with every frame sent. Senders seed it from
+  their wall clock in 10 us units (as MAVLink 2 signing does), so a sender that
+  restarted starts above anything it sent before. Receivers keep a sliding window per
+  sender (`replay.py`, 64 frames): a frame above the highest seq seen, or within the
+  window below it and not seen yet, is accepted (a channel that reorders loses
+  nothing); a repeat, or a frame older than the window, is dropped as `replay`. The
+  seeding is the runtime's job (`seq_seed`).
 - tag: HMAC-SHA256 over everything before it, truncated to 8 bytes (MAVLink 2 uses 6).
 
 `decode` raises only `CodecError` (with a machine-readable `reason`) on any input.

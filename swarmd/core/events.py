@@ -1,0 +1,211 @@
+"""The event log's records as types, one frozen class a kind (DESIGN section 3).
+
+The event log is an outside contract: clients parse it by name, one JSON object a line,
+`{"t", "robot", "event", ...fields}`. Each class below is one name; its dataclass fields
+are the record's fields in the order they are written. `record(t, robot)` builds the
+JSON object, so the node emits typed values and only the driver turns them into JSON.
+
+A channel's condition (radio up or down, send errors) is not an event: it goes to the
+daemon's own log and counters, so no name outside this module reaches the log.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+
+class Event:
+    """Base of every event-log record type; `match` on the subclasses."""
+
+    __slots__ = ()
+    name: ClassVar[str]
+    """The record's `event` value."""
+
+    def fields(self) -> dict[str, Any]:
+        """The record's fields, in contract order (`from_` is written `from`)."""
+        return {key: getattr(self, attr) for attr, key in _keys(type(self))}
+
+    def record(self, t: float, robot: int) -> dict[str, Any]:
+        """The JSON Lines object: {"t", "robot", "event", ...fields}."""
+        return {"t": t, "robot": robot, "event": self.name, **self.fields()}
+
+    @classmethod
+    def contract(cls) -> tuple[str, ...]:
+        """The field names every record of this kind carries."""
+        return tuple(key for attr, key in _keys(cls)
+                     if _field(cls, attr).default is dataclasses.MISSING)
+
+
+_KEYS: dict[type[Event], tuple[tuple[str, str], ...]] = {}
+
+
+def _keys(cls: type[Event]) -> tuple[tuple[str, str], ...]:
+    """(attribute, JSON key) for each field: a trailing `_` escapes a Python keyword."""
+    keys = _KEYS.get(cls)
+    if keys is None:
+        keys = _KEYS[cls] = tuple((f.name, f.name.removesuffix("_"))
+                                  for f in dataclasses.fields(cls))  # type: ignore[arg-type]
+    return keys
+
+
+def _field(cls: type[Event], attr: str) -> dataclasses.Field[Any]:
+    return next(f for f in dataclasses.fields(cls) if f.name == attr)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, slots=True)
+class Started(Event):
+    """The node runs: as `role` ("active" / "standby"), holding `function` or None; after
+    a rejoin hold (DESIGN rule 2 across a reboot), the hold's outcome."""
+
+    name: ClassVar[str] = "started"
+    role: str
+    function: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Suspect(Event):
+    """A watchdog fired: `subject`, holder of the watched `function`, fell silent for
+    T_max (paper Fig. 7)."""
+
+    name: ClassVar[str] = "suspect"
+    subject: int
+    function: str
+
+
+@dataclass(frozen=True, slots=True)
+class Warn(Event):
+    """This robot starts warning the standbys about `subject` (paper Fig. 8)."""
+
+    name: ClassVar[str] = "warn"
+    subject: int
+    function: str
+
+
+@dataclass(frozen=True, slots=True)
+class Vote(Event):
+    """A standby counted a new witness `from_` against `subject`; `count` distinct
+    witnesses within the window so far (paper Fig. 9, DESIGN rule 3)."""
+
+    name: ClassVar[str] = "vote"
+    subject: int
+    function: str
+    from_: int
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class Claim(Event):
+    """This standby claims `function` from `subject` at `epoch` (the paper's wait state)."""
+
+    name: ClassVar[str] = "claim"
+    subject: int
+    function: str
+    epoch: int
+
+
+@dataclass(frozen=True, slots=True)
+class Backoff(Event):
+    """This robot gave up its claim on `function`: `winner` claims or holds it (lowest id
+    wins; a higher epoch knows more)."""
+
+    name: ClassVar[str] = "backoff"
+    subject: int
+    function: str
+    winner: int
+
+
+@dataclass(frozen=True, slots=True)
+class Takeover(Event):
+    """The claim hold ran out: this robot executes `function` at `epoch` in place of
+    `replaced`."""
+
+    name: ClassVar[str] = "takeover"
+    function: str
+    epoch: int
+    replaced: int
+
+
+@dataclass(frozen=True, slots=True)
+class Fenced(Event):
+    """This robot heard its `function` held at `epoch` by another and stopped it (DESIGN
+    rule 2)."""
+
+    name: ClassVar[str] = "fenced"
+    function: str
+    epoch: int
+
+
+@dataclass(frozen=True, slots=True)
+class Refute(Event):
+    """`subject`, suspected on `function`, was heard alive (DESIGN rule 4). The contract
+    names no field (`refute{}`); the core always says whom and which slot."""
+
+    name: ClassVar[str] = "refute"
+    subject: int
+    function: str
+
+    @classmethod
+    def contract(cls) -> tuple[str, ...]:
+        return ()
+
+
+@dataclass(frozen=True, slots=True)
+class Leave(Event):
+    """This robot stops executing `function` and tells the swarm (`reason`: "fault",
+    DESIGN rule 7, or "shutdown", a graceful stop with handover)."""
+
+    name: ClassVar[str] = "leave"
+    function: str
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class Alert(Event):
+    """Nobody can or did take `function` over (DESIGN rule 8): for an operator."""
+
+    name: ClassVar[str] = "alert"
+    function: str
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class Stopped(Event):
+    """The node stopped (graceful stop)."""
+
+    name: ClassVar[str] = "stopped"
+
+
+@dataclass(frozen=True, slots=True)
+class Fault(Event):
+    """A fault injected by a simulator (`kind` as in `crash:R@T`), never by the core.
+    `spec` is the fault as given; `duration` and `groups` are written when the fault has
+    them (a pause, a partition)."""
+
+    name: ClassVar[str] = "fault"
+    kind: str
+    spec: str | None = None
+    duration: float | None = None
+    groups: list[list[int]] | None = None
+
+    def fields(self) -> dict[str, Any]:
+        return {key: value for key, value in Event.fields(self).items()
+                if value is not None or key == "kind"}
+
+
+CORE_EVENTS: tuple[type[Event], ...] = (
+    Started, Suspect, Warn, Vote, Claim, Backoff, Takeover, Fenced, Refute, Leave, Alert,
+    Stopped,
+)
+"""Every kind the core emits, in DESIGN section 3's order."""
+
+EVENTS: dict[str, type[Event]] = {cls.name: cls for cls in CORE_EVENTS}
+EVENTS[Fault.name] = Fault
+"""Every name the event log may hold -> its type."""
+
+
+__all__ = [
+    "CORE_EVENTS", "EVENTS", "Alert", "Backoff", "Claim", "Event", "Fault", "Fenced",
+    "Leave", "Refute", "Started", "Stopped", "Suspect", "Takeover", "Vote", "Warn",
+]
