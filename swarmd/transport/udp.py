@@ -22,6 +22,7 @@ from typing import Any
 
 from swarmd.transport.addresses import interface_address, multicast_group
 from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.media import UDP_MAX_PAYLOAD
 
 log = logging.getLogger(__name__)
 
@@ -29,9 +30,8 @@ DEFAULT_GROUP = "239.255.77.7"
 DEFAULT_PORT = 47007
 DEFAULT_INTERFACE = "127.0.0.1"
 
-# IPv4 minimum MTU on Ethernet (1500) minus IP (20) and UDP (8) headers: a frame this size
-# is never fragmented on any real link. swarmd frames are ~23 bytes, far below.
-MAX_PAYLOAD = 1472
+# Never fragmented on any real link (media.py). swarmd frames are ~23 bytes, far below.
+MAX_PAYLOAD = UDP_MAX_PAYLOAD
 
 
 # Datagrams read per readiness event: under a flood this bounds how long one read keeps
