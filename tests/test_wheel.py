@@ -30,9 +30,10 @@ SIM_HINT = "pip install 'swarmd[sim]'"
 pytestmark = pytest.mark.slow
 
 
-def run(cmd: list[str | Path], timeout: float, **kw: object) -> subprocess.CompletedProcess[str]:
+def run(cmd: list[str | Path], timeout: float, env: dict[str, str] | None = None,
+        cwd: str | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run([str(c) for c in cmd], capture_output=True, text=True,
-                          timeout=timeout, check=False, **kw)  # type: ignore[call-overload]
+                          timeout=timeout, check=False, env=env, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
