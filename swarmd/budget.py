@@ -30,6 +30,7 @@ from typing import Any
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.wire import HEADER_LEN, TAG_LEN
+from swarmd.transport import media
 
 AIR_RATE_BPS = 250_000
 BYTE_TIME = 8 / AIR_RATE_BPS  # 32 us
@@ -39,10 +40,11 @@ PSDU_MAX = 127
 AIRTIME_CEILING = 0.30
 ZIGBEE_BROADCASTS_PER_S = 1.0
 
-MAX_PAYLOAD = {"zigbee": 92, "802.15.4": 100, "digimesh": 73, "serial": 64, "udp": 1472}
-"""Largest payload per medium: XBee 3 broadcast limits (unencrypted); the serial
-transport's default frame limit (one RF packet after COBS framing); a UDP datagram that
-fits a 1500-byte Ethernet MTU."""
+MAX_PAYLOAD = {**media.MAX_PAYLOAD, "serial": media.SERIAL_MAX_PAYLOAD,
+               "udp": media.UDP_MAX_PAYLOAD}
+"""Largest payload per medium (transport/media.py): XBee 3 broadcast limits
+(unencrypted); the serial transport's default frame limit; a UDP datagram that fits a
+1500-byte Ethernet MTU."""
 
 HEARTBEAT_BODY = 4  # wire.py: function (1), epoch (2), role|health (1)
 WARN_BODY = 5  # suspect (2), function (1), epoch (2)
@@ -51,7 +53,7 @@ MEDIA = tuple(MAX_PAYLOAD)
 
 def frame_overhead(medium: str) -> int:
     """Bytes a frame costs on the air beyond its payload."""
-    if medium in ("zigbee", "802.15.4", "digimesh"):
+    if medium in media.PROTOCOLS:
         return PHY_OVERHEAD + PSDU_MAX - MAX_PAYLOAD[medium]
     if medium == "serial":
         # COBS + CRC framing (transport/framing.py) carried by a transparent-mode radio,

@@ -6,6 +6,8 @@ import asyncio
 import contextlib
 import logging
 import os
+import subprocess
+import sys
 import threading
 from collections.abc import Mapping
 from pathlib import Path
@@ -15,6 +17,7 @@ import pytest
 
 from sim.xbee_emu import Medium
 from swarmd.transport.xbee import RadioMismatch, XBeeTransport
+from swarmd.transport.xbee_device import DeviceThread
 
 NASTY = bytes([0x7E, 0x7D, 0x11, 0x13]) * 25
 
@@ -97,7 +100,7 @@ async def test_oversize_and_in_flight_bound(tmp_path: Path) -> None:
                                    "limit": 73}) in sink.events
             for i in range(10):
                 tr.send(bytes([i]) * 10)
-                assert len(tr._in_flight) <= 2
+                assert len(tr._window.in_flight) <= 2
             # 2 in flight, 3 queued (the newest), 5 dropped oldest-first.
             assert tr.counters["send_error:queue full"] == 5
             await sink.until(lambda: tr.counters["delivered"] == 5)
@@ -192,7 +195,7 @@ async def test_hung_up_port_is_noticed_by_the_watchdog_alone(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # The POLLHUP check does not depend on digi-xbee's log text: with the reader's
     # signal ignored, the watchdog still reports the port within an interval.
-    monkeypatch.setattr(XBeeTransport, "_reader_hung_up", lambda self: None)
+    monkeypatch.setattr(DeviceThread, "_reader_hung_up", lambda self: None)
     with Medium(1, directory=tmp_path) as medium:
         tr, sink = await watched(medium.path(1))
         try:
@@ -211,7 +214,8 @@ async def test_close_is_bounded_when_the_library_hangs(tmp_path: Path) -> None:
     with Medium(1, directory=tmp_path) as medium:
         tr = XBeeTransport(port=medium.path(1), close_timeout=0.2)
         await tr.start(lambda _: None, lambda *_: None)
-        dev = tr._device
+        assert tr._radio is not None
+        dev = tr._radio._device
         real_close = dev.close
 
         def stuck_close() -> None:
@@ -226,3 +230,31 @@ async def test_close_is_bounded_when_the_library_hangs(tmp_path: Path) -> None:
             assert device_threads and all(t.daemon for t in device_threads)
         finally:
             gate.set()
+
+
+def test_reader_filter_is_installed_on_open_not_on_import(tmp_path: Path) -> None:
+    # Importing swarmd must leave another program's digi-xbee logging alone; opening a
+    # port installs the filter, once however many ports open.
+    script = (
+        "import asyncio, logging, sys\n"
+        "from sim.xbee_emu import Medium\n"
+        "from swarmd.transport.xbee import XBeeTransport\n"
+        "from swarmd.transport.xbee_device import ReaderHangups\n"
+        "reader = logging.getLogger('digi.xbee.reader')\n"
+        "def ours(): return sum(isinstance(f, ReaderHangups) for f in reader.filters)\n"
+        "assert ours() == 0, 'installed at import'\n"
+        "async def main():\n"
+        "    with Medium(2, directory=sys.argv[1]) as medium:\n"
+        "        trs = [XBeeTransport(port=medium.path(n)) for n in (1, 2)]\n"
+        "        for tr in trs:\n"
+        "            await tr.start(lambda _: None, lambda *_: None)\n"
+        "        try:\n"
+        "            assert ours() == 1, ours()\n"
+        "        finally:\n"
+        "            for tr in trs:\n"
+        "                await tr.close()\n"
+        "asyncio.run(main())\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr

@@ -8,6 +8,7 @@
 """
 
 from sim.xbee_emu.medium import DEFAULT_DIR, Medium
-from sim.xbee_emu.radio import MAX_PAYLOAD, PROTOCOLS, EmulatedRadio
+from sim.xbee_emu.radio import EmulatedRadio
+from swarmd.transport.media import MAX_PAYLOAD, PROTOCOLS
 
 __all__ = ["DEFAULT_DIR", "MAX_PAYLOAD", "PROTOCOLS", "EmulatedRadio", "Medium"]

@@ -11,15 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-PROTOCOLS = ("zigbee", "802.15.4", "digimesh")
+from swarmd.transport.media import MAX_PAYLOAD, MAX_PAYLOAD_ENCRYPTED, PROTOCOLS
 
 # Firmware versions digi-xbee maps to each protocol on XBee 3 hardware (notes/xbee.md).
 _VR = {"zigbee": b"\x10\x0d", "802.15.4": b"\x20\x14", "digimesh": b"\x30\x0d"}
 HV_XBEE3 = b"\x42\x40"
-
-MAX_PAYLOAD = {"zigbee": 92, "802.15.4": 100, "digimesh": 73}
-"""Largest broadcast payload per protocol, unencrypted (Digi's XBee 3 manuals)."""
-MAX_PAYLOAD_ENCRYPTED = {"zigbee": 74, "802.15.4": 95, "digimesh": 65}
 
 BROADCAST64 = 0x000000000000FFFF
 

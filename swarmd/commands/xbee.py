@@ -16,8 +16,9 @@ from typing import Annotated, Any
 
 import typer
 
+from swarmd.transport.media import PROTOCOL_NAMES, PROTOCOLS
+
 SETTINGS = ("AP", "ID", "CH", "CE", "SM", "MY", "DH", "DL", "NI", "EE")
-PROTOCOL_NAMES = {"ZIGBEE": "zigbee", "RAW_802_15_4": "802.15.4", "DIGI_MESH": "digimesh"}
 
 
 def _int(text: str) -> int:
@@ -224,7 +225,7 @@ def register(app: typer.Typer) -> None:
         """
         import sys
 
-        from sim.xbee_emu import PROTOCOLS, Medium
+        from sim.xbee_emu import Medium
 
         if protocol not in PROTOCOLS:
             raise typer.BadParameter(f"--protocol must be one of {', '.join(PROTOCOLS)}")

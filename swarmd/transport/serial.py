@@ -25,14 +25,13 @@ from swarmd.transport.base import (
     FrameCallback,
     TransportError,
 )
+from swarmd.transport.media import SERIAL_MAX_PAYLOAD
 from swarmd.transport.reopen import Reopener
 
 log = logging.getLogger(__name__)
 
-DEFAULT_MAX_PAYLOAD = 64
-"""Largest swarmd frame: after framing (+7 B) it still fits one RF packet of the
-smallest radio payload in use (DigiMesh 73 B), so radios never split a frame and
-packets of two senders cannot interleave inside one."""
+DEFAULT_MAX_PAYLOAD = SERIAL_MAX_PAYLOAD
+"""Largest swarmd frame (media.py: one RF packet after framing)."""
 
 
 class _Protocol(asyncio.Protocol):

@@ -29,12 +29,12 @@ from swarmd.transport.addresses import (
     multicast_group,
 )
 from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.media import UDP_MAX_PAYLOAD
 
 log = logging.getLogger(__name__)
 
-# IPv4 minimum MTU on Ethernet (1500) minus IP (20) and UDP (8) headers: a frame this size
-# is never fragmented on any real link. swarmd frames are ~23 bytes, far below.
-MAX_PAYLOAD = 1472
+# Never fragmented on any real link (media.py). swarmd frames are ~23 bytes, far below.
+MAX_PAYLOAD = UDP_MAX_PAYLOAD
 
 
 # Datagrams read per readiness event: under a flood this bounds how long one read keeps
