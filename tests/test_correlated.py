@@ -12,13 +12,13 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from harness import Net
 
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.core import wire
 from swarmd.core.params import Params, udp
 from swarmd.core.plan import RobotPlan, SwarmPlan
-from tests.harness import Net
 
 BOUND = 1.5
 """Crash -> takeover bound for correlated failures at the udp preset, s: one T_max to
