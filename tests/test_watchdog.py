@@ -70,7 +70,7 @@ def test_claim_heard_hands_over_then_suspects_again() -> None:
     assert w.deadline == pytest.approx(0.6 + P.claim_hold + P.t_max)
     fired = w.fire(w.deadline)
     assert state(w) is WatchState.SUSPECT
-    assert not fired.first  # the same episode goes on
+    assert fired.first  # a handover that brought nobody is logged as a new suspicion
     assert w.since == pytest.approx(0.5)
 
 

@@ -107,6 +107,11 @@ class _SlotBeat(NamedTuple):
     at: float
 
 
+_CLAIMS_REMEMBERED = 16
+"""Claims remembered per slot (rule 10); a flood of invented (claimant, epoch) pairs
+pushes out the oldest, it cannot grow the node."""
+
+
 class NodeError(RuntimeError):
     """Misuse of the node API (a bug in the driver), never caused by peer frames."""
 
@@ -164,6 +169,9 @@ class Node:
         # liar) must not look alive to the standby that would replace it.
         self._slot_heard: dict[str, _SlotBeat] = {}
         self._standby_at: dict[int, float] = {}  # standby robot -> last standby heartbeat
+        # function -> {(claimant, epoch): first heard}: claims are believed for a
+        # bounded time (rule 10); forgotten when the slot's next holder heartbeats.
+        self._claims_seen: dict[str, dict[tuple[int, int], float]] = {}
         self._replay = ReplayFilter()
         self._start_time = now
         self._next_heartbeat = now
@@ -415,6 +423,7 @@ class Node:
             return
         self._known[f] = Holder(sender, hb.epoch)
         self._slot_heard[f] = _SlotBeat(sender, hb.epoch, now)
+        self._claims_seen.pop(f, None)
         # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
         if f == self._function and self._role == Role.ACTIVE and sender != self._robot_id:
             self._fence(hb.epoch, now)
@@ -472,6 +481,14 @@ class Node:
         count = votes.add(sender, w.suspect, w.epoch, now)
         if fresh:  # repeated warnings refresh a vote; only a new witness is an event
             self._emit(ev.Vote(subject=w.suspect, function=f, from_=sender, count=count))
+        if count < self._params.quorum and self._own_ears(f, now):
+            # Rule 9: correlated failures took watchers of f with the suspect; this
+            # standby's own ears stand in for them, as one witness.
+            mine = self._robot_id in votes.witnesses
+            count = votes.add(self._robot_id, w.suspect, w.epoch, now)
+            if not mine:
+                self._emit(ev.Vote(subject=w.suspect, function=f, from_=self._robot_id,
+                                   count=count))
         if count >= self._params.quorum:
             # Rule 4 from our own ears: the channel is a broadcast, so the standby hears
             # the suspect too. Heard within T_max/2, the suspect is alive whatever the
@@ -484,10 +501,50 @@ class Node:
                 return
             self._start_claim(f, w.suspect, w.epoch, now)
 
+    def _own_ears(self, f: str, now: float) -> bool:
+        """DESIGN rule 9: is this standby a witness of f's holder's silence itself?
+
+        Only when (a) it has heard no heartbeat for slot f for T_max — on a broadcast
+        medium a live suspect is heard by the standby as well as by its watchers, so a
+        liar's warning about a live robot finds the standby's ears against it — and
+        (b) fewer than a quorum of f's watchers are alive by their own heartbeats, so
+        the quorum can no longer be met by watchers alone. Never during the start-up
+        grace, when silence means nothing yet."""
+        p = self._params
+        if now - self._start_time < p.startup_grace:
+            return False
+        heard = self._slot_heard.get(f)
+        if heard is not None and now - heard.at < p.t_max:
+            return False
+        live = 0
+        for g in self._plan.watched_by(f):
+            beat = self._slot_heard.get(g)
+            if beat is not None and beat.holder == self._known[g].robot \
+                    and now - beat.at < p.t_max:
+                live += 1
+        return live < p.quorum
+
+    def _claim_believed(self, f: str, sender: int, c: wire.Claim, now: float) -> bool:
+        """DESIGN rule 10: a CLAIM is believed for `claim_hold + t_max` from the first
+        time this (claimant, epoch) was heard for f; by then the claimant heartbeats
+        at its new epoch or it is dead or stuck. Its repeats neither extend the
+        watchers' silence nor clear a standby's votes again."""
+        seen = self._claims_seen.setdefault(f, {})
+        first = seen.get((sender, c.epoch))
+        if first is None:
+            if len(seen) >= _CLAIMS_REMEMBERED:
+                del seen[min(seen, key=seen.__getitem__)]
+            seen[(sender, c.epoch)] = now
+            return True
+        return now - first <= self._params.claim_hold + self._params.t_max
+
     def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
         f = self._plan.function_at(c.function)
         if f is None:
             self._drops["bad_function"] += 1
+            return
+        if not self._claim_believed(f, sender, c, now):
+            self._drops["stale_claim"] += 1
             return
         if self._claim is not None and self._claim.function == f:
             # The paper's wait state: the lower id wins; a claim at a higher epoch

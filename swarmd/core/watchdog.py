@@ -9,7 +9,9 @@ One `SlotWatch` per slot the robot's own slot watches. It follows whoever holds 
               or a CLAIM is heard (Fig. 7: "till it receives a message from the
               substitute"); raises an alert once after `alert_after` (rule 8)
     HANDOVER  a CLAIM or LEAVE was heard: silent for `claim_hold + t_max`, waiting for
-              the new holder's heartbeat; if none comes, back to SUSPECT
+              the new holder's heartbeat; if none comes, back to SUSPECT, logged as a
+              new suspicion; once per episode, so repeated or further claims cannot
+              keep the watchers silent (DESIGN rule 10)
 
 The class is pure: the node calls `heard`, `claim_heard` and `fire` with `now` and turns
 the returned `Fired` into frames and events.
@@ -40,13 +42,15 @@ class Fired:
 
 
 class SlotWatch:
-    __slots__ = ("alerted", "deadline", "function", "last_heard", "params", "since", "state")
+    __slots__ = ("alerted", "deadline", "function", "handed_over", "last_heard", "params",
+                 "since", "state")
 
     def __init__(self, function: str, params: Params, now: float,
                  last_heard: float | None = None) -> None:
         self.function = function
         self.params = params
         self.since: float | None = None  # start of the current suspicion episode
+        self.handed_over = False  # a CLAIM or LEAVE silenced this episode once already
         self.alerted = False
         self.last_heard = last_heard
         if last_heard is not None and now - last_heard < params.t_max:
@@ -70,11 +74,18 @@ class SlotWatch:
         self.deadline = now + self.params.t_max
         self.since = None
         self.alerted = False
+        self.handed_over = False
         return was_suspect
 
     def claim_heard(self, now: float) -> None:
         """A substitute claimed (or the holder left): stop warning (paper, wait state)
         and give the new holder time to heartbeat."""
+        if self.state is WatchState.HANDOVER or self.handed_over:
+            # Rule 10: one handover per suspicion episode. Repeated claims never extend
+            # the silence; once a claim went unfulfilled, later ones do not silence the
+            # warnings either (a claiming standby ignores them; others may race it).
+            return
+        self.handed_over = True
         if self.since is None:
             self.since = now
         self.state = WatchState.HANDOVER
@@ -83,7 +94,10 @@ class SlotWatch:
     def fire(self, now: float) -> Fired:
         """Deadline reached. Call only when `now >= deadline`."""
         p = self.params
-        first = self.state in (WatchState.WAITING, WatchState.RUNNING)
+        # A handover that brought no new holder (rule 10) is a new suspicion, logged
+        # again, unless the episode already raised its alert.
+        first = self.state in (WatchState.WAITING, WatchState.RUNNING) or (
+            self.state is WatchState.HANDOVER and not self.alerted)
         if self.since is None:
             self.since = now
         self.state = WatchState.SUSPECT
