@@ -31,9 +31,8 @@ from sim.physics.controller import Command, SE3Controller
 from sim.physics.model import GRAVITY, PHYSICS_DT, Preset, Vec3, quad_xml, x2
 from swarmd.core.roles import Health
 from swarmd.functions import (
+    Flight,
     FunctionSpec,
-    PatrolFlight,
-    SlotFlight,
     flight_for,
     parse_function,
 )
@@ -107,7 +106,7 @@ class QuadRobot:
         self.t_start = t
         self.mode = Mode.PARKED
         self.function: str | None = None
-        self.flight: SlotFlight | PatrolFlight | None = None
+        self.flight: Flight | None = None
         self.t0 = 0.0
         self.battery_s = battery_s
         self.battery = 1.0
@@ -116,6 +115,7 @@ class QuadRobot:
         self.crashed_at: float | None = None
         self.armed = False
         self._land_from: tuple[float, float] | None = None
+        self._land_xy: tuple[float, float] | None = None
         self.record = record
         self.samples: list[Sample] = []
         self._next_sample = t
@@ -160,9 +160,16 @@ class QuadRobot:
             # The same function again (a new epoch after a rejoin): keep flying it; a
             # patrol must not restart its approach from the present waypoint.
             return True
-        self.function = function
         self.t0 = t0
-        self.flight = flight_for(spec, self.t - t0)
+        return self.fly(function, flight_for(spec, self.t - t0))
+
+    def fly(self, function: str, flight: Flight) -> bool:
+        """Fly `flight` (its setpoints on the clock `self.t - self.t0`); take off first
+        from the ground. A simulated autopilot flies its position setpoints this way."""
+        if self.mode is Mode.CRASHED or self.failed_motors:
+            return False
+        self.function = function
+        self.flight = flight
         self.controller.reset()
         if self.mode in (Mode.PARKED, Mode.LANDING) and self.position[2] < (
             self.home[2] + TAKEOFF_HEIGHT
@@ -173,8 +180,9 @@ class QuadRobot:
             self.mode = Mode.FLYING
         return True
 
-    def release(self, function: str | None = None) -> None:
-        """Stop the function (all of them if None) and land at home."""
+    def release(self, function: str | None = None, *, here: bool = False) -> None:
+        """Stop the function (all of them if None) and land at home (or where the craft
+        is, `here`: an autopilot's LAND mode)."""
         if function is not None and function != self.function:
             return
         self.function = None
@@ -182,6 +190,7 @@ class QuadRobot:
         if self.mode in (Mode.TAKEOFF, Mode.FLYING):
             self.mode = Mode.LANDING
             self._land_from = None
+            self._land_xy = (self.position[0], self.position[1]) if here else None
 
     def fail_motor(self, index: int = 0) -> None:
         """The rotor stops producing thrust (the `motor:R@T` fault): the craft falls."""
@@ -305,6 +314,8 @@ class QuadRobot:
 
     def _landing_setpoint(self, pos: Vec3) -> tuple[Vec3, Vec3]:
         hx, hy, hz = self.home
+        if self._land_xy is not None:
+            hx, hy = self._land_xy
         if self._land_from is None:
             self._land_from = (self.t, pos[2])
         if math.hypot(pos[0] - hx, pos[1] - hy) > 0.2 and self._land_from[1] > hz + 0.4:

@@ -3,7 +3,7 @@
     robot: 2
     swarm: paper.yaml                 # relative to this file
     transport: {kind: udp}            # udp | serial | xbee
-    link: {kind: none}                # none | socket | exec
+    link: {kind: none}                # none | socket | exec | mavlink
     event_log: null
     state_dir: /var/lib/swarmd
     handover_on_stop: true
@@ -130,8 +130,54 @@ class ExecLinkConfig(_Model):
     """A health command still running after this is killed: the robot is faulty."""
 
 
+HealthName = Literal["ok", "degraded", "faulty"]
+
+
+class MavlinkHealthConfig(_Model):
+    """Thresholds of the MAVLink health table (docs/mavlink.md)."""
+
+    heartbeat_timeout: float = Field(default=3.0, gt=0, description="s")
+    battery_degraded: float = Field(default=30.0, ge=0, le=100, description="%")
+    battery_faulty: float = Field(default=15.0, ge=0, le=100, description="%")
+    estimator_degraded: float = Field(default=0.5, gt=0)
+    estimator_faulty: float = Field(default=0.8, gt=0)
+    critical: HealthName = "degraded"
+    not_ready: HealthName = "degraded"
+    failsafe_mode: HealthName = "faulty"
+    command_refused: HealthName = "faulty"
+    refused_hold: float = Field(default=30.0, ge=0, description="s")
+    sensors: dict[Literal["gyro", "accel", "mag", "gps", "motors"], HealthName] = Field(
+        default_factory=dict)
+    """Overrides of the per-sensor health (gyro, accel, motors faulty; mag, gps degraded)."""
+
+
+class MavlinkLinkConfig(_Model):
+    """A PX4 or ArduPilot flight controller over MAVLink (docs/mavlink.md)."""
+
+    kind: Literal["mavlink"]
+    url: str = Field(min_length=1)
+    """pymavlink form: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or a serial device."""
+    baud: int = Field(default=57600, gt=0)
+    source_system: int = Field(default=1, ge=1, le=255)
+    source_component: int = Field(default=191, ge=1, le=255)
+    target_system: int | None = Field(default=None, ge=1, le=255)
+    target_component: int = Field(default=1, ge=0, le=255)
+    autopilot: Literal["auto", "px4", "ardupilot"] = "auto"
+    takeoff_altitude: float = Field(default=2.0, gt=0, description="m")
+    setpoint_rate: float = Field(default=10.0, ge=5, le=50, description="Hz")
+    release: Literal["hold", "land", "rtl"] = "rtl"
+    command_timeout: float = Field(default=1.0, gt=0, description="s")
+    command_retries: int = Field(default=3, ge=0, le=20)
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Swarm-frame position (x east, y north, z up) of the autopilot's local origin."""
+    geo_origin: tuple[float, float, float] | None = None
+    """(latitude, longitude, altitude) of the swarm frame's 0; replaces `origin`."""
+    health: MavlinkHealthConfig = Field(default_factory=MavlinkHealthConfig)
+
+
 LinkConfig = Annotated[
-    NoneLinkConfig | SocketLinkConfig | ExecLinkConfig, Field(discriminator="kind")
+    NoneLinkConfig | SocketLinkConfig | ExecLinkConfig | MavlinkLinkConfig,
+    Field(discriminator="kind"),
 ]
 
 
@@ -164,7 +210,7 @@ class RobotConfig:
     swarm: SwarmConfig
     swarm_path: Path
     transport: UdpTransportConfig | SerialTransportConfig | XBeeTransportConfig
-    link: NoneLinkConfig | SocketLinkConfig | ExecLinkConfig
+    link: NoneLinkConfig | SocketLinkConfig | ExecLinkConfig | MavlinkLinkConfig
     event_log: Path | None
     state_dir: Path
     handover_on_stop: bool

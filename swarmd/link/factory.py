@@ -1,4 +1,4 @@
-"""Build the robot link the robot file asks for (`link: {kind: none | socket | exec}`).
+"""Build the robot link the robot file asks for (`link: {kind: none | socket | exec | mavlink}`).
 
 The simulator injects its own link (the MuJoCo quadrotor) into `run_daemon` instead of
 calling this.
@@ -36,4 +36,9 @@ def make_link(cfg: Any) -> RobotLink:
                 extra[name] = value
         return ExecLink(on_assign=cfg.on_assign, on_release=cfg.on_release,
                         health_command=getattr(cfg, "health_command", None), **extra)
-    raise LinkConfigError(f"unknown robot link kind {kind!r} (none, socket, exec)")
+    if kind == "mavlink":
+        from swarmd.link.mavlink import MavlinkLink, pilot_config
+
+        return MavlinkLink(cfg.url, baud=cfg.baud, source_system=cfg.source_system,
+                           source_component=cfg.source_component, pilot=pilot_config(cfg))
+    raise LinkConfigError(f"unknown robot link kind {kind!r} (none, socket, exec, mavlink)")

@@ -1,0 +1,134 @@
+"""Benchmarks of the MAVLink robot link against the simulated autopilot (loopback UDP).
+
+1. detect: a craft holds a slot; a motor fails; time until the daemon's link reports
+   FAULTY from the autopilot's MAVLink telemetry (SYS_STATUS motor bit, EMERGENCY), per
+   flavour, over `--runs` runs.
+2. cpu: N links (each with its own simulated autopilot, all in this process) flying a
+   slot for `--seconds`: the CPU time of each link's I/O thread (from
+   /proc/self/task/<tid>/stat), i.e. the link's cost per robot on a companion computer,
+   apart from the simulated physics.
+
+    python bench/bench_mavlink.py [--parts detect,cpu] [--runs 3] [--robots 1,5]
+        [--seconds 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import socket
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from sim.physics.autopilot import SimMavlinkLink  # noqa: E402
+from sim.physics.link import QuadLink  # noqa: E402
+from swarmd.core.roles import Health  # noqa: E402
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+async def until(cond: Callable[[], object], timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            return False
+        await asyncio.sleep(0.01)
+    return True
+
+
+async def fly(link: SimMavlinkLink, healths: list[Health], slot: tuple[float, float, float],
+              timeout: float = 60.0) -> bool:
+    await link.start(healths.append)
+    if not await until(lambda: healths and healths[-1] is Health.OK, 15.0):
+        return False
+    link.assign("f1", 1, {"kind": "slot", "position": list(slot)})
+
+    def there() -> bool:
+        p = link.quad.robot.position
+        return bool(sum((p[i] - slot[i]) ** 2 for i in range(3)) ** 0.5 < 0.5)
+
+    return await until(there, timeout)
+
+
+async def detect_once(flavour: str) -> float | None:
+    healths: list[Health] = []
+    link = SimMavlinkLink(QuadLink(1, (0.0, 0.0, 0.0)), flavour, free_port())  # type: ignore[arg-type]
+    try:
+        if not await fly(link, healths, (1.0, 1.0, 1.5)):
+            return None
+        t = time.monotonic()
+        link.fail_motor(1)
+        if not await until(lambda: healths[-1] is Health.FAULTY, 10.0):
+            return None
+        return time.monotonic() - t
+    finally:
+        await link.close()
+
+
+def thread_cpu(tid: int) -> float:
+    fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
+    ticks = os.sysconf("SC_CLK_TCK")
+    return (int(fields[11]) + int(fields[12])) / ticks  # utime + stime
+
+
+async def cpu(n: int, seconds: float) -> tuple[float, float, float]:
+    links = [SimMavlinkLink(QuadLink(i + 1, (1.5 * i, -5.0, 0.0)), "px4", free_port())
+             for i in range(n)]
+    healths: list[list[Health]] = [[] for _ in links]
+    try:
+        oks = await asyncio.gather(*(fly(lk, h, (1.5 * i, 0.0, 1.5))
+                                     for i, (lk, h) in enumerate(zip(links, healths,
+                                                                      strict=True))))
+        tids = [lk.link._thread.native_id for lk in links if lk.link._thread is not None]
+        c0 = [thread_cpu(t) for t in tids if t is not None]
+        p0, w0 = time.process_time(), time.monotonic()
+        await asyncio.sleep(seconds)
+        wall = time.monotonic() - w0
+        c1 = [thread_cpu(t) for t in tids if t is not None]
+        proc = (time.process_time() - p0) / wall
+        per = [(b - a) / wall for a, b in zip(c0, c1, strict=True)]
+        assert all(oks), "a craft did not reach its slot"
+        return statistics.mean(per), max(per), proc
+    finally:
+        for lk in links:
+            await lk.close()
+
+
+async def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--parts", default="detect,cpu")
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--robots", default="1,5")
+    ap.add_argument("--seconds", type=float, default=10.0)
+    args = ap.parse_args()
+    parts = args.parts.split(",")
+    if "detect" in parts:
+        print("motor failure -> FAULTY through MAVLink (s):")
+        for flavour in ("px4", "ardupilot"):
+            got = [await detect_once(flavour) for _ in range(args.runs)]
+            ok = [g for g in got if g is not None]
+            text = ", ".join(f"{g:.3f}" for g in ok)
+            print(f"  {flavour:9s} runs={len(got)} ok={len(ok)} [{text}]"
+                  + (f" median {statistics.median(ok):.3f}" if ok else ""))
+    if "cpu" in parts:
+        print(f"link I/O thread CPU per robot over {args.seconds:g} s (fraction of one core):")
+        for n in (int(x) for x in args.robots.split(",")):
+            mean, worst, proc = await cpu(n, args.seconds)
+            print(f"  {n:3d} robots: link mean {mean:.4f} max {worst:.4f}; whole process "
+                  f"(physics + autopilots + links) {proc:.3f}")
+
+
+if __name__ == "__main__":
+    asyncio.run(main())
