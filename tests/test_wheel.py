@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.realtime.orchestrator import free_udp_port
+from sim.realtime.robotfiles import free_udp_port
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
