@@ -110,6 +110,8 @@ class _Expect:
     one may fail at the same instant, or be consumed by another slot)."""
     watchers: tuple[int, ...] = ()
     """Robots executing a slot that watches `function`, alive at the failure."""
+    done: float | None = None
+    """When the slot was taken over (judged at the end: a late takeover is a miss)."""
 
 
 @dataclass(slots=True)
@@ -302,9 +304,9 @@ class Checker:
     def _takeover(self, t: float, r: int, f: str, replaced: int) -> None:
         rec = {"t": t, "robot": r, "function": f, "replaced": replaced}
         self.takeovers.append(rec)
-        for e in list(self.expects):
-            if e.function == f and t >= e.t:
-                self.expects.remove(e)
+        for e in self.expects:
+            if e.function == f and t >= e.t and e.done is None:
+                e.done = t
         if not self._healthy_and_reachable(replaced, t):
             return
         self.false_takeovers.append(rec)
@@ -352,6 +354,8 @@ class Checker:
             for x in mates:
                 if e.t < x.start <= deadline < x.start + bound:
                     deadline, moved = x.start + bound, True
+        if e.done is not None and e.done <= deadline:
+            return None
         if duration < deadline:
             return None  # the run ended too soon to tell
         if any(s <= deadline and h >= e.t for s, h in self.partitions):
@@ -374,7 +378,8 @@ class Checker:
         with_ = f" with robot(s) {', '.join(map(str, others))} failing" if others else ""
         return Violation(
             e.t, "no_takeover" if alone else "no_takeover_correlated", e.robot,
-            f"{e.kind} of robot {e.robot} holding {e.function}{with_}: no takeover by "
+            f"{e.kind} of robot {e.robot} holding {e.function}{with_}: "
+            f"{'no takeover' if e.done is None else f'taken over only at {e.done:.2f} s'} by "
             f"{deadline:.2f} s although standby(s) {', '.join(map(str, live))} and "
             f"watcher(s) {', '.join(map(str, watchers)) or 'none needed'} stayed alive")
 
