@@ -26,6 +26,7 @@ import collections
 import random
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -88,8 +89,11 @@ def draw_case(seed: int, max_robots: int = 60) -> Case:
     t = params.t_max
     faults: list[Fault] = []
     base = round(rng.uniform(2.5, 4.0), 3)
+    partitioned = False
     for _ in range(rng.randint(1, 4)):
-        kind = rng.choice(KINDS)
+        # one partition a run: the virtual medium holds one partition at a time
+        kind = rng.choice([k for k in KINDS if k != "partition" or not partitioned])
+        partitioned = partitioned or kind == "partition"
         # overlapping: at the same instant, or T_max/2 .. 2 T_max after another fault
         at = round(base + rng.choice((0.0, 0.0, t / 2, t, 2 * t, rng.uniform(0, 3))), 3)
         first = rng.choice(ids)
@@ -153,7 +157,7 @@ def ring8() -> tuple[SwarmPlan, Params]:
     return cfg.to_plan(), cfg.params()
 
 
-def ring8_latencies(pairs: list[tuple[int, ...]], phases: int = 20,
+def ring8_latencies(pairs: Sequence[tuple[int, ...]], phases: int = 20,
                     loss: float = 0.0) -> tuple[list[float], int, int]:
     """Takeover latencies (s, fault -> takeover) of the slots of the crashed actives, the
     count of such slots never taken over, and the count of runs with a violation."""
@@ -188,7 +192,8 @@ def print_ring8(phases: int) -> None:
     adjacent = [(i, i % 8 + 1) for i in range(1, 9)]
     plan, _ = ring8()
     # a watcher and the first standby covering the slot it watches
-    with_standby = [(i, plan.covered_by(f"f{i % 8 + 1}")[0]) for i in range(1, 9)]
+    with_standby = [(i, next(r for r in plan.covered_by(f"f{i % 8 + 1}")
+                             if plan.robots[r].function is None)) for i in range(1, 9)]
     for title, pairs in (("two adjacent robots crash at once", adjacent),
                          ("a watcher and the standby of its neighbour's slot", with_standby)):
         t0 = time.perf_counter()
