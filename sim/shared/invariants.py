@@ -298,6 +298,8 @@ class Checker:
         standbys = [r for r in self.plan.covered_by(f)
                     if r != robot and r not in self.dead and r not in self.paused
                     and r not in running and r not in self.executing and r not in self.unhealthy]
+        if any(g == f and r != robot for r, g in running.items()):
+            return  # already taken over (e.g. while the robot was paused)
         if standbys and not self.in_partition:
             self.expects.append(_Expect(t, robot, f, kind, tuple(standbys), tuple(watchers)))
 
