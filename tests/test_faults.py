@@ -8,7 +8,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sim.shared.faults import KINDS, Fault, FaultSpecError, check_faults, fault_record, parse_fault
+from sim.shared.faults import (
+    KINDS,
+    Fault,
+    FaultSpecError,
+    check_faults,
+    fault_record,
+    fault_records,
+    parse_fault,
+)
 from sim.virtual.simulator import run_virtual
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -26,6 +34,12 @@ PAPER_IDS = {1, 2, 3, 4, 5, 6}
     ("leave:1@5", Fault("leave", 5.0, (1,))),
     ("unhealthy:6@4", Fault("unhealthy", 4.0, (6,))),
     ("motor:2@5", Fault("motor", 5.0, (2,))),
+    ("collide:1,2@5", Fault("collide", 5.0, (1, 2))),
+    ("collide:3,1,2@5", Fault("collide", 5.0, (3, 1, 2))),
+    ("crash:1,2@3", Fault("crash", 3.0, (1, 2))),
+    ("pause:1,4@2+1", Fault("pause", 2.0, (1, 4), 1.0)),
+    ("leave:2,3@1", Fault("leave", 1.0, (2, 3))),
+    ("unhealthy:5,6@1", Fault("unhealthy", 1.0, (5, 6))),
     ("crash:35@.5", Fault("crash", 0.5, (35,))),
     ("crash:2@3.", Fault("crash", 3.0, (2,))),
     ("crash:65535@1", Fault("crash", 1.0, (65535,))),
@@ -36,11 +50,12 @@ def test_parse_fault_every_kind(spec: str, fault: Fault) -> None:
 
 def test_parse_fault_covers_every_kind_of_the_cli() -> None:
     assert set(KINDS) == {"crash", "restart", "pause", "partition", "liar", "leave",
-                          "unhealthy", "motor"}
+                          "unhealthy", "motor", "collide"}
 
 
 @pytest.mark.parametrize("spec", [
     " crash : 2 @ 3 ", "crash:2@3\n", "\tcrash:2 @3", "partition: 1, 2 | 3 ,4 @ 2 + 3",
+    "collide: 1 , 2 @ 5",
 ])
 def test_parse_fault_ignores_blanks_around_parts(spec: str) -> None:
     assert parse_fault(spec) == parse_fault(spec.replace(" ", "").strip())
@@ -68,7 +83,12 @@ def test_parse_fault_ignores_blanks_around_parts(spec: str) -> None:
     ("crash:-1@3", "'-1' is not a robot id"),
     ("crash:0@3", "robot id 0 is out of range"),
     ("crash:65536@3", "out of range"),
-    ("crash:2,3@3", "targets one robot"),
+    ("crash:2|3@3", "has no groups"),
+    ("crash:2,2@3", "robot 2 is named twice"),
+    ("crash:2,@3", "robot id is missing"),
+    ("collide:2@3", "needs two or more robots"),
+    ("collide:2,3@3+1", "takes no duration"),
+    ("collide:2,3", "no '@T'"),
     ("crash:2@3+1", "takes no duration"),
     ("pause:2@3", "missing '+D'"),
     ("pause:2@3+0", "must be positive"),
@@ -150,7 +170,8 @@ def _faults(draw: st.DrawFn) -> Fault:
         length = draw(_times.filter(lambda d: d > 0))
         return Fault(kind, at, tuple(named), length, groups)
     dur = draw(_times.filter(lambda d: d > 0)) if kind == "pause" else None
-    return Fault(kind, at, (draw(_ids),), dur)
+    n = draw(st.integers(2 if kind == "collide" else 1, 4))
+    return Fault(kind, at, tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True))), dur)
 
 
 @given(_faults())
@@ -186,3 +207,44 @@ def test_virtual_logs_one_fault_record_per_injected_fault(
     result = run_virtual(plan, params, duration=6, faults=faults)
     records = [e for e in result.events if e["event"] == "fault"]
     assert records == [fault_record(f, f.at) for f in faults]
+
+
+def test_split_gives_one_fault_a_robot_with_the_users_spec() -> None:
+    collide = parse_fault("collide:1,2@5")
+    parts = collide.split()
+    assert parts == (Fault("collide", 5.0, (1,)), Fault("collide", 5.0, (2,)))
+    assert [p.origin for p in parts] == ["collide:1,2@5"] * 2
+    assert [p.robot for p in parts] == [1, 2]
+    assert parse_fault("crash:2@3").split() == (parse_fault("crash:2@3"),)
+    partition = parse_fault("partition:1|2@1+1")
+    assert partition.split() == (partition,)
+    with pytest.raises(ValueError, match="several robots"):
+        _ = parse_fault("crash:1,2@3").robot
+
+
+def test_fault_records_one_a_robot() -> None:
+    assert fault_records(parse_fault("collide:1,2@5"), 5.0) == [
+        {"t": 5.0, "robot": 1, "event": "fault", "kind": "collide", "spec": "collide:1,2@5"},
+        {"t": 5.0, "robot": 2, "event": "fault", "kind": "collide", "spec": "collide:1,2@5"}]
+
+
+def test_check_faults_names_the_unknown_robot_of_several() -> None:
+    assert check_faults([parse_fault("collide:1,9@5")], PAPER_IDS, physics=False) == [
+        "collide:1,9@5: robot 9 is not in the swarm (robots: 1-6)"]
+    assert check_faults([parse_fault("collide:1,2@5")], PAPER_IDS, physics=False) == []
+
+
+def test_virtual_collide_is_two_crashes_at_one_instant(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    """In --virtual a collision kills both robots at once: the same run as two crash
+    faults at that instant, logged once a robot with the spec given."""
+    plan, params = paper
+    collide = run_virtual(plan, params, duration=8, faults=[parse_fault("collide:1,3@3")])
+    crashes = run_virtual(plan, params, duration=8,
+                          faults=[parse_fault("crash:1@3"), parse_fault("crash:3@3")])
+    strip = [e for e in collide.events if e["event"] != "fault"]
+    assert strip == [e for e in crashes.events if e["event"] != "fault"]
+    assert [(e["robot"], e["spec"]) for e in collide.events if e["event"] == "fault"] == [
+        (1, "collide:1,3@3"), (3, "collide:1,3@3")]
+    assert collide.holders() == {"f2": [2], "f4": [4], "f1": [5], "f3": [6]}
+    assert 1 not in collide.final and 3 not in collide.final

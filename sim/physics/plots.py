@@ -37,7 +37,7 @@ FENCE_SHOW = 1.0
 """s a FENCED span lasts when no later event ends it: the node rejoins as standby after
 one heartbeat period and logs no event for that (roles.py FENCE_DONE)."""
 
-DOWN_FAULTS = frozenset({"crash", "motor"})
+DOWN_FAULTS = frozenset({"crash", "motor", "collide"})
 """Injected faults after which the craft is down (black) until it starts again."""
 
 

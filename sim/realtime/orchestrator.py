@@ -282,10 +282,18 @@ class Orchestrator:
         if fault.kind == "partition":
             self._fault_event(fault)  # the receive filters already hold the window
             return
+        parts = fault.split()
+        if len(parts) > 1:  # several robots at one instant: one fault each
+            for part in parts:
+                self._apply(part)
+            return
         robot = fault.robot
         self._fault_event(fault)
         proc = self.procs.get(robot)
-        match fault.kind:
+        kind = fault.kind
+        if kind == "collide":  # the crafts lose their motors; without physics, a crash
+            kind = "motor" if self.link == "quad" else "crash"
+        match kind:
             case "crash":
                 if proc is not None:
                     self._kill_proc(proc)
@@ -301,8 +309,8 @@ class Orchestrator:
                 self.procs[robot] = self._spawn(robot, self.t0)
             case "leave" | "unhealthy" | "liar" | "motor":
                 if proc is not None and proc.alive:
-                    proc.left = proc.left or fault.kind == "leave"
-                    self._send(proc, {"cmd": fault.kind})
+                    proc.left = proc.left or kind == "leave"
+                    self._send(proc, {"cmd": kind})
             case _:
                 self.problems.append(f"fault kind {fault.kind} is not supported in real time")
 

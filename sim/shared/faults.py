@@ -1,6 +1,10 @@
 """Fault specifications for `swarmd sim --fault SPEC` (DESIGN section 3).
 
     crash:R@T            robot R dies at T (real time: SIGKILL)
+    collide:R1,R2@T      R1 and R2 collide at T: with physics both crafts lose their
+                         motors at once and fall (each daemon notices through its
+                         health and the others through silence); in --virtual and
+                         --no-physics, two crashes at the same instant
     restart:R@T          robot R comes back at T (a new process / node with its
                          persisted state); usually after a crash
     pause:R@T+D          robot R freezes at T for D seconds (SIGSTOP / SIGCONT)
@@ -11,7 +15,10 @@
     unhealthy:R@T        robot R reports itself faulty at T (DESIGN rule 7)
     motor:R@T            a rotor of robot R fails at T (physics only)
 
-Times are seconds since the run's start.
+Every kind but partition and collide targets one robot or several at once
+(`crash:1,2@T`: both at the same instant); `Fault.split()` gives one fault a robot,
+which is what the simulators and the checker apply. Times are seconds since the run's
+start.
 """
 
 from __future__ import annotations
@@ -20,13 +27,14 @@ import difflib
 import math
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from decimal import Decimal
 from typing import Any
 
 from swarmd.core import events
 
-KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor")
+KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor",
+         "collide")
 _DURATION_KINDS = {"pause", "partition"}
 
 
@@ -39,17 +47,30 @@ class Fault:
     kind: str
     at: float
     robots: tuple[int, ...] = ()
-    """The target robot (one) — or, for a partition, every robot named."""
+    """The target robots (one or several) — or, for a partition, every robot named."""
     duration: float | None = None
     groups: tuple[tuple[int, ...], ...] = ()
     """Partition groups; empty for other kinds."""
+    origin: str | None = field(default=None, compare=False)
+    """For one part of a fault on several robots (`split`): the SPEC the user gave."""
 
     @property
     def robot(self) -> int:
-        """The single target of a non-partition fault."""
+        """The single target of a one-robot fault (use `split()` for several)."""
         if self.kind == "partition":
             raise ValueError("a partition has groups, not one robot")
+        if len(self.robots) != 1:
+            raise ValueError(f"{self.spec()} targets several robots; use split()")
         return self.robots[0]
+
+    def split(self) -> tuple[Fault, ...]:
+        """One fault a target robot, same kind and times, each remembering this SPEC
+        (`origin`) so that the log and the summary show what the user typed. A
+        partition acts on all its robots together and stays whole."""
+        if self.kind == "partition" or (len(self.robots) == 1 and self.kind != "collide"):
+            return (self,)
+        spec = self.spec()
+        return tuple(replace(self, robots=(r,), origin=spec) for r in self.robots)
 
     @property
     def end(self) -> float | None:
@@ -62,17 +83,24 @@ class Fault:
             groups = "|".join(",".join(map(str, g)) for g in self.groups)
             return f"partition:{groups}@{_num(self.at)}+{_num(self.duration or 0.0)}"
         tail = f"+{_num(self.duration)}" if self.duration is not None else ""
-        return f"{self.kind}:{self.robot}@{_num(self.at)}{tail}"
+        who = ",".join(map(str, self.robots))
+        return f"{self.kind}:{who}@{_num(self.at)}{tail}"
 
 
 def fault_record(fault: Fault, t: float) -> dict[str, Any]:
     """The `fault` event of an injected fault, one per fault, when it is applied (DESIGN
     section 3 `fault{kind}`; docs/sim.md): `robot` is the target, 0 for a partition;
     `spec` always, `duration` and `groups` when the fault has them. Both simulators log
-    this, so a log reads the same whichever produced it."""
+    this, so a log reads the same whichever produced it. A fault on several robots is
+    logged once a robot (`fault_records`), each record with the SPEC the user gave."""
     groups = [list(g) for g in fault.groups] or None
-    record = events.Fault(fault.kind, fault.spec(), fault.duration, groups)
+    record = events.Fault(fault.kind, fault.origin or fault.spec(), fault.duration, groups)
     return record.record(round(t, 6), 0 if fault.kind == "partition" else fault.robot)
+
+
+def fault_records(fault: Fault, t: float) -> list[dict[str, Any]]:
+    """The `fault` events of a fault, one per target robot (one for a partition)."""
+    return [fault_record(part, t) for part in fault.split()]
 
 
 def _num(x: float | None) -> str:
@@ -93,14 +121,15 @@ _SECONDS = re.compile(r"[0-9]+(?:\.[0-9]*)?|\.[0-9]+")
 _ROBOT = re.compile(r"[0-9]+")
 
 _FORMS = {
-    "crash": "crash:R@T",
-    "restart": "restart:R@T",
-    "pause": "pause:R@T+D",
+    "crash": "crash:R@T or crash:R1,R2@T",
+    "restart": "restart:R@T or restart:R1,R2@T",
+    "pause": "pause:R@T+D or pause:R1,R2@T+D",
     "partition": "partition:1,2|3,4@T+D",
-    "liar": "liar:R@T",
-    "leave": "leave:R@T",
-    "unhealthy": "unhealthy:R@T",
-    "motor": "motor:R@T",
+    "liar": "liar:R@T or liar:R1,R2@T",
+    "leave": "leave:R@T or leave:R1,R2@T",
+    "unhealthy": "unhealthy:R@T or unhealthy:R1,R2@T",
+    "motor": "motor:R@T or motor:R1,R2@T",
+    "collide": "collide:R1,R2@T",
 }
 
 
@@ -139,9 +168,15 @@ def parse_fault(spec: str) -> Fault:
     if kind not in _DURATION_KINDS and dur is not None:
         raise bad(f"a {kind} takes no duration '+{dur_text.strip()}'")
     if kind != "partition":
-        if "," in who or "|" in who:
-            raise bad(f"a {kind} targets one robot, got {who.strip()!r}")
-        return Fault(kind, at, (_robot(who, bad),), dur)
+        if "|" in who:
+            raise bad(f"a {kind} has no groups, got {who.strip()!r}")
+        robots = tuple(_robot(r, bad) for r in who.split(","))
+        twice = sorted({r for r in robots if robots.count(r) > 1})
+        if twice:
+            raise bad(f"robot {twice[0]} is named twice")
+        if kind == "collide" and len(robots) < 2:
+            raise bad(f"a collision needs two or more robots, got {who.strip()!r}")
+        return Fault(kind, at, robots, dur)
     groups = tuple(tuple(_robot(r, bad) for r in g.split(",")) for g in who.split("|"))
     if len(groups) < 2:
         raise bad("a partition needs two or more groups separated by '|'")

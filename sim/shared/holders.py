@@ -38,8 +38,9 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-CRASH = frozenset({"crash"})
-"""The default `down` faults: a crashed process logs nothing more until it restarts."""
+CRASH = frozenset({"crash", "collide"})
+"""The default `down` faults: a crashed process logs nothing more until it restarts; a
+collided craft is down whether its process lives on (physics) or not."""
 
 _SILENT_FAULTS = frozenset({"unhealthy", "motor"})
 """Injected health faults: a claiming node drops its claim without an event (node.py

@@ -8,9 +8,24 @@ by one piece of code. What a robot executes is reconstructed from its events
 nothing until it resumes.
 
 Invariants (each violation names the time, robot and what went wrong):
-1. takeover: an ACTIVE robot that crashes (or leaves, reports a fault, or stays paused
-   long enough) is replaced within `bounds.takeover`, whenever a live standby covers its
-   slot and its live watchers reach the quorum, and no other fault hits in between;
+1. takeover: an ACTIVE robot that crashes (or collides, leaves, reports a fault, or stays
+   paused long enough) is replaced within `bounds.takeover`, whatever else fails at the
+   same time, whenever its slot keeps a live covering standby and (for a silent failure:
+   crash, collide, pause) at least one live watcher. "Live" means not failed at any
+   moment between the failure and the deadline. Not a violation:
+   - every standby that could have come was consumed by another failure (it took over
+     another slot by the deadline, or failed itself): a standby takes one slot, the
+     other slot is rightly left to an alert (rule 8);
+   - no watcher of the slot is live: the standby alone would be one robot's word, which
+     never replaces a robot (rule 3);
+   - a partition overlaps the window, the failed robot is restarted in it, or the run
+     ends before the deadline.
+   Another failure of a robot of the slot's neighbourhood (its watchers and covering
+   standbys) within the window moves the deadline to one bound after it. A missed
+   takeover is `no_takeover` when the failure came alone (a quorum of live watchers,
+   no other failure in the neighbourhood) and `no_takeover_correlated` when other
+   robots of the neighbourhood failed with it: the paper handles one failure at a time,
+   and its quorum of two distinct witnesses cannot be met when a witness fails too;
 2. single holder: outside partitions, no slot is executed by two running robots for
    longer than `bounds.dual`; after a partition heals, within `bounds.converge`;
 3. liars: a takeover of a healthy, reachable robot is a false takeover; without loss it
@@ -34,7 +49,9 @@ from sim.shared.holders import HolderFold
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
-_STOPPING_FAULTS = ("crash", "leave", "unhealthy", "motor")
+_STOPPING_FAULTS = ("crash", "collide", "leave", "unhealthy", "motor")
+_SILENT = ("crash", "collide", "pause")
+"""Failures the swarm learns of only from silence (the others hand over by LEAVE)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,6 +86,19 @@ class Bounds:
         return cls(takeover, dual, converge)
 
 
+@dataclass(frozen=True, slots=True)
+class _Failure:
+    """An injected failure of one robot: crash, collide, leave, unhealthy and motor never
+    end; a pause ends when it is over; a restart is a crash at that instant."""
+
+    start: float
+    end: float
+    robot: int
+    kind: str
+    function: str | None
+    """What the robot executed when it failed (None: a standby)."""
+
+
 @dataclass(slots=True)
 class _Expect:
     t: float
@@ -76,6 +106,12 @@ class _Expect:
     function: str
     kind: str
     standbys: tuple[int, ...] = ()
+    """Covering standbys alive and idle when the holder failed (judged again at the end:
+    one may fail at the same instant, or be consumed by another slot)."""
+    watchers: tuple[int, ...] = ()
+    """Robots executing a slot that watches `function`, alive at the failure."""
+    done: float | None = None
+    """When the slot was taken over (judged at the end: a late takeover is a miss)."""
 
 
 @dataclass(slots=True)
@@ -103,6 +139,8 @@ class Checker:
     takeovers: list[dict[str, Any]] = field(default_factory=list)
     false_takeovers: list[dict[str, Any]] = field(default_factory=list)
     last_fault_at: list[float] = field(default_factory=list)
+    failures: list[_Failure] = field(default_factory=list)
+    """Every injected failure of one robot, in time order."""
     paused_until: dict[int, float] = field(default_factory=dict)
     false_suspicions: int = 0
     """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
@@ -119,9 +157,19 @@ class Checker:
 
     # ------------------------------------------------------------------ inputs
     def fault(self, t: float, fault: Fault, phase: str) -> None:
+        parts = fault.split()
+        if len(parts) > 1:  # several robots at one instant: one fault each
+            for part in parts:
+                self.fault(t, part, phase)
+            return
         if phase == "begin":
             self.faults.append((t, fault))
             self.last_fault_at.append(t)
+            if fault.kind in (*_STOPPING_FAULTS, "pause", "restart"):
+                end = fault.end if fault.kind == "pause" else t if fault.kind == "restart" \
+                    else float("inf")
+                self.failures.append(_Failure(t, end if end is not None else t, fault.robot,
+                                              fault.kind, self.executing.get(fault.robot)))
         if fault.kind == "partition":
             if phase == "begin":
                 self.in_partition = True
@@ -132,11 +180,13 @@ class Checker:
                 self.partitions[-1] = (start, t)
             return
         r = fault.robot
-        if fault.kind in ("crash", "pause") and phase == "begin":
+        if fault.kind in _SILENT and phase == "begin":
             self._close_watcher(r)  # a dead or frozen watcher's warnings end with it
         if fault.kind in _STOPPING_FAULTS and phase == "begin":
             f = self.executing.get(r)
-            if fault.kind == "crash":
+            # A collision is judged as a crash: with physics the daemon lives on and
+            # hands over by LEAVE, which needs less than a crash does (no watchers).
+            if fault.kind in ("crash", "collide"):
                 self.dead.add(r)
                 self.started.discard(r)
                 self.holding.forget(r)
@@ -243,22 +293,22 @@ class Checker:
 
     def _expect_takeover(self, t: float, robot: int, f: str, kind: str) -> None:
         running = self._running()
-        q = self.params.quorum
-        watchers = {r for r, g in running.items() if g in self.plan.watched_by(f) and r != robot
-                    and r not in self.unhealthy}
+        watchers = sorted(r for r, g in running.items() if g in self.plan.watched_by(f)
+                          and r != robot and r not in self.unhealthy)
         standbys = [r for r in self.plan.covered_by(f)
                     if r != robot and r not in self.dead and r not in self.paused
                     and r not in running and r not in self.executing and r not in self.unhealthy]
-        needs_watchers = kind in ("crash", "pause")  # leave / fault hand over by LEAVE
-        if standbys and (len(watchers) >= q or not needs_watchers) and not self.in_partition:
-            self.expects.append(_Expect(t, robot, f, kind, tuple(standbys)))
+        if any(g == f and r != robot for r, g in running.items()):
+            return  # already taken over (e.g. while the robot was paused)
+        if standbys and not self.in_partition:
+            self.expects.append(_Expect(t, robot, f, kind, tuple(standbys), tuple(watchers)))
 
     def _takeover(self, t: float, r: int, f: str, replaced: int) -> None:
         rec = {"t": t, "robot": r, "function": f, "replaced": replaced}
         self.takeovers.append(rec)
-        for e in list(self.expects):
-            if e.function == f and t >= e.t:
-                self.expects.remove(e)
+        for e in self.expects:
+            if e.function == f and t >= e.t and e.done is None:
+                e.done = t
         if not self._healthy_and_reachable(replaced, t):
             return
         self.false_takeovers.append(rec)
@@ -285,6 +335,56 @@ class Checker:
                 return False
         return True
 
+    # ------------------------------------------------------------------ takeover judged
+    def _failed_in(self, robot: int, start: float, end: float) -> bool:
+        """Whether `robot` failed (or was down) at some moment of [start, end]."""
+        return any(x.robot == robot and x.start <= end and x.end >= start
+                   for x in self.failures)
+
+    def _judge_expect(self, e: _Expect, duration: float) -> Violation | None:
+        """Invariant 1 for one failure whose slot was not taken over (see the module
+        docstring): the violation, or None when the miss is excused."""
+        bound = self.bounds.takeover
+        near = set(self.plan.watched_by(e.function))
+        hood = {*self.plan.covered_by(e.function), *e.standbys, *e.watchers}
+        mates = [x for x in self.failures if x.robot != e.robot
+                 and (x.robot in hood or x.function in near)]
+        deadline = e.t + bound
+        moved = True
+        while moved:  # each failure in the neighbourhood restarts the clock
+            moved = False
+            for x in mates:
+                if e.t < x.start <= deadline < x.start + bound:
+                    deadline, moved = x.start + bound, True
+        if e.done is not None and e.done <= deadline:
+            return None
+        if duration < deadline:
+            return None  # the run ended too soon to tell
+        if any(s <= deadline and h >= e.t for s, h in self.partitions):
+            return None  # a partition is another kind of trouble (invariant 2)
+        if any(fl.kind == "restart" and e.robot in fl.robots and e.t < ft <= deadline
+               for ft, fl in self.faults):
+            return None  # the robot is back and may take its slot back (rule 2)
+        watchers = [w for w in e.watchers if not self._failed_in(w, e.t, deadline)]
+        silent = e.kind in _SILENT
+        if silent and not watchers:
+            return None  # nobody left to witness: the standby alone is one word (rule 3)
+        consumed = {tk["robot"] for tk in self.takeovers
+                    if tk["function"] != e.function and e.t - bound <= tk["t"] <= deadline}
+        live = [r for r in e.standbys
+                if r not in consumed and not self._failed_in(r, e.t, deadline)]
+        if not live:
+            return None  # every standby that could come took another slot or failed
+        others = sorted({x.robot for x in mates if e.t - bound <= x.start <= deadline})
+        alone = not others and (not silent or len(watchers) >= self.params.quorum)
+        with_ = f" with robot(s) {', '.join(map(str, others))} failing" if others else ""
+        return Violation(
+            e.t, "no_takeover" if alone else "no_takeover_correlated", e.robot,
+            f"{e.kind} of robot {e.robot} holding {e.function}{with_}: "
+            f"{'no takeover' if e.done is None else f'taken over only at {e.done:.2f} s'} by "
+            f"{deadline:.2f} s although standby(s) {', '.join(map(str, live))} and "
+            f"watcher(s) {', '.join(map(str, watchers)) or 'none needed'} stayed alive")
+
     # ------------------------------------------------------------------ end
     def finish(self, events: Iterable[dict[str, Any]], duration: float) -> list[Violation]:
         """Close the run at `duration` and return every violation, oldest first."""
@@ -292,23 +392,9 @@ class Checker:
             self._judge_dual(f, since, duration)
         self.dual_since.clear()
         for e in self.expects:
-            later_fault = any(e.t < ft <= e.t + self.bounds.takeover for ft in self.last_fault_at)
-            if later_fault or duration - e.t < self.bounds.takeover:
-                continue  # another fault interfered, or the run ended too soon to tell
-            # A standby takes one slot: if every standby that could have come was taken
-            # by another failure at about the same time, the slot is rightly left (and
-            # alerted, rule 8) — two faults at once are beyond "whenever a live standby
-            # covers it".
-            busy = {tk["robot"] for tk in self.takeovers
-                    if tk["function"] != e.function
-                    and abs(tk["t"] - e.t) <= self.bounds.takeover}
-            if e.standbys and set(e.standbys) <= busy:
-                continue
-            self.violations.append(Violation(
-                e.t, "no_takeover", e.robot,
-                f"{e.kind} of robot {e.robot} holding {e.function}: no takeover within "
-                f"{self.bounds.takeover:.2f} s although a standby and a quorum of watchers "
-                "were alive"))
+            v = self._judge_expect(e, duration)
+            if v is not None:
+                self.violations.append(v)
         self.expects = []
         grace = self.params.alert_after + self.bounds.takeover
         for (w, f), (t, subject) in sorted(self.episodes.items(), key=lambda kv: kv[1][0]):

@@ -30,7 +30,7 @@ from sim.shared.invariants import Violation, check_events
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
-_REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor")
+_REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor", "collide")
 """Faults whose row says who took the robot's slot over. In real time `restart` kills the
 process first, so its slot can be taken over like a crash's (or kept, if the robot is
 back before T_max: then the row shows no takeover)."""
@@ -164,8 +164,10 @@ def summarize(
             unique.append(v)
     outcomes = []
     credited: set[int] = set()  # takeovers already explained by an earlier fault
-    labelled = [(f, f.spec()) for f in faults] + [(f, f"died:{f.robot}@{f.at:.2f}")
-                                                  for f in died]
+    # A fault on several robots gets a row a robot: `collide:1,2@5 (robot 1)`.
+    labelled = [(part, f.spec() if part is f else f"{f.spec()} (robot {part.robot})")
+                for f in faults for part in f.split()]
+    labelled += [(f, f"died:{f.robot}@{f.at:.2f}") for f in died]
     for fault, spec in sorted(labelled, key=lambda fs: fs[0].at):
         if fault.kind not in _REPLACEABLE:
             outcomes.append(FaultOutcome(spec, fault.kind, None if fault.kind ==
@@ -228,8 +230,8 @@ def lateness_figures(
     late wake-ups `(robot, t, ms)` and the count of all wake-ups (the others were on time,
     under `sim.realtime.robot_proc.LATE_MS`). A paused robot's own lateness during and just after
     its pause is left out: it is the fault, not the machine."""
-    frozen = [(f.robot, f.at, (f.end or f.at) + PAUSE_AFTERMATH) for f in faults
-              if f.kind == "pause"]
+    frozen = [(r, f.at, (f.end or f.at) + PAUSE_AFTERMATH) for f in faults
+              if f.kind == "pause" for r in f.robots]
     kept = [x for x in late if not any(r == x[0] and a <= x[1] <= b for r, a, b in frozen)]
     n = max(wakes - (len(late) - len(kept)), len(kept))
     if n == 0:
@@ -274,7 +276,7 @@ def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
         if e["event"] == "started":
             first.setdefault(int(e["robot"]), float(e["t"]))
     return {r: t for r, t in sorted(first.items()) if t > grace
-            and not any(f.kind != "partition" and f.robot == r and f.at <= t for f in faults)}
+            and not any(f.kind != "partition" and r in f.robots and f.at <= t for f in faults)}
 
 
 def render_summary(summary: Summary, console: Console) -> None:

@@ -99,7 +99,8 @@ class VirtualSwarm:
         self.plan = plan
         self.params = params
         self.duration = duration
-        self.faults = sorted(faults, key=lambda f: f.at)
+        # A fault on several robots is one fault a robot at the same instant.
+        self.faults = sorted((part for f in faults for part in f.split()), key=lambda f: f.at)
         self.channel = channel or Channel()
         self.rng = random.Random(seed)
         self.keys = tuple(keys)
@@ -300,7 +301,8 @@ class VirtualSwarm:
             # the new node starts at once from what the old one persisted.
             self._kill(r)
         match fault.kind, phase:
-            case "crash", _:
+            case "crash" | "collide", _:
+                # Without physics a collision is two crashes at one instant (docs/sim.md).
                 self._kill(r)
             case "restart", _:
                 r.alive, r.paused, r.buffered = True, False, []

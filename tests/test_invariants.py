@@ -1,0 +1,116 @@
+"""`sim.shared.invariants`: invariant 1 (takeover) under faults that come together, judged
+on hand-written event logs of the paper's swarm (configs/paper.yaml: f1-f4 in a ring,
+each watched by its two neighbours; standby 5 covers f1 and f4, standby 6 f2 and f3).
+
+udp timing: the takeover bound is t_max + vote_window + claim_hold = 1.7 s."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sim.shared.faults import parse_fault
+from sim.shared.invariants import Checker, check_events
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+
+
+def boot(plan: SwarmPlan) -> list[dict[str, Any]]:
+    out = []
+    for rid, robot in sorted(plan.robots.items()):
+        rec: dict[str, Any] = {"t": 0.01, "robot": rid, "event": "started",
+                               "role": "active" if robot.function else "standby"}
+        if robot.function:
+            rec["function"] = robot.function
+        out.append(rec)
+    return out
+
+
+def takeover(t: float, robot: int, function: str, replaced: int) -> dict[str, Any]:
+    return {"t": t, "robot": robot, "event": "takeover", "function": function, "epoch": 1,
+            "replaced": replaced}
+
+
+def judge(paper: tuple[SwarmPlan, Params], faults: list[str],
+          events: list[dict[str, Any]], duration: float = 12.0) -> Checker:
+    plan, params = paper
+    return check_events(boot(plan) + events, [parse_fault(f) for f in faults], plan, params,
+                        loss=0.0, duration=duration)
+
+
+def kinds(checker: Checker) -> list[tuple[str, int | None]]:
+    return [(v.kind, v.robot) for v in checker.violations]
+
+
+def test_bound_is_the_one_the_docstring_states(paper: tuple[SwarmPlan, Params]) -> None:
+    assert Checker(*paper).bounds.takeover == 1.7
+
+
+def test_lone_crash_taken_over_in_time_is_fine(paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(judge(paper, ["crash:2@3"], [takeover(4.6, 6, "f2", 2)])) == []
+
+
+def test_lone_crash_not_taken_over_is_no_takeover(paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(judge(paper, ["crash:2@3"], [])) == [("no_takeover", 2)]
+    # late is as bad as never
+    assert kinds(judge(paper, ["crash:2@3"], [takeover(4.8, 6, "f2", 2)])) == [
+        ("no_takeover", 2)]
+
+
+def test_neighbours_crashing_together_are_judged(paper: tuple[SwarmPlan, Params]) -> None:
+    """1 and 2 watch each other: each slot keeps one live watcher and its own standby,
+    so both must be taken over whatever else failed."""
+    checker = judge(paper, ["crash:1,2@3"], [])
+    assert kinds(checker) == [("no_takeover_correlated", 1), ("no_takeover_correlated", 2)]
+    assert "with robot(s) 2 failing" in checker.violations[0].detail
+    # the same as a collision and as two faults at one instant, in either order
+    for faults in (["collide:1,2@3"], ["crash:2@3", "crash:1@3"]):
+        assert sorted(kinds(judge(paper, faults, []))) == kinds(checker)
+    ok = [takeover(4.5, 5, "f1", 1), takeover(4.6, 6, "f2", 2)]
+    assert kinds(judge(paper, ["crash:1,2@3"], ok)) == []
+
+
+def test_neighbour_failing_later_moves_the_deadline(paper: tuple[SwarmPlan, Params]) -> None:
+    """Robot 1 (a watcher of f2) dies 1 s after robot 2: the bound starts again then."""
+    faults = ["crash:2@3", "crash:1@4"]
+    in_time = [takeover(5.5, 6, "f2", 2)]  # 2.5 s after 2's crash, 1.5 s after 1's
+    assert [r for _, r in kinds(judge(paper, faults, in_time))] == [1]
+    too_late = [takeover(6.0, 6, "f2", 2)]  # 2 s after 1's crash
+    checker = judge(paper, faults, too_late)
+    assert kinds(checker) == [("no_takeover_correlated", 2), ("no_takeover_correlated", 1)]
+    assert "taken over only at 6.00 s by 5.70 s" in checker.violations[0].detail
+
+
+def test_unrelated_failure_excuses_nothing(paper: tuple[SwarmPlan, Params]) -> None:
+    """The standby 5 is no neighbour of f2 (it covers f1, f4): its leave 0.5 s after
+    robot 2's crash does not excuse a missed takeover of f2."""
+    assert kinds(judge(paper, ["crash:2@3", "leave:5@3.5"], [])) == [("no_takeover", 2)]
+
+
+def test_standby_consumed_by_another_slot_excuses(paper: tuple[SwarmPlan, Params]) -> None:
+    """5 covers f1 and f4; 1 and 3 crash together (not neighbours); 4 too, later: 5 took
+    f1, so f4 is rightly left to an alert."""
+    events = [takeover(4.5, 5, "f1", 1), takeover(4.6, 6, "f3", 3)]
+    assert kinds(judge(paper, ["crash:1,3@3", "leave:4@3.2"], events)) == []
+
+
+def test_standby_failing_too_excuses(paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(judge(paper, ["crash:2,6@3"], [])) == []
+    assert kinds(judge(paper, ["crash:2@3", "pause:6@3.5+3"], [])) == []
+
+
+def test_no_live_watcher_excuses(paper: tuple[SwarmPlan, Params]) -> None:
+    """f2's watchers are f1 and f3: with both gone, only the standby could tell, and one
+    robot's word never replaces a robot (DESIGN rule 3)."""
+    assert ("no_takeover_correlated", 2) not in kinds(judge(paper, ["crash:1,2,3@3"], []))
+    # a leave hands over by itself: no watcher is needed
+    assert kinds(judge(paper, ["crash:1,3@3", "leave:2@3"], [])) == [
+        ("no_takeover_correlated", 1), ("no_takeover_correlated", 3),
+        ("no_takeover_correlated", 2)]
+
+
+def test_restart_of_the_failed_robot_excuses(paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(judge(paper, ["crash:2@3", "restart:2@3.5"], [])) == []
+
+
+def test_run_too_short_to_tell(paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(judge(paper, ["crash:2@3"], [], duration=4.0)) == []
