@@ -134,10 +134,9 @@ def test_spaced_random_faults_never_break_an_invariant(case: Case) -> None:
 @settings(max_examples=200)
 @given(cases())
 def test_random_faults_never_break_an_invariant(case: Case) -> None:
-    """Any schedule, overlapping faults included. A slot missed while a neighbour failed
-    with it (`no_takeover_correlated`) is the paper protocol's known gap, judged by
-    tests/test_schedules.py (strict xfail) and bench/bench_chaos.py, not here."""
-    check(case, allow=frozenset({"no_takeover_correlated"}))
+    """Any schedule, overlapping faults included: correlated failures too (DESIGN
+    rule 9)."""
+    check(case)
 
 
 # ------------------------------------------- regressions: core bugs the properties found

@@ -16,10 +16,8 @@ schedule is run once per orbit, in the form with the smallest robot ids. This ke
 whole set within CI's time (about 2,200 runs).
 
 The paper handles one failure at a time: its quorum of two distinct witnesses cannot
-be met when a witness fails with the robot it watches. The schedules that hit this are
-marked `xfail(strict=True)`, grouped by the predicate that picks them from the schedule
-alone (`_known_gap`); a protocol that handles them turns these into XPASS, which fails
-the run and asks for the marker to go.
+be met when a witness fails with the robot it watches. DESIGN rule 9 (the standby's own
+ears) closes that gap: every schedule here, correlated ones included, must pass.
 """
 
 from __future__ import annotations
@@ -119,39 +117,8 @@ def schedules() -> list[Schedule]:
     return [s for s in out if s.canonical()]
 
 
-def _known_gap(s: Schedule) -> str | None:
-    """Why the protocol of the paper misses this schedule, or None if it must not.
-
-    The one gap: the holder of a slot and one of its watchers fail silently less than
-    T_max apart, so the slot is suspected by one live witness only and the quorum of
-    two distinct witnesses (DESIGN rule 3) is never met, while a live standby and a
-    live watcher remain (otherwise the checker expects nothing)."""
-    if s.kind not in SILENT:
-        return None
-    plan, params = swarm(s.swarm)
-    at = {f.robot: f.at for f in s.faults()}
-    for h, t in at.items():
-        f = plan.robots[h].function
-        if f is None:
-            continue
-        watchers = [plan.initial_holder(g) for g in plan.watched_by(f)]
-        lost = [w for w in watchers if w in at and abs(at[w] - t) < params.t_max]
-        live = [w for w in watchers if w not in at]
-        standbys = [r for r in plan.covered_by(f) if r not in at]
-        if lost and live and standbys:
-            return ("two watchers of one function lost together: the holder of a slot and "
-                    "a watcher fail silently within T_max, the quorum of two witnesses is "
-                    "never met")
-    return None
-
-
 def _params() -> list[object]:
-    out: list[object] = []
-    for s in schedules():
-        reason = _known_gap(s)
-        marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
-        out.append(pytest.param(s, id=s.id(), marks=marks))
-    return out
+    return [pytest.param(s, id=s.id()) for s in schedules()]
 
 
 @pytest.mark.parametrize("schedule", _params())

@@ -49,7 +49,8 @@ class SwarmView:
             view.process = "stopped"
         elif name == "fault":
             view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
-                            "leave": "leaving", "collide": "collided"}.get(str(rec.get("kind", "")), view.process)
+                            "leave": "leaving", "collide": "collided",
+                            }.get(str(rec.get("kind", "")), view.process)
         view.last_event = name if name != "fault" else f"fault {rec.get('kind')}"
         view.last_t = float(rec.get("t", 0.0))
 
