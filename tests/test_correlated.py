@@ -133,6 +133,19 @@ def test_a_liar_with_a_dead_co_watcher_replaces_nobody() -> None:
     assert set(takeover_times(res)) == {"f3"}
 
 
+def test_a_partition_that_looks_like_a_collision_is_taken_over_then_fenced(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # {1,2} | {3,4,5,6}: the standbys' side cannot tell it from robots 1 and 2 colliding.
+    plan, params = paper
+    res = run(plan, "partition:1,2|3,4,5,6@2+3", duration=8.0, params=params)
+    assert res.violations == []
+    takeovers = {e["function"]: e for e in res.events if e["event"] == "takeover"}
+    assert {f: e["robot"] for f, e in takeovers.items()} == {"f1": 5, "f2": 6}
+    fenced = {e["robot"]: e["t"] for e in res.events if e["event"] == "fenced"}
+    assert set(fenced) == {1, 2} and min(fenced.values()) >= 5.0  # after the heal
+    assert res.holders() == {"f1": [5], "f2": [6], "f3": [3], "f4": [4]}
+
+
 # -- rule 10: claims believed for a bounded time -------------------------------------------
 
 def two_standbys_for_f2(plan: SwarmPlan) -> SwarmPlan:

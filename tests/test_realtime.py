@@ -123,16 +123,20 @@ async def test_realtime_leave_and_unhealthy_hand_over_without_a_timeout(tmp_path
     assert holders_at_end(result) == {"f1": 1, "f2": 2, "f3": 6, "f4": 5}
 
 
-async def test_realtime_partition_without_a_quorum_replaces_nobody(tmp_path: Path) -> None:
-    # {1,2} | {3,4,5,6}: every slot keeps one watcher on each side, so each standby
-    # hears one witness only, never the quorum of two (paper section III-B, rule 3).
-    result = await run(4.5, "partition:1,2|3,4,5,6@1+1.5", tmp_path=tmp_path, loss=0.02,
+async def test_realtime_partition_cutting_off_holder_and_watcher_is_healed_by_epochs(
+        tmp_path: Path) -> None:
+    # {1,2} | {3,4,5,6}: to the standbys' side this is robots 1 and 2 failing together
+    # (each slot keeps one watcher there): DESIGN rule 9 takes both slots over, and
+    # rule 2 fences the cut-off holders as soon as the partition heals.
+    result = await run(6.5, "partition:1,2|3,4,5,6@1+3", tmp_path=tmp_path, loss=0.02,
                        seed=3)
-    assert named(result, "takeover") == []
-    suspected = {(e["robot"], e["subject"]) for e in named(result, "suspect")}
-    assert {(4, 1), (3, 2)} <= suspected  # the partition was real
-    votes = named(result, "vote")
-    assert votes and max(e["count"] for e in votes) == 1
+    takeovers = {e["function"]: (e["robot"], e["replaced"]) for e in named(result, "takeover")}
+    assert takeovers == {"f1": (5, 1), "f2": (6, 2)}
+    healed = 4.0
+    assert all(e["t"] < healed for e in named(result, "takeover"))
+    fenced = {e["robot"]: e for e in named(result, "fenced")}
+    assert set(fenced) == {1, 2} and all(e["t"] >= healed for e in fenced.values())
+    assert holders_at_end(result) == {"f1": 5, "f2": 6, "f3": 3, "f4": 4}
 
 
 def _alive(pid: int) -> bool:
