@@ -1,5 +1,5 @@
 """End to end with physics: `swarmd sim` of the paper's swarm with MuJoCo quadrotors
-(issue 4): a motor fails on robot 2 at 5 s; its daemon still runs, notices through the
+a motor fails on robot 2 at 5 s; its daemon still runs, notices through the
 robot's health (DESIGN rule 7: LEAVE), and standby 6 flies to f2's slot.
 
 One real-time run (14 s), bounded by `asyncio.wait_for`; what happened is read from the
@@ -64,3 +64,23 @@ async def test_motor_2_at_5_ends_with_robot_6_holding_f2(tmp_path: Path) -> None
     out = report_pictures(tmp_path, ev, functions, t0=result.t0, end=DURATION, video=False)
     with Image.open(out["trajectory_png"]) as im:
         assert im.format == "PNG" and im.size == (800, 800)
+
+
+async def test_collide_1_2_at_5_both_slots_taken_over_and_both_crafts_down(
+        tmp_path: Path) -> None:
+    # Two neighbours collide (DESIGN rule 9's likeliest double failure): both crafts lose
+    # their motors and fall; f1 goes to standby 5 and f2 to standby 6 within 3 s.
+    duration = 9.0
+    result = await asyncio.wait_for(
+        run_realtime_async(PAPER, duration=duration, faults=[parse_fault("collide:1,2@5")],
+                           report_dir=tmp_path, physics=True),
+        timeout=duration + 40.0,
+    )
+    assert result.problems == []
+    took = {e["function"]: e for e in result.events if e["event"] == "takeover"}
+    assert {f: e["robot"] for f, e in took.items()} == {"f1": 5, "f2": 6}
+    assert all(e["t"] - 5.0 <= 3.0 for e in took.values()), took
+    trajs = {tr.robot: tr for tr in (load_trajectory(p, t0=result.t0)
+                                     for p in trajectory_files(tmp_path))}
+    for down in (1, 2):
+        assert trajs[down].modes[-1] == "crashed" and trajs[down].pos[-1][2] < 0.3
