@@ -1,4 +1,4 @@
-"""End to end with physics: `swarmd sim` of the paper's swarm with MuJoCo quadrotors
+"""End to end with physics: `swarmd sim` of the paper's swarm with MuJoCo quadrotors:
 a motor fails on robot 2 at 5 s; its daemon still runs, notices through the
 robot's health (DESIGN rule 7: LEAVE), and standby 6 flies to f2's slot.
 
