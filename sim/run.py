@@ -362,9 +362,26 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
                               link=options.robot_link, refuse_arm=options.refuse_arm)
     except (ValueError, RuntimeError) as exc:  # a swarm that could not start
         raise SimError(f"swarmd sim: {exc}") from None
-    summary = summarize_realtime(result, list(faults), checked.plan, checked.params,
+    # A robot whose autopilot refuses to arm is faulty from the start: its daemon hands
+    # its function over (DESIGN rule 7), so its replacement is no false takeover.
+    # It counts from its daemon's start, when it held its function (the fault table's
+    # `function`).
+    started = {e["robot"]: float(e["t"]) for e in reversed(result.events)
+               if e.get("event") == "started"}
+    refused = [RefusedArm("unhealthy", round(started.get(r, 0.0), 6) + 1e-6, (r,))
+               for r in options.refuse_arm]
+    summary = summarize_realtime(result, [*refused, *faults], checked.plan, checked.params,
                                  loss=options.loss)
     return summary, result.events, result.t0
+
+
+@dataclass(frozen=True, slots=True)
+class RefusedArm(Fault):
+    """`--refuse-arm R` for the run's checker and summary: what the daemon sees of it is
+    a robot unhealthy from t=0 (kind `unhealthy`), labelled as the option."""
+
+    def spec(self) -> str:
+        return f"refuse-arm:{self.robot}"
 
 
 def _write_report(options: SimOptions, checked: _Checked, summary: Summary,
