@@ -293,11 +293,11 @@ class AutopilotCore:
     def control(self, t: float) -> None:
         """Mode logic that runs with time: PX4's offboard loss, disarm on touch-down."""
         r = self.robot
+        # Retried every tick while a failed craft refuses HOLD: logged once it is in.
         if (self.flavour == "px4" and self.mode == "guided"
-                and t - self.last_setpoint > OFFBOARD_TIMEOUT):
-            # Retried every tick while a failed craft refuses HOLD: logged once it is in.
-            if self._enter("hold", t) == ACCEPTED:
-                log.warning("robot %d: setpoints stopped: OFFBOARD -> HOLD", r.robot_id)
+                and t - self.last_setpoint > OFFBOARD_TIMEOUT
+                and self._enter("hold", t) == ACCEPTED):
+            log.warning("robot %d: setpoints stopped: OFFBOARD -> HOLD", r.robot_id)
         if self.mode == "takeoff" and r.mode is Mode.FLYING and abs(
                 r.position[2] - self.target.position[2]) < 0.2:
             self.mode = "hold"

@@ -93,7 +93,7 @@ def register(app: typer.Typer) -> None:
 
         Example: swarmd sim configs/paper.yaml --fault crash:2@5 --duration 15 --report out/demo
 
-        Example: swarmd sim configs/paper.yaml --link mavlink --autopilot ardupilot --fault motor:2@5
+        Example: swarmd sim configs/paper.yaml --link mavlink --fault motor:2@5
         """
         from rich.console import Console
 
