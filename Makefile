@@ -3,7 +3,7 @@ PY ?= python3
 PIP ?= $(PY) -m pip
 STAMP := .make-stamps
 
-.PHONY: setup system-deps test lint demo bench clean
+.PHONY: setup system-deps test lint demo demo-mavlink bench clean
 
 $(STAMP)/system: scripts/system-deps.sh
 	bash scripts/system-deps.sh
@@ -30,6 +30,13 @@ test: setup
 demo: setup
 	$(PY) -m swarmd.cli sim configs/paper.yaml --fault crash:2@5 --duration 15 --seed 1 \
 	  --report out/demo
+
+# The same swarm flown through MAVLink: each daemon talks to a simulated PX4 autopilot
+# over loopback UDP; a motor fails on robot 2 at 5 s, its daemon hears it as MAVLink
+# health and hands f2 over; standby 6 flies there. Report in out/demo-mavlink/.
+demo-mavlink: setup
+	$(PY) -m swarmd.cli sim configs/paper.yaml --link mavlink --autopilot px4 \
+	  --fault motor:2@5 --duration 15 --seed 1 --report out/demo-mavlink
 
 bench: setup
 	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

@@ -7,9 +7,14 @@
    slot for `--seconds`: the CPU time of each link's I/O thread (from
    /proc/self/task/<tid>/stat), i.e. the link's cost per robot on a companion computer,
    apart from the simulated physics.
+3. substitute: the paper's swarm flown through MAVLink (`swarmd sim --link mavlink`,
+   one process per robot, each daemon talking to its simulated autopilot), a motor of
+   robot 2 failing at 5 s: the time from the failure to robot 2's `leave` (noticed
+   through MAVLink health), to standby 6's `takeover` of f2, and to robot 6 within
+   0.5 m of f2's slot (from its trajectory file), per flavour.
 
-    python bench/bench_mavlink.py [--parts detect,cpu] [--runs 3] [--robots 1,5]
-        [--seconds 10]
+    python bench/bench_mavlink.py [--parts detect,cpu,substitute] [--runs 3]
+        [--robots 1,5] [--seconds 10]
 """
 
 from __future__ import annotations
@@ -29,6 +34,11 @@ sys.path.insert(0, str(ROOT))
 
 from sim.physics.autopilot import SimMavlinkLink  # noqa: E402
 from sim.physics.link import QuadLink  # noqa: E402
+from sim.physics.render import trajectory_files  # noqa: E402
+from sim.physics.robot import load_trajectory  # noqa: E402
+from sim.realtime.orchestrator import run_realtime_async  # noqa: E402
+from sim.shared.faults import parse_fault  # noqa: E402
+from swarmd.config import load_swarm  # noqa: E402
 from swarmd.core.roles import Health  # noqa: E402
 
 
@@ -106,9 +116,44 @@ async def cpu(n: int, seconds: float) -> tuple[float, float, float]:
             await lk.close()
 
 
+PAPER = ROOT / "configs" / "paper.yaml"
+FAIL_AT = 5.0
+
+
+async def substitute_once(flavour: str, duration: float = 16.0,
+                          ) -> tuple[float | None, float | None, float | None]:
+    """(failure -> leave of 2, -> takeover of f2 by 6, -> 6 within 0.5 m of f2's slot), s;
+    None for what did not happen within the run."""
+    import tempfile
+
+    slot = load_swarm(PAPER).function_spec("f2")["position"]
+    with tempfile.TemporaryDirectory(prefix="bench-mavlink-") as tmp:
+        result = await run_realtime_async(
+            PAPER, duration=duration, faults=[parse_fault(f"motor:2@{FAIL_AT:g}")],
+            report_dir=Path(tmp), physics=True, link=f"mavlink-{flavour}")
+        trajs = {tr.robot: tr for tr in (load_trajectory(p, t0=result.t0)
+                                         for p in trajectory_files(Path(tmp)))}
+    fault = next((e["t"] for e in result.events if e["event"] == "fault"), FAIL_AT)
+    leave = next((e["t"] - fault for e in result.events
+                  if e["event"] == "leave" and e["robot"] == 2), None)
+    take = next((e["t"] - fault for e in result.events
+                 if e["event"] == "takeover" and e["robot"] == 6), None)
+    six = trajs.get(6)
+    there = None if six is None else next(
+        (t - fault for t, p in zip(six.t, six.pos, strict=True)
+         if t > fault and sum((p[i] - slot[i]) ** 2 for i in range(3)) ** 0.5 < 0.5), None)
+    return leave, take, there
+
+
+def _fmt(xs: list[float | None]) -> str:
+    ok = [x for x in xs if x is not None]
+    text = ", ".join(f"{x:.3f}" if x is not None else "-" for x in xs)
+    return f"[{text}]" + (f" median {statistics.median(ok):.3f}" if ok else "")
+
+
 async def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--parts", default="detect,cpu")
+    ap.add_argument("--parts", default="detect,cpu,substitute")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--robots", default="1,5")
     ap.add_argument("--seconds", type=float, default=10.0)
@@ -128,6 +173,17 @@ async def main() -> None:
             mean, worst, proc = await cpu(n, args.seconds)
             print(f"  {n:3d} robots: link mean {mean:.4f} max {worst:.4f}; whole process "
                   f"(physics + autopilots + links) {proc:.3f}")
+
+
+    if "substitute" in parts:
+        runs = max(1, min(args.runs, 2))  # 20 s of a 6-process swarm each
+        print(f"motor failure -> substitute within 0.5 m of the slot over MAVLink (s; "
+              f"paper swarm, motor:2@{FAIL_AT:g}, {runs} run(s) per flavour):")
+        for flavour in ("px4", "ardupilot"):
+            subs = [await substitute_once(flavour) for _ in range(runs)]
+            print(f"  {flavour:9s} leave (MAVLink health) {_fmt([g[0] for g in subs])}; "
+                  f"takeover {_fmt([g[1] for g in subs])}; in the slot "
+                  f"{_fmt([g[2] for g in subs])}")
 
 
 if __name__ == "__main__":

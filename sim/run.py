@@ -32,6 +32,12 @@ from sim.shared.summary import Summary, summarize
 
 TRANSPORTS = ("udp", "xbee", "serial")
 """Channels of the real-time mode (sim.realtime.orchestrator)."""
+LINKS = ("direct", "mavlink")
+"""How a flying robot's daemon reaches its craft: `direct` (the daemon's link drives the
+MuJoCo quadrotor) or `mavlink` (the daemon's MAVLink link talks over loopback UDP to a
+simulated autopilot that flies the quadrotor; docs/mavlink.md)."""
+AUTOPILOTS = ("px4", "ardupilot")
+"""Flavours of the simulated autopilot of `--link mavlink` (swarmd.link.mavlink_modes)."""
 
 EXTRA_HINT = "pip install 'swarmd[sim]'"
 """The one line that tells a lean install what to add."""
@@ -80,6 +86,12 @@ class SimOptions:
     transport: str = "udp"
     live: bool = False
     """Real time: draw the live table on a terminal stdout."""
+    link: str = "direct"
+    """Physics only: `direct` or `mavlink` (LINKS)."""
+    autopilot: str | None = None
+    """`--link mavlink`: the simulated autopilot's flavour (AUTOPILOTS); None: px4."""
+    refuse_arm: tuple[int, ...] = ()
+    """`--link mavlink`: robots whose autopilot denies every arm command."""
     parsed_faults: tuple[Fault, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -98,6 +110,18 @@ class SimOptions:
             problems.append("--craft: only with physics (not with --virtual or --no-physics)")
         if self.virtual and not self.physics:
             problems.append("--no-physics: --virtual never flies; give one of the two")
+        if self.link not in LINKS:
+            problems.append(f"--link: {self.link!r} is not one of {', '.join(LINKS)}")
+        elif self.link == "mavlink" and not self.flies:
+            problems.append("--link: mavlink needs physics (the simulated autopilot flies a "
+                            "MuJoCo quadrotor): not with --virtual or --no-physics")
+        if self.autopilot is not None and self.autopilot not in AUTOPILOTS:
+            problems.append(f"--autopilot: {self.autopilot!r} is not one of "
+                            f"{', '.join(AUTOPILOTS)}")
+        elif self.autopilot is not None and self.link != "mavlink":
+            problems.append("--autopilot: only with --link mavlink")
+        if self.refuse_arm and self.link != "mavlink":
+            problems.append("--refuse-arm: only with --link mavlink")
         parsed = []
         for spec in self.faults:
             try:
@@ -119,6 +143,15 @@ class SimOptions:
 
     def chosen_craft(self) -> str:
         return self.craft or os.environ.get("SWARMD_QUAD_PRESET", "x2")
+
+    @property
+    def robot_link(self) -> str:
+        """The robot processes' link (sim.realtime.robot_proc.LINK_FACTORIES)."""
+        if not self.flies:
+            return "none"
+        if self.link == "mavlink":
+            return f"mavlink-{self.autopilot or 'px4'}"
+        return "quad"
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,6 +271,10 @@ def check(options: SimOptions) -> _Checked:
                             physics=options.physics, duration=options.duration)
     if problems:
         raise SimError(*[f"--fault: {p}" for p in problems])
+    unknown = sorted(set(options.refuse_arm) - set(plan.robots))
+    if unknown:
+        raise SimError(f"--refuse-arm: robot {', '.join(map(str, unknown))} is not in "
+                       f"{options.swarm} (robots: {', '.join(map(str, sorted(plan.robots)))})")
     if options.flies:
         from sim.physics.model import PRESETS
         from swarmd.functions import flight_problems
@@ -321,12 +358,30 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
                               loss=options.loss, seed=options.seed,
                               report_dir=options.report, physics=options.physics,
                               craft=options.chosen_craft() if options.flies else None,
-                              transport=options.transport, live=options.live)
+                              transport=options.transport, live=options.live,
+                              link=options.robot_link, refuse_arm=options.refuse_arm)
     except (ValueError, RuntimeError) as exc:  # a swarm that could not start
         raise SimError(f"swarmd sim: {exc}") from None
-    summary = summarize_realtime(result, list(faults), checked.plan, checked.params,
+    # A robot whose autopilot refuses to arm is faulty from the start: its daemon hands
+    # its function over (DESIGN rule 7), so its replacement is no false takeover.
+    # It counts from its daemon's start, when it held its function (the fault table's
+    # `function`).
+    started = {e["robot"]: float(e["t"]) for e in reversed(result.events)
+               if e.get("event") == "started"}
+    refused = [RefusedArm("unhealthy", round(started.get(r, 0.0), 6) + 1e-6, (r,))
+               for r in options.refuse_arm]
+    summary = summarize_realtime(result, [*refused, *faults], checked.plan, checked.params,
                                  loss=options.loss)
     return summary, result.events, result.t0
+
+
+@dataclass(frozen=True, slots=True)
+class RefusedArm(Fault):
+    """`--refuse-arm R` for the run's checker and summary: what the daemon sees of it is
+    a robot unhealthy from t=0 (kind `unhealthy`), labelled as the option."""
+
+    def spec(self) -> str:
+        return f"refuse-arm:{self.robot}"
 
 
 def _write_report(options: SimOptions, checked: _Checked, summary: Summary,

@@ -102,6 +102,9 @@ class AutopilotCore:
         self.refuse_arm = False
         self.forced = Health.OK
         """`set_health`: a fault the simulator injects (DEGRADED: CRITICAL, else EMERGENCY)."""
+        self.label = "mavlink"
+        """What the trajectory file records as the craft's function (MAVLink has no such
+        notion; `SimMavlinkLink` names the daemon's function so pictures can)."""
         self.took_off = False
         self.last_setpoint = -math.inf
         self.target = _Target(robot.position)
@@ -252,7 +255,7 @@ class AutopilotCore:
         elif name == "hold" and r.mode in (Mode.TAKEOFF, Mode.FLYING, Mode.LANDING):
             self.target.position = r.position
             self.target.velocity = (0.0, 0.0, 0.0)
-            r.fly("mavlink", self.target)
+            r.fly(self.label, self.target)
         return ACCEPTED
 
     def _takeoff(self, alt: float, t: float) -> int:
@@ -267,7 +270,7 @@ class AutopilotCore:
         self.target.position = (x, y, r.home[2] + max(alt, 0.5))
         self.target.velocity = (0.0, 0.0, 0.0)
         self.took_off = True
-        return ACCEPTED if r.fly("mavlink", self.target) else FAILED
+        return ACCEPTED if r.fly(self.label, self.target) else FAILED
 
     def _setpoint(self, msg: Any, t: float) -> None:
         self.counters["setpoints"] += 1
@@ -285,15 +288,16 @@ class AutopilotCore:
         if self.flavour == "ardupilot" and on_ground and not self.took_off:
             return  # ArduCopter: a position target on the ground waits for NAV_TAKEOFF
         if r.flight is not self.target or r.mode not in (Mode.TAKEOFF, Mode.FLYING):
-            r.fly("mavlink", self.target)
+            r.fly(self.label, self.target)
 
     def control(self, t: float) -> None:
         """Mode logic that runs with time: PX4's offboard loss, disarm on touch-down."""
         r = self.robot
+        # Retried every tick while a failed craft refuses HOLD: logged once it is in.
         if (self.flavour == "px4" and self.mode == "guided"
-                and t - self.last_setpoint > OFFBOARD_TIMEOUT):
+                and t - self.last_setpoint > OFFBOARD_TIMEOUT
+                and self._enter("hold", t) == ACCEPTED):
             log.warning("robot %d: setpoints stopped: OFFBOARD -> HOLD", r.robot_id)
-            self._enter("hold", t)
         if self.mode == "takeoff" and r.mode is Mode.FLYING and abs(
                 r.position[2] - self.target.position[2]) < 0.2:
             self.mode = "hold"
@@ -452,8 +456,12 @@ class SimMavlinkLink:
 
     @classmethod
     def for_robot(cls, cfg: Any, flavour: Flavour, port: int,
-                  restart_of: float | None = None, **kwargs: Any) -> SimMavlinkLink:
-        return cls(QuadLink.for_robot(cfg, restart_of=restart_of), flavour, port, **kwargs)
+                  restart_of: float | None = None, craft: str | None = None,
+                  **kwargs: Any) -> SimMavlinkLink:
+        """From a loaded robot file, as `QuadLink.for_robot` (home, trajectory file,
+        `craft` preset, `restart_of`); `kwargs` go to the constructor."""
+        return cls(QuadLink.for_robot(cfg, restart_of=restart_of, craft=craft), flavour,
+                   port, **kwargs)
 
     async def start(self, on_health: HealthCallback) -> None:
         self.autopilot = await start_autopilot(self.quad, self.flavour, self.port)
@@ -461,6 +469,8 @@ class SimMavlinkLink:
         await self.link.start(on_health)
 
     def assign(self, function: str, epoch: int, params: Any) -> None:
+        if self.autopilot is not None:
+            self.autopilot.core.label = function  # the trajectory file's label only
         self.link.assign(function, epoch, params)
 
     def release(self, function: str) -> None:

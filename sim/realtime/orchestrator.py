@@ -106,6 +106,8 @@ class Orchestrator:
         port: int | None = None,
         transport: str = "udp",
         craft: str | None = None,
+        link: str | None = None,
+        refuse_arm: Sequence[int] = (),
     ) -> None:
         self.swarm_path = swarm_path
         self.craft = craft
@@ -114,7 +116,12 @@ class Orchestrator:
         self.faults = sorted(faults, key=lambda f: f.at)
         self.loss = loss
         self.seed = seed
-        self.link = "quad" if physics else "none"
+        # The robots' link (robot_proc.LINK_FACTORIES): `quad` drives the MuJoCo craft
+        # directly, `mavlink-px4` / `mavlink-ardupilot` through a simulated autopilot.
+        self.link = link or ("quad" if physics else "none")
+        if self.link != "none" and not physics:
+            raise ValueError(f"robot link {self.link!r} flies a craft: it needs physics")
+        self.refuse_arm = frozenset(refuse_arm)
         self.live = live
         self.report_dir = report_dir
         self.group = group
@@ -180,7 +187,7 @@ class Orchestrator:
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
             loss=self.loss, seed=self.seed, partitions=self.partitions, link=self.link, t0=t0,
-            craft=self.craft,
+            craft=self.craft, refuse_arm=robot in self.refuse_arm,
         )
         ev_r, ev_w = self._ctx.Pipe(duplex=False)
         ctl_r, ctl_w = self._ctx.Pipe(duplex=False)
@@ -485,14 +492,19 @@ async def run_realtime_async(
     port: int | None = None,
     handle_signals: bool = False,
     craft: str | None = None,
+    link: str | None = None,
+    refuse_arm: Sequence[int] = (),
 ) -> RealtimeResult:
     """Run the swarm in real time (see the module docstring); awaitable form for tests.
     `handle_signals`: SIGINT and SIGTERM end the run early with a partial result
     (`interrupted`) instead of raising; only one run per process may ask for that.
-    `craft`: the quadrotor preset every robot flies (physics; None: the link's default)."""
+    `craft`: the quadrotor preset every robot flies (physics; None: the link's default).
+    `link`: the robots' link (`sim.realtime.robot_proc.LINK_FACTORIES`; None: `quad` with
+    physics, else `none`); `refuse_arm`: robots whose simulated autopilot denies arming
+    (the `mavlink-*` links)."""
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
                         physics=physics, live=live, report_dir=report_dir, port=port,
-                        transport=transport, craft=craft)
+                        transport=transport, craft=craft, link=link, refuse_arm=refuse_arm)
     try:
         result = await orch.run(handle_signals=handle_signals)
     finally:

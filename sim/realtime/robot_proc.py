@@ -5,8 +5,10 @@ exactly what `swarmd start --config` runs: `swarmd.daemon.run_daemon`) and start
 module's `child_main` in a forkserver child. What the simulator adds around the daemon:
 
 - a receive filter (`sim/realtime/netfilter.py`): seeded loss and partitions, per receiver;
-- a robot link chosen by name (`LINK_FACTORIES`): the bare `none` link today, the MuJoCo
-  quadrotor (`sim.physics.link.QuadLink`) when physics is on, so a new robot plugs in here;
+- a robot link chosen by name (`LINK_FACTORIES`): the bare `none` link, the MuJoCo
+  quadrotor (`sim.physics.link.QuadLink`) when physics is on, or the daemon's MAVLink
+  link talking to a simulated autopilot over that quadrotor (`mavlink-px4`,
+  `mavlink-ardupilot`: sim.physics.autopilot.SimMavlinkLink); a new robot plugs in here;
 - the `liar` fault: forged WARN frames about its neighbours, sent through the daemon's
   own runtime so they are signed and sequenced like its real frames (`Liar`);
 - two pipes to the orchestrator: events out (one JSON object a message, t relative to
@@ -80,6 +82,8 @@ class RobotSpec:
     """Start at once with this run origin (a restart); None: wait for the `go` message."""
     craft: str | None = None
     """Quadrotor preset of the `quad` link (sim.physics.model.PRESETS); None: its default."""
+    refuse_arm: bool = False
+    """`mavlink-*` links: the simulated autopilot denies every arm command."""
 
 
 # -- robot links ----------------------------------------------------------------------------
@@ -98,9 +102,27 @@ def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
     return link
 
 
+def _mavlink_link(flavour: str) -> Callable[[RobotSpec, Any], RobotLink]:
+    def build(spec: RobotSpec, cfg: Any) -> RobotLink:
+        from sim.physics.autopilot import SimMavlinkLink
+        from sim.realtime.robotfiles import free_udp_port
+
+        # The daemon's MAVLink link and a simulated autopilot (its own UDP port, as PX4
+        # SITL gives each vehicle) flying the craft: the daemon learns of a `motor` or
+        # `unhealthy` fault only through MAVLink health (docs/mavlink.md).
+        link: RobotLink = SimMavlinkLink.for_robot(
+            cfg, flavour, free_udp_port(), restart_of=spec.t0,  # type: ignore[arg-type]
+            craft=spec.craft, refuse_arm=spec.refuse_arm)
+        return link
+
+    return build
+
+
 LINK_FACTORIES: dict[str, Callable[[RobotSpec, Any], RobotLink]] = {
     "none": _none_link,
     "quad": _quad_link,
+    "mavlink-px4": _mavlink_link("px4"),
+    "mavlink-ardupilot": _mavlink_link("ardupilot"),
 }
 """Robot links by name: the orchestrator picks one; add a robot model here."""
 

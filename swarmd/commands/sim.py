@@ -65,18 +65,35 @@ def register(app: typer.Typer) -> None:
             "--transport", help="Channel in real time: udp (multicast on loopback), xbee "
             "or serial (emulated radios on pseudo-terminals). Refused with --virtual.")]
         = "udp",
+        link: Annotated[str, typer.Option(
+            "--link", help="How each daemon reaches its quadrotor (physics only): direct "
+            "(the daemon's link drives the MuJoCo craft) or mavlink (the daemon's MAVLink "
+            "link over loopback UDP to a simulated autopilot, one system id and UDP port per "
+            "robot, that flies the craft; faults reach the daemon only as MAVLink health). "
+            "Default: direct.")] = "direct",
+        autopilot: Annotated[str | None, typer.Option(
+            "--autopilot", help="Flavour of the simulated autopilot of --link mavlink: px4 "
+            "(OFFBOARD setpoints) or ardupilot (GUIDED). Default: px4.")] = None,
+        refuse_arm: Annotated[list[int] | None, typer.Option(
+            "--refuse-arm", help="Robot id whose simulated autopilot denies every arm "
+            "command, as a failing pre-arm check (repeatable; --link mavlink only). "
+            "Default: none.")] = None,
     ) -> None:
         """Run the whole swarm on this machine, inject faults, print a summary.
 
         Default: one process per robot, each a real daemon (the code swarmd start runs)
-        flying a MuJoCo quadrotor, over UDP multicast on loopback. --no-physics: the same
-        without quadrotors. --virtual: one process on a virtual clock.
+        flying a MuJoCo quadrotor, over UDP multicast on loopback. --link mavlink: each
+        daemon flies its quadrotor through a simulated PX4 or ArduPilot autopilot over
+        MAVLink. --no-physics: the same without quadrotors. --virtual: one process on a
+        virtual clock.
 
         Exit codes: 0 no invariant violated, 1 an invariant was violated or a robot
-        process failed, 2 bad input (swarm file, --fault, --craft, --report; nothing was
+        process failed, 2 bad input (swarm file, --fault, --craft, --link, --report; nothing was
         started), 130 / 143 ended early by Ctrl-C / SIGTERM (partial report).
 
         Example: swarmd sim configs/paper.yaml --fault crash:2@5 --duration 15 --report out/demo
+
+        Example: swarmd sim configs/paper.yaml --link mavlink --fault motor:2@5
         """
         from rich.console import Console
 
@@ -90,7 +107,8 @@ def register(app: typer.Typer) -> None:
                 swarm=swarm, virtual=virtual, duration=duration, seed=seed, loss=loss,
                 faults=tuple(fault or ()), events=events, report=report,
                 physics=not no_physics, craft=craft, transport=transport,
-                live=not json_out)
+                live=not json_out, link=link, autopilot=autopilot,
+                refuse_arm=tuple(refuse_arm or ()))
             result = run_sim(options)
         except SimError as exc:
             for line in exc.lines:
