@@ -216,14 +216,17 @@ class Node:
     # ------------------------------------------------------------------ entry points
     def receive(self, data: bytes, now: float) -> list[Action]:
         """A frame from the channel. Never raises on peer input."""
-        self._advance(now)
-        if self._stopped:
-            return self._drain()
         head = wire.peek(data)
         if head is not None and self._irrelevant(
                 head.swarm_id, head.sender, head.slot, head.robot,
                 standby_beat=head.mtype == wire.MsgType.HEARTBEAT and head.slot == 0):
-            return self._drop("irrelevant")  # before the HMAC: cost follows the neighbourhood
+            # Before the HMAC and any state: a daemon's cost follows its neighbourhood,
+            # not the swarm. No deadline moved, so there is nothing to hand back.
+            self._drops["irrelevant"] += 1
+            return []
+        self._advance(now)
+        if self._stopped:
+            return self._drain()
         try:
             frame = wire.decode(data, self._keys)
         except wire.CodecError as exc:
@@ -234,15 +237,16 @@ class Node:
         """A frame already decoded and verified with this swarm's keys. For simulators
         that deliver one broadcast to many nodes and decode it once; the runtime uses
         `receive`."""
-        self._advance(now)
-        if self._stopped:
-            return self._drain()
         msg = frame.msg
         about = msg.suspect if isinstance(msg, wire.Warn) else \
             msg.failed if isinstance(msg, wire.Claim) else 0
         if self._irrelevant(frame.swarm_id, frame.sender, msg.function, about,
                             standby_beat=isinstance(msg, wire.Heartbeat) and msg.function == 0):
-            return self._drop("irrelevant")
+            self._drops["irrelevant"] += 1
+            return []
+        self._advance(now)
+        if self._stopped:
+            return self._drain()
         return self._accept(frame, now)
 
     def _irrelevant(self, swarm_id: int, sender: int, slot: int, about: int, *,
