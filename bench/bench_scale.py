@@ -7,8 +7,9 @@ virtual run's speed, and a 100-robot swarm on one 802.15.4 channel at `radio()`.
    configs/make_grid.py, `udp()` preset, signed frames) is fed the heartbeats of the
    whole swarm, as a daemon on UDP multicast receives them, over `--seconds` of virtual
    time. Printed: the frames per second it receives, how many it processes (the rest
-   is dropped by slot before the HMAC, DESIGN section 4), CPU per frame (process time)
-   and the share of one core that costs; the same with the early drop disabled.
+   is dropped by slot before the HMAC: DESIGN section 2, "What a robot hears"), CPU
+   per frame (process time) and the share of one core that costs; the same with the
+   early drop disabled.
 2. A 1,000-robot grid in `sim.virtual` for 10 s with a crash at 5 s: robot-seconds per
    wall-second and the crash-to-takeover time.
 3. configs/grid100-radio.yaml: its channel budget on 802.15.4 (signed and unsigned),
@@ -21,23 +22,20 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.path)
 
-from grids import grid_swarm  # noqa: E402
-
-from sim.shared.faults import parse_fault  # noqa: E402
-from sim.virtual.simulator import run_virtual  # noqa: E402
-from swarmd.budget import channel_budget, largest_swarm  # noqa: E402
-from swarmd.config import load_swarm  # noqa: E402
-from swarmd.core import wire  # noqa: E402
-from swarmd.core.node import Node  # noqa: E402
-from swarmd.core.params import Params, radio, udp  # noqa: E402
-from swarmd.core.plan import SwarmPlan  # noqa: E402
+from sim.shared.faults import parse_fault
+from sim.virtual.simulator import run_virtual
+from swarmd.budget import channel_budget, largest_swarm
+from swarmd.config import load_swarm
+from swarmd.core import wire
+from swarmd.core.node import Node
+from swarmd.core.params import Params, udp
+from swarmd.core.plan import SwarmPlan
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = b"b" * 32

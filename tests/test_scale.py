@@ -1,5 +1,5 @@
 """Large swarms: more than 255 functions on the wire, and the receiver's early drop of
-frames about slots it does not care about (DESIGN section 4, "What a robot hears")."""
+frames about slots it does not care about (DESIGN section 2, "What a robot hears")."""
 
 from __future__ import annotations
 

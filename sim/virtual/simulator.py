@@ -8,7 +8,8 @@ seeded `random.Random`: a run is a pure function of (plan, params, faults, seed)
 Speed: a broadcast is encoded by the sender's node and decoded once here, then handed
 to each receiver with `Node.receive_frame`. With `interest=True` a frame reaches only
 the robots whose plan makes it relevant (`SwarmPlan.relevant`, the sets a `Node` drops
-irrelevant frames by before verifying them): everything else the receiver would drop. `tests/test_virtual.py` checks that this changes no outcome.
+irrelevant frames by before verifying them): everything else the receiver would drop.
+`tests/test_scenarios.py` checks that this changes no outcome.
 """
 
 from __future__ import annotations

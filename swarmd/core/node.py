@@ -251,7 +251,7 @@ class Node:
 
     def _irrelevant(self, swarm_id: int, sender: int, slot: int, about: int, *,
                     standby_beat: bool) -> bool:
-        """A frame no rule of this robot would act on (DESIGN section 4, "What a robot
+        """A frame no rule of this robot would act on (DESIGN section 2, "What a robot
         hears"), judged by slot, not by sender: watchers follow whoever holds a slot
         (rule 1). Anything `_accept` counts under its own reason passes through."""
         if swarm_id != self._plan.swarm_id or sender == self._robot_id \

@@ -21,7 +21,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-
 MAX_FUNCTIONS = 0xFFFF
 """Slots 1..65535 (wire.py's slot field; 0 means "no function")."""
 
@@ -32,7 +31,7 @@ class PlanError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class Relevant:
-    """What one robot must hear (DESIGN section 4, "What a robot hears"): frames about
+    """What one robot must hear (DESIGN section 2, "What a robot hears"): frames about
     `slots` (wire indices) and the standby heartbeats of `standbys`. Everything else it
     would ignore anyway, so a receiver drops it before verifying the tag."""
 

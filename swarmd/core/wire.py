@@ -26,8 +26,8 @@ Layout (big-endian)::
 
 `decode` raises only `CodecError` (with a machine-readable `reason`) on any input;
 `peek` reads sender, type and slot without verifying anything (the receiver's early
-drop of frames about slots it does not care about, DESIGN section 4) and returns None
-on anything it cannot read.
+drop of frames about slots it does not care about: DESIGN section 2, "What a robot
+hears") and returns None on anything it cannot read.
 """
 
 from __future__ import annotations
