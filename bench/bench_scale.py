@@ -108,10 +108,10 @@ def bench_virtual_1000(directory: Path) -> None:
     res = run_virtual(plan, params, duration=10.0, faults=[parse_fault("crash:450@5")])
     wall = time.monotonic() - started
     took = [e["t"] - 5.0 for e in res.events if e["event"] == "takeover"]
+    outcome = f"takeover {took[0]:.3f} s after the crash" if took else "NO takeover"
     print(f"1,000-robot grid, sim.virtual, 10 s with crash:450@5: {wall:.1f} s wall, "
-          f"{res.robot_seconds / wall:.0f} robot-seconds per wall-second; takeover "
-          f"{took[0]:.3f} s after the crash" if took else "NO takeover"
-          + f"; violations {len(res.violations)}")
+          f"{res.robot_seconds / wall:.0f} robot-seconds per wall-second; {outcome}; "
+          f"violations {len(res.violations)}")
 
 
 def bench_radio_swarm(loss_runs: int) -> None:

@@ -118,6 +118,8 @@ _PEEK = struct.Struct(">BHH")
 _U16 = struct.Struct(">H")
 _SLOT_AT = {MsgType.HEARTBEAT: 0, MsgType.WARN: 2, MsgType.CLAIM: 2, MsgType.LEAVE: 0}
 """Offset of the slot field in each body (after the 16-bit robot id in WARN and CLAIM)."""
+_TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None, None, None)
+"""Message type by the low 3 bits of byte 0 (0, 5, 6 and 7 are no type)."""
 _FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 4, MsgType.CLAIM: 4, MsgType.LEAVE: 3}
 """Body bytes besides the slot field."""
 
@@ -273,19 +275,26 @@ def peek(data: bytes) -> Peek | None:
     """Header and slot of a frame, unverified: None for anything `decode` would reject
     as malformed at a glance. Whatever it returns still goes through `decode` before it
     is believed; a receiver uses it only to drop frames it would ignore anyway."""
-    if len(data) < HEADER_LEN + 1:
+    # Runs on every frame a robot receives: table look-ups, no enum construction.
+    if len(data) < HEADER_LEN + 3:
         return None
     first, swarm_id, sender = _PEEK.unpack_from(data)
-    if first >> 4 != VERSION or not 1 <= first & _TYPE_MASK <= 4:
+    if first >> 4 != VERSION:
         return None
-    mtype = MsgType(first & _TYPE_MASK)
-    got = _read_slot(data, HEADER_LEN + _SLOT_AT[mtype])
-    if got is None:
+    mtype = _TYPES[first & _TYPE_MASK]
+    if mtype is None:
         return None
-    robot = 0
-    if _SLOT_AT[mtype]:
-        robot = _U16.unpack_from(data, HEADER_LEN)[0]
-    return Peek(swarm_id, sender, mtype, got[0], robot)
+    at = _SLOT_AT[mtype]
+    byte = data[HEADER_LEN + at]
+    if byte < 0x80:  # the common case: a swarm of fewer than 128 functions
+        slot = byte
+    else:
+        got = _read_slot(data, HEADER_LEN + at)
+        if got is None:
+            return None
+        slot = got[0]
+    robot = (data[HEADER_LEN] << 8) | data[HEADER_LEN + 1] if at else 0
+    return Peek(swarm_id, sender, mtype, slot, robot)
 
 
 def seq_seed(unix_time: float) -> int:
