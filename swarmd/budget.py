@@ -29,7 +29,7 @@ from typing import Any
 
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.wire import HEADER_LEN, TAG_LEN
+from swarmd.core.wire import HEADER_LEN, TAG_LEN, slot_size
 from swarmd.transport import media
 
 AIR_RATE_BPS = 250_000
@@ -46,8 +46,8 @@ MAX_PAYLOAD = {**media.MAX_PAYLOAD, "serial": media.SERIAL_MAX_PAYLOAD,
 (unencrypted); the serial transport's default frame limit; a UDP datagram that fits a
 1500-byte Ethernet MTU."""
 
-HEARTBEAT_BODY = 4  # wire.py: function (1), epoch (2), role|health (1)
-WARN_BODY = 5  # suspect (2), function (1), epoch (2)
+HEARTBEAT_BODY = 3  # wire.py: epoch (2), role|health (1), plus the slot field
+WARN_BODY = 4  # suspect (2), epoch (2), plus the slot field
 MEDIA = tuple(MAX_PAYLOAD)
 
 
@@ -123,12 +123,13 @@ class Budget:
         return out
 
 
-def heartbeat_size(signed: bool) -> int:
-    return HEADER_LEN + HEARTBEAT_BODY + (TAG_LEN if signed else 0)
+def heartbeat_size(signed: bool, slot_bytes: int = 1) -> int:
+    """Bytes of a heartbeat; `slot_bytes` 1 below 128 functions, 2 or 3 above (wire.py)."""
+    return HEADER_LEN + HEARTBEAT_BODY + slot_bytes + (TAG_LEN if signed else 0)
 
 
-def warn_size(signed: bool) -> int:
-    return HEADER_LEN + WARN_BODY + (TAG_LEN if signed else 0)
+def warn_size(signed: bool, slot_bytes: int = 1) -> int:
+    return HEADER_LEN + WARN_BODY + slot_bytes + (TAG_LEN if signed else 0)
 
 
 def budget_for(
@@ -139,13 +140,15 @@ def budget_for(
     *,
     medium: str,
     signed: bool,
+    slot_bytes: int = 1,
 ) -> Budget:
-    """The budget from counts alone (what `channel_budget` derives from a plan)."""
+    """The budget from counts alone (what `channel_budget` derives from a plan);
+    `slot_bytes` is the widest slot field the swarm sends (`wire.slot_size`)."""
     robots = active + standby
     overhead = frame_overhead(medium)
     copies = broadcast_copies(medium, robots)
-    hb = heartbeat_size(signed)
-    warn = warn_size(signed)
+    hb = heartbeat_size(signed, slot_bytes)
+    warn = warn_size(signed, slot_bytes)
     hb_rate = active / params.heartbeat_interval + standby / params.standby_heartbeat_interval
     warn_rate = max_watchers / params.warn_interval
     claim_rate = 1 / params.claim_hold  # at most one CLAIM per hold, counted as a rate
@@ -193,7 +196,8 @@ def channel_budget(plan: SwarmPlan, params: Params, *, medium: str, signed: bool
     active = sum(1 for r in plan.robots.values() if r.function is not None)
     standby = len(plan.robots) - active
     max_watchers = max((len(plan.watched_by(f)) for f in plan.functions), default=0)
-    return budget_for(active, standby, max_watchers, params, medium=medium, signed=signed)
+    return budget_for(active, standby, max_watchers, params, medium=medium, signed=signed,
+                      slot_bytes=slot_size(len(plan.functions)))
 
 
 def largest_swarm(

@@ -70,8 +70,10 @@ DROP_REPORT_S = 10.0
 """s. Frames dropped since the last report are logged at most this often: an operator
 without a metrics endpoint still sees a robot with the wrong key (`auth`), another swarm
 on the group (`swarm`) or garbage on the channel, without a line per frame."""
-QUIET_DROPS = frozenset({"own"})
-"""Drop reasons never reported: `own` is this robot's multicast echo, every frame."""
+QUIET_DROPS = frozenset({"own", "irrelevant"})
+"""Drop reasons never logged (metrics still count them): `own` is this robot's multicast
+echo, every frame; `irrelevant` is the traffic of the rest of a large swarm (DESIGN
+section 2, "What a robot hears")."""
 SENT_MEMORY = 512
 """Frames whose digests are kept to recognise our own echoes: many seconds of our own
 traffic, far more than can be in flight or queued (QUEUE_SIZE frames of all robots)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from sim.xbee_emu.swarm import paper_plan
@@ -12,17 +14,23 @@ from swarmd.budget import (
     frame_overhead,
     heartbeat_size,
     largest_swarm,
+    warn_size,
 )
+from swarmd.config import load_swarm
 from swarmd.core.params import radio, udp
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
 
 def test_paper_swarm_on_802154_by_hand() -> None:
     b = channel_budget(paper_plan(), radio(), medium="802.15.4", signed=True)
-    # 4 active at 2 Hz + 2 standby at 0.5 Hz = 9 heartbeats/s of 23 B (+33 B overhead).
+    # 4 active every 0.6 s + 2 standby every 8 s = 6.92 heartbeats/s of 23 B (+33 B
+    # overhead).
+    rate = 4 / 0.6 + 2 / 8
     assert (b.active, b.standby) == (4, 2)
-    assert b.frames_per_s == pytest.approx(9.0)
-    assert b.bytes_per_s == pytest.approx(9 * (23 + 33))
-    assert b.airtime_share == pytest.approx(9 * ((23 + 33) * 32e-6 + 640e-6))
+    assert b.frames_per_s == pytest.approx(rate)
+    assert b.bytes_per_s == pytest.approx(rate * (23 + 33))
+    assert b.airtime_share == pytest.approx(rate * ((23 + 33) * 32e-6 + 640e-6))
     assert b.heartbeat_bytes == 23 and b.heartbeat_fits
     assert b.warnings == ()
 
@@ -56,9 +64,29 @@ def test_airtime_ceiling_warning_and_largest_swarm() -> None:
     assert airtime("digimesh", 10) > airtime("802.15.4", 10)
 
 
+def test_a_hundred_robots_fit_one_802154_channel_at_radio() -> None:
+    assert largest_swarm(radio(), medium="802.15.4", signed=True) >= 100
+    cfg = load_swarm(CONFIGS / "grid100-radio.yaml")
+    plan = cfg.to_plan()
+    assert len(plan.robots) >= 100 and cfg.params() == radio()
+    for signed in (True, False):
+        b = channel_budget(plan, radio(), medium="802.15.4", signed=signed)
+        assert b.airtime_share is not None and b.airtime_share < 0.3
+        assert not b.warnings
+
+
+def test_the_slot_field_widens_the_budget_past_127_functions() -> None:
+    assert heartbeat_size(True, 2) == 24 and warn_size(True, 3) == 11 + 4 + 3 + 8
+    small = budget_for(60, 20, 4, radio(), medium="802.15.4", signed=True)
+    wide = budget_for(60, 20, 4, radio(), medium="802.15.4", signed=True, slot_bytes=2)
+    assert wide.heartbeat_bytes == small.heartbeat_bytes + 1
+    assert wide.airtime_share is not None and small.airtime_share is not None
+    assert wide.airtime_share > small.airtime_share
+
+
 def test_lines_are_human_readable() -> None:
     text = "\n".join(channel_budget(paper_plan(), radio(), medium="802.15.4",
                                     signed=True).lines())
-    assert "9.0 frames/s" in text and "airtime at 250 kbps" in text and "fits" in text
+    assert "6.9 frames/s" in text and "airtime at 250 kbps" in text and "fits" in text
     with pytest.raises(ValueError):
         frame_overhead("carrier-pigeon")

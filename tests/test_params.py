@@ -19,9 +19,9 @@ def test_udp_preset() -> None:
 
 def test_radio_preset() -> None:
     p = radio()
-    assert (p.heartbeat_interval, p.t_max, p.quorum) == (0.5, 2.0, 2)
-    assert (p.warn_interval, p.vote_window, p.claim_hold) == (0.5, 4.0, 1.0)
-    assert (p.standby_heartbeat_interval, p.standby_timeout) == (2.0, 8.0)
+    assert (p.heartbeat_interval, p.t_max, p.quorum) == (0.6, 2.0, 2)
+    assert (p.warn_interval, p.vote_window, p.claim_hold) == (0.5, 4.0, 0.8)
+    assert (p.standby_heartbeat_interval, p.standby_timeout) == (8.0, 24.0)
     assert (p.startup_grace, p.alert_after, p.rejoin_hold) == (10.0, 8.0, 3.0)
 
 

@@ -48,7 +48,7 @@ def test_valid_small_plan() -> None:
     [
         ({"swarm_id": 0x10000}, "16 bits"),
         ({"functions": ("a", "a")}, "duplicate"),
-        ({"functions": ()}, "1 to 255"),
+        ({"functions": ()}, "1 to 65535"),
         ({"robots": {1: RobotPlan(2, "a")}}, "robot id"),
         ({"robots": {1: RobotPlan(1, "zz")}}, "unknown function"),
         ({"robots": {1: RobotPlan(1, "a"), 2: RobotPlan(2, "a")}}, "held by robots"),

@@ -41,9 +41,48 @@ def test_round_trip(msg: Message, key: bytes | None) -> None:
 
 
 def test_signed_heartbeat_fits_24_bytes() -> None:
-    frame = Frame(0xFFFF, 0xFFFF, wire.SEQ_MAX, Heartbeat(255, 0xFFFF, 4, 2))
-    assert len(encode(frame, KEY)) <= 24
+    frame = Frame(0xFFFF, 0xFFFF, wire.SEQ_MAX, Heartbeat(127, 0xFFFF, 4, 2))
+    assert len(encode(frame, KEY)) == 23  # a swarm of < 128 functions: one slot byte
     assert len(encode(frame)) == len(encode(frame, KEY)) - wire.TAG_LEN
+    big = Frame(0xFFFF, 0xFFFF, wire.SEQ_MAX, Heartbeat(0xFFFF, 0xFFFF, 4, 2))
+    assert len(encode(big, KEY)) == 25  # the largest swarm: a three-byte slot
+
+
+@pytest.mark.parametrize(
+    ("slot", "size"),
+    [(0, 1), (1, 1), (0x7F, 1), (0x80, 2), (0xFF, 2), (0x100, 2), (0x7EFF, 2), (0x7F00, 3),
+     (0xFFFE, 3), (0xFFFF, 3)],
+)
+def test_slot_field_boundaries(slot: int, size: int) -> None:
+    assert wire.slot_size(slot) == size == len(wire.encode_slot(slot))
+    for msg in (Heartbeat(slot, 1, 1, 0), Warn(9, slot, 1), Claim(9, slot, 2), Leave(slot, 1, 0)):
+        data = encode(Frame(1, 2, 3, msg), KEY)
+        assert decode(data, (KEY,)).msg == msg
+        peeked = wire.peek(data)
+        assert peeked is not None and (peeked.sender, peeked.slot) == (2, slot)
+
+
+@pytest.mark.parametrize("field", [b"\x80\x05", b"\x80\x7f", b"\xff\x7e\xff", b"\xff\x00\x05"])
+def test_overlong_slot_forms_are_malformed(field: bytes) -> None:
+    """Only the shortest form is valid, so no slot has two encodings (a signed frame
+    cannot be re-encoded into a different one that still means the same)."""
+    head = encode(Frame(1, 2, 3, Heartbeat(5, 1, 1, 0)))[:wire.HEADER_LEN]
+    data = head + field + b"\x00\x01\x01"
+    with pytest.raises(CodecError) as info:
+        decode(data)
+    assert info.value.reason == "malformed"
+    assert wire.peek(data) is None
+
+
+@given(st.binary(max_size=40))
+def test_peek_is_total(data: bytes) -> None:
+    p = wire.peek(data)
+    try:
+        frame = decode(data)
+    except CodecError:
+        return
+    assert p is not None and (p.swarm_id, p.sender, p.slot) == (
+        frame.swarm_id, frame.sender, frame.msg.function)
 
 
 def test_every_message_type_is_distinct_on_the_wire() -> None:
@@ -51,17 +90,19 @@ def test_every_message_type_is_distinct_on_the_wire() -> None:
     assert types == {t.value for t in wire.MsgType}
 
 
+# Slots near the field's boundaries as often as anywhere else.
+slots = st.one_of(st.integers(0, 0xFFFF), st.sampled_from([0, 0x7F, 0x80, 0x7EFF, 0x7F00, 0xFFFF]))
 frames = st.builds(
     Frame,
     swarm_id=st.integers(0, 0xFFFF),
     sender=st.integers(0, 0xFFFF),
     seq=st.integers(0, wire.SEQ_MAX),
     msg=st.one_of(
-        st.builds(Heartbeat, st.integers(0, 255), st.integers(0, 0xFFFF), st.integers(0, 15),
+        st.builds(Heartbeat, slots, st.integers(0, 0xFFFF), st.integers(0, 15),
                   st.integers(0, 15)),
-        st.builds(Warn, st.integers(0, 0xFFFF), st.integers(0, 255), st.integers(0, 0xFFFF)),
-        st.builds(Claim, st.integers(0, 0xFFFF), st.integers(0, 255), st.integers(0, 0xFFFF)),
-        st.builds(Leave, st.integers(0, 255), st.integers(0, 0xFFFF), st.integers(0, 255)),
+        st.builds(Warn, st.integers(0, 0xFFFF), slots, st.integers(0, 0xFFFF)),
+        st.builds(Claim, st.integers(0, 0xFFFF), slots, st.integers(0, 0xFFFF)),
+        st.builds(Leave, slots, st.integers(0, 0xFFFF), st.integers(0, 255)),
     ),
 )
 
@@ -74,13 +115,14 @@ def test_round_trip_property(frame: Frame, signed: bool) -> None:
 
 @given(st.binary(max_size=64), st.booleans())
 def test_garbage_raises_only_codec_error(data: bytes, keyed: bool) -> None:
+    wire.peek(data)  # total too: returns, never raises
     try:
         decode(data, (KEY,) if keyed else ())
     except CodecError as exc:
         assert exc.reason in {"malformed", "version", "auth"}
 
 
-@given(frames, st.integers(0, 22), st.integers(0, 255))
+@given(frames, st.integers(0, 24), st.integers(0, 255))
 def test_flipped_byte_never_verifies_as_another_frame(frame: Frame, pos: int, xor: int) -> None:
     data = bytearray(encode(frame, KEY))
     pos %= len(data)
@@ -131,7 +173,8 @@ def test_key_rotation_accepts_old_and_new() -> None:
         Frame(1, 1, wire.SEQ_MAX + 1, Heartbeat(1, 0, 1, 0)),
         Frame(1, 1, -1, Heartbeat(1, 0, 1, 0)),
         Frame(0x10000, 1, 1, Heartbeat(1, 0, 1, 0)),
-        Frame(1, 1, 1, Heartbeat(256, 0, 1, 0)),
+        Frame(1, 1, 1, Heartbeat(0x10000, 0, 1, 0)),
+        Frame(1, 1, 1, Claim(1, -1, 0)),
         Frame(1, 1, 1, Warn(0x10000, 1, 0)),
     ],
 )

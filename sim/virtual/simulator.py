@@ -7,9 +7,9 @@ seeded `random.Random`: a run is a pure function of (plan, params, faults, seed)
 
 Speed: a broadcast is encoded by the sender's node and decoded once here, then handed
 to each receiver with `Node.receive_frame`. With `interest=True` a frame reaches only
-the robots whose plan makes it relevant (holder, watchers and covering standbys of the
-slot it names; see `_interest`): everything else would be ignored by the receiver
-anyway. `tests/test_virtual.py` checks that this changes no outcome.
+the robots whose plan makes it relevant (`SwarmPlan.relevant`, the sets a `Node` drops
+irrelevant frames by before verifying them): everything else the receiver would drop.
+`tests/test_scenarios.py` checks that this changes no outcome.
 """
 
 from __future__ import annotations
@@ -126,33 +126,32 @@ class VirtualSwarm:
                 self._push(fault.end, _FAULT, i, "end")
 
     # ------------------------------------------------------------------ set-up
-    def _interest(self) -> dict[str, tuple[int, ...]]:
-        """function -> robots to which a frame about it matters; key "" is for standby
-        heartbeats keyed by sender (computed lazily in `_targets`)."""
+    def _interest(self) -> dict[int, tuple[int, ...]]:
+        """slot -> robots to which a frame about it matters, from `SwarmPlan.relevant`
+        (the same sets `Node` drops irrelevant frames by); standby heartbeats go by
+        sender (`_standby_targets`)."""
         plan = self.plan
-        interest: dict[int, set[str]] = {}
-        for rid in plan.robots:
-            possible = {f for f in plan.functions if rid in plan.covered_by(f)}
-            seen: set[str] = set()
-            for f in possible:
-                seen.add(f)
-                seen.update(plan.watched(f))
-                seen.update(plan.watched_by(f))
-            interest[rid] = seen
-        self._interest_of = interest
-        return {f: tuple(sorted(r for r, s in interest.items() if f in s))
-                for f in plan.functions}
+        by_slot: dict[int, list[int]] = {}
+        by_standby: dict[int, list[int]] = {}
+        for rid in sorted(plan.robots):
+            rel = plan.relevant(rid)
+            for slot in rel.slots:
+                by_slot.setdefault(slot, []).append(rid)
+            for sb in rel.standbys:
+                by_standby.setdefault(sb, []).append(rid)
+        self._standby_targets = {r: tuple(v) for r, v in by_standby.items()}
+        return {slot: tuple(v) for slot, v in by_slot.items()}
 
     def _targets(self, sender: int, msg: wire.Message) -> Sequence[int]:
         if self._receivers is None:
             return self._all
         slot = msg.function
-        f = self.plan.function_at(slot) if slot else None
-        if f is not None:
-            return self._receivers[f]
-        # A standby's heartbeat matters to whoever watches a slot it may take over.
-        covers = {g for g in self.plan.functions if sender in self.plan.covered_by(g)}
-        return tuple(r for r in self._all if self._interest_of[r] & covers)
+        if slot and self.plan.function_at(slot) is not None:
+            return self._receivers.get(slot, ())
+        if slot == 0 and isinstance(msg, wire.Heartbeat):
+            # A standby's heartbeat matters to whoever watches a slot it may take over.
+            return self._standby_targets.get(sender, ())
+        return self._all  # garbage: every receiver counts it as it would
 
     def _push(self, t: float, kind: int, a: Any, b: Any) -> None:
         heapq.heappush(self._heap, (t, next(self._counter), kind, a, b))

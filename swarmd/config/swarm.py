@@ -158,6 +158,7 @@ class SwarmConfig(_Model):
     _source: str = PrivateAttr(default="<string>")
     _directory: Path = PrivateAttr(default_factory=Path.cwd)
     _warnings: tuple[Problem, ...] = PrivateAttr(default=())
+    _robots_by_id: dict[int, RobotEntry] | None = PrivateAttr(default=None)
 
     # -- where it came from --------------------------------------------------------------
     @property
@@ -208,10 +209,17 @@ class SwarmConfig(_Model):
                 return r.id
         return None
 
+    def _by_id(self) -> dict[int, RobotEntry]:
+        """id -> entry, built once (the model is frozen): resolving every robot's
+        `subs` stays linear in the swarm."""
+        if self._robots_by_id is None:
+            self._robots_by_id = {r.id: r for r in self.robots}
+        return self._robots_by_id
+
     def sub_functions(self, robot: RobotEntry) -> tuple[str, ...]:
         """`robot.subs` resolved to function names (robot ids -> their functions);
         unresolvable entries are skipped (errors of `swarm_rules.cross_check`)."""
-        by_id = {r.id: r for r in self.robots}
+        by_id = self._by_id()
         out: list[str] = []
         for ref in robot.subs:
             if isinstance(ref, int):
@@ -226,21 +234,24 @@ class SwarmConfig(_Model):
     def coverage(self) -> list[Coverage]:
         """One row per function, in wire order; tolerant of a swarm with errors."""
         rows = []
+        # Indexed once, so a swarm of thousands of robots is checked in linear time.
+        holders_of: dict[str, list[int]] = {}
+        watchers_of: dict[int, set[int]] = {}
+        standbys_of: dict[str, set[int]] = {}
+        for r in self.robots:
+            if r.holds is not None:
+                holders_of.setdefault(r.holds, []).append(r.id)
+            if r.state == "active":
+                for n in set(r.neighbors):
+                    watchers_of.setdefault(n, set()).add(r.id)
+            elif r.state == "standby":
+                for f in self.sub_functions(r):
+                    standbys_of.setdefault(f, set()).add(r.id)
         for name, spec in self.functions.items():
-            holders = tuple(r.id for r in self.robots if r.holds == name)
+            holders = tuple(holders_of.get(name, ()))
             watchers = sorted(
-                {
-                    r.id
-                    for r in self.robots
-                    if r.state == "active"
-                    and r.id not in holders
-                    and any(h in r.neighbors for h in holders)
-                }
-            )
-            standbys = sorted(
-                {r.id for r in self.robots if r.state == "standby"
-                 and name in self.sub_functions(r)}
-            )
+                {w for h in holders for w in watchers_of.get(h, ()) if w not in holders})
+            standbys = sorted(standbys_of.get(name, ()))
             rows.append(Coverage(name, spec.kind, holders, tuple(watchers), tuple(standbys)))
         return rows
 

@@ -23,6 +23,7 @@ from swarmd.config.swarm import (
     Timing,
 )
 from swarmd.core.params import PRESETS, ParamsError
+from swarmd.core.plan import MAX_FUNCTIONS
 from swarmd.keys import KeyFileError, load_key
 
 
@@ -78,14 +79,14 @@ def cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
     def warn(loc: Loc, msg: str) -> None:
         out.append(src.problem(loc, msg, "warning"))
 
-    # Functions: names and count (one byte on the wire, swarmd.core.wire).
+    # Functions: names and count (a 16-bit slot on the wire, swarmd.core.wire).
     for name in cfg.functions:
         if not FUNCTION_NAME.match(name):
             err(("functions", name), f"function name {name!r} must start with a letter or "
                 "'_' and use letters, digits, '_', '.', '-' (at most 32)")
-    if len(cfg.functions) > 255:
-        err(("functions",), f"{len(cfg.functions)} functions; a swarm has at most 255 "
-            "(the slot index is one byte on the wire)")
+    if len(cfg.functions) > MAX_FUNCTIONS:
+        err(("functions",), f"{len(cfg.functions)} functions; a swarm has at most "
+            f"{MAX_FUNCTIONS} (the slot index is 16 bits on the wire)")
 
     # Timing: Params validates itself; name the field its message is about.
     quorum: int | None = None

@@ -154,6 +154,7 @@ class Node:
                     self._known[f] = Holder(holder, epoch)
 
         self._covers = frozenset(f for f in plan.functions if robot_id in plan.covered_by(f))
+        self._relevant = plan.relevant(robot_id)
         self._role = Role.STANDBY
         self._function: str | None = None
         self._epoch = 0
@@ -223,6 +224,14 @@ class Node:
     # ------------------------------------------------------------------ entry points
     def receive(self, data: bytes, now: float) -> list[Action]:
         """A frame from the channel. Never raises on peer input."""
+        head = wire.peek(data)
+        if head is not None and self._irrelevant(
+                head.swarm_id, head.sender, head.slot, head.robot,
+                standby_beat=head.mtype == wire.MsgType.HEARTBEAT and head.slot == 0):
+            # Before the HMAC and any state: a daemon's cost follows its neighbourhood,
+            # not the swarm. No deadline moved, so there is nothing to hand back.
+            self._drops["irrelevant"] += 1
+            return []
         self._advance(now)
         if self._stopped:
             return self._drain()
@@ -236,10 +245,31 @@ class Node:
         """A frame already decoded and verified with this swarm's keys. For simulators
         that deliver one broadcast to many nodes and decode it once; the runtime uses
         `receive`."""
+        msg = frame.msg
+        about = msg.suspect if isinstance(msg, wire.Warn) else \
+            msg.failed if isinstance(msg, wire.Claim) else 0
+        if self._irrelevant(frame.swarm_id, frame.sender, msg.function, about,
+                            standby_beat=isinstance(msg, wire.Heartbeat) and msg.function == 0):
+            self._drops["irrelevant"] += 1
+            return []
         self._advance(now)
         if self._stopped:
             return self._drain()
         return self._accept(frame, now)
+
+    def _irrelevant(self, swarm_id: int, sender: int, slot: int, about: int, *,
+                    standby_beat: bool) -> bool:
+        """A frame no rule of this robot would act on (DESIGN section 2, "What a robot
+        hears"), judged by slot, not by sender: watchers follow whoever holds a slot
+        (rule 1). Anything `_accept` counts under its own reason passes through."""
+        if swarm_id != self._plan.swarm_id or sender == self._robot_id \
+                or sender not in self._plan.robots:
+            return False
+        if standby_beat:
+            return sender not in self._relevant.standbys  # rules 6 and 8
+        if about == self._robot_id or not 1 <= slot <= len(self._plan.functions):
+            return False  # a warning about us (rule 4), or a bad_function drop
+        return slot not in self._relevant.slots
 
     def _accept(self, frame: wire.Frame, now: float) -> list[Action]:
         sender = frame.sender

@@ -21,9 +21,22 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+MAX_FUNCTIONS = 0xFFFF
+"""Slots 1..65535 (wire.py's slot field; 0 means "no function")."""
+
 
 class PlanError(ValueError):
     """A plan that is not self-consistent (misuse of the API)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Relevant:
+    """What one robot must hear (DESIGN section 2, "What a robot hears"): frames about
+    `slots` (wire indices) and the standby heartbeats of `standbys`. Everything else it
+    would ignore anyway, so a receiver drops it before verifying the tag."""
+
+    slots: frozenset[int]
+    standbys: frozenset[int]
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,14 +59,16 @@ class SwarmPlan:
     _watchers: dict[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
     _covers: dict[str, tuple[int, ...]] = field(init=False, repr=False, compare=False)
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
+    _holders: dict[str, int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not 0 <= self.swarm_id <= 0xFFFF:
             raise PlanError(f"swarm id {self.swarm_id} does not fit 16 bits")
         if len(set(self.functions)) != len(self.functions):
             raise PlanError("duplicate function names")
-        if not 1 <= len(self.functions) <= 255:
-            raise PlanError("a swarm has 1 to 255 functions (one byte on the wire)")
+        if not 1 <= len(self.functions) <= MAX_FUNCTIONS:
+            raise PlanError(f"a swarm has 1 to {MAX_FUNCTIONS} functions (a 16-bit slot on "
+                            "the wire)")
         index = {name: i + 1 for i, name in enumerate(self.functions)}
         holders: dict[str, int] = {}
         for rid, robot in self.robots.items():
@@ -86,12 +101,13 @@ class SwarmPlan:
                 if rid not in covers[f]:
                     covers[f].append(rid)
         object.__setattr__(self, "_index", index)
+        object.__setattr__(self, "_holders", holders)
         object.__setattr__(self, "_watchers", {f: tuple(v) for f, v in watchers.items()})
         object.__setattr__(self, "_covers", {f: tuple(sorted(v)) for f, v in covers.items()})
 
     # -- queries -------------------------------------------------------------------------
     def slot(self, function: str) -> int:
-        """Wire index (1..255) of a function."""
+        """Wire index (1..65535) of a function."""
         return self._index[function]
 
     def function_at(self, slot: int) -> str | None:
@@ -113,10 +129,28 @@ class SwarmPlan:
         return self._covers[function]
 
     def initial_holder(self, function: str) -> int | None:
-        for rid, robot in self.robots.items():
-            if robot.function == function:
-                return rid
-        return None
+        return self._holders.get(function)
+
+    def relevant(self, robot_id: int) -> Relevant:
+        """The slots and standbys `robot_id` must hear, whatever role it has.
+
+        A robot only ever holds a slot it covers (its home slot or one of its `subs`,
+        rule 1), so one set serves every role it can reach: for each covered slot `c`,
+        `c` itself (fencing of our own slot, rule 2; claims and LEAVEs for it; heartbeats
+        that refute its suspect, rule 4), the slots `c`'s holder watches (their
+        heartbeats feed the watchdogs; a holder taking `c` over starts watching them
+        with what it has heard, Fig. 7) and the slots that watch `c` (their holders are
+        the witnesses whose warnings count, rule 3). Standbys: the robots that cover any
+        of those slots, whose liveness heartbeats tell rules 6 and 8 whether anyone is
+        left to take a watched slot over."""
+        mine = [f for f in self.functions if robot_id in self._covers[f]]
+        near: set[str] = set()
+        for c in mine:
+            near.add(c)
+            near.update(self.watched(c))
+            near.update(self._watchers[c])
+        standbys = {r for f in near for r in self._covers[f]}
+        return Relevant(frozenset(self._index[f] for f in near), frozenset(standbys))
 
     def standbys(self) -> tuple[int, ...]:
         return tuple(sorted(r for r, p in self.robots.items() if p.function is None))

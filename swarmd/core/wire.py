@@ -8,6 +8,13 @@ Layout (big-endian)::
 - byte 0: version in the high nibble (1), message type in bits 0-2, bit 3 set when the
   frame carries a tag. A signed HEARTBEAT is 11 + 4 + 8 = 23 bytes (DESIGN: <= 24, so
   it fits any XBee broadcast payload: Zigbee 92 B, 802.15.4 100 B, DigiMesh 73 B).
+- body: HEARTBEAT `slot, epoch (16), role|health (8)`; WARN and CLAIM `robot (16), slot,
+  epoch (16)`; LEAVE `slot, epoch (16), reason (8)`.
+- slot: a function's wire index (0 = none, 1..65535), variable length so that a swarm
+  of fewer than 128 functions pays one byte as it always did: `0xxxxxxx` is 0..127 in
+  one byte; a first byte 0x80..0xFE carries 15 bits `1hhhhhhh llllllll` (128..0x7EFF,
+  two bytes); 0xFF is followed by the 16-bit slot (0x7F00..0xFFFF, three bytes). Only
+  the shortest form is valid, so every slot has exactly one encoding.
 - seq: a per-sender counter that rises with every frame sent. Senders seed it from
   their wall clock in 10 us units (as MAVLink 2 signing does), so a sender that
   restarted starts above anything it sent before. Receivers keep a sliding window per
@@ -17,7 +24,10 @@ Layout (big-endian)::
   seeding is the runtime's job (`seq_seed`).
 - tag: HMAC-SHA256 over everything before it, truncated to 8 bytes (MAVLink 2 uses 6).
 
-`decode` raises only `CodecError` (with a machine-readable `reason`) on any input.
+`decode` raises only `CodecError` (with a machine-readable `reason`) on any input;
+`peek` reads sender, type and slot without verifying anything (the receiver's early
+drop of frames about slots it does not care about: DESIGN section 2, "What a robot
+hears") and returns None on anything it cannot read.
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 VERSION = 1
 TAG_LEN = 8
@@ -101,12 +112,50 @@ class Leave:
 
 Message = Heartbeat | Warn | Claim | Leave
 
-_BODY: dict[MsgType, struct.Struct] = {
-    MsgType.HEARTBEAT: struct.Struct(">BHB"),
-    MsgType.WARN: struct.Struct(">HBH"),
-    MsgType.CLAIM: struct.Struct(">HBH"),
-    MsgType.LEAVE: struct.Struct(">BHB"),
-}
+SLOT_MAX = 0xFFFF
+_HB_TAIL = struct.Struct(">HB")
+_PEEK = struct.Struct(">BHH")
+_U16 = struct.Struct(">H")
+_SLOT_AT = {MsgType.HEARTBEAT: 0, MsgType.WARN: 2, MsgType.CLAIM: 2, MsgType.LEAVE: 0}
+"""Offset of the slot field in each body (after the 16-bit robot id in WARN and CLAIM)."""
+_TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None, None, None)
+"""Message type by the low 3 bits of byte 0 (0, 5, 6 and 7 are no type)."""
+_FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 4, MsgType.CLAIM: 4, MsgType.LEAVE: 3}
+"""Body bytes besides the slot field."""
+
+
+def slot_size(slot: int) -> int:
+    """Bytes the slot field takes on the wire (1, 2 or 3)."""
+    if not 0 <= slot <= SLOT_MAX:
+        raise ValueError(f"slot {slot} does not fit 16 bits")
+    return 1 if slot < 0x80 else 2 if slot < 0x7F00 else 3
+
+
+def encode_slot(slot: int) -> bytes:
+    size = slot_size(slot)
+    if size == 1:
+        return bytes((slot,))
+    if size == 2:
+        return bytes((0x80 | (slot >> 8), slot & 0xFF))
+    return b"\xff" + _U16.pack(slot)
+
+
+def _read_slot(data: bytes, at: int) -> tuple[int, int] | None:
+    """(slot, bytes used) at `at`, or None if truncated or not in its shortest form."""
+    if at >= len(data):
+        return None
+    first = data[at]
+    if first < 0x80:
+        return first, 1
+    if first < 0xFF:
+        if at + 2 > len(data):
+            return None
+        slot = ((first & 0x7F) << 8) | data[at + 1]
+        return (slot, 2) if slot >= 0x80 else None
+    if at + 3 > len(data):
+        return None
+    slot = _U16.unpack_from(data, at + 1)[0]
+    return (slot, 3) if slot >= 0x7F00 else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,14 +179,15 @@ def _type_of(msg: Message) -> MsgType:
     raise TypeError(f"not a message: {msg!r}")  # pragma: no cover - exhaustive above
 
 
-def _body_fields(msg: Message) -> tuple[int, ...]:
+def _body(msg: Message) -> bytes:
     match msg:
         case Heartbeat(function, epoch, role, health):
-            return (function, epoch, (role & 0x0F) | ((health & 0x0F) << 4))
+            return encode_slot(function) + struct.pack(
+                ">HB", epoch, (role & 0x0F) | ((health & 0x0F) << 4))
         case Warn(suspect, function, epoch) | Claim(suspect, function, epoch):
-            return (suspect, function, epoch)
+            return _U16.pack(suspect) + encode_slot(function) + _U16.pack(epoch)
         case Leave(function, epoch, reason):
-            return (function, epoch, reason)
+            return encode_slot(function) + struct.pack(">HB", epoch, reason)
     raise TypeError(f"not a message: {msg!r}")  # pragma: no cover
 
 
@@ -154,8 +204,8 @@ def encode(frame: Frame, key: bytes | None = None) -> bytes:
     first = (VERSION << 4) | int(mtype) | (_SIGNED if key else 0)
     try:
         head = HEADER.pack(first, frame.swarm_id, frame.sender, frame.seq.to_bytes(6, "big"))
-        body = _BODY[mtype].pack(*_body_fields(frame.msg))
-    except struct.error as exc:
+        body = _body(frame.msg)
+    except (struct.error, ValueError) as exc:
         raise ValueError(f"field out of range in {frame!r}: {exc}") from exc
     data = head + body
     return data + tag(key, data) if key else data
@@ -176,8 +226,12 @@ def decode(data: bytes, keys: Sequence[bytes] = ()) -> Frame:
     except ValueError:
         raise CodecError("malformed", f"unknown message type {first & _TYPE_MASK}") from None
     signed = bool(first & _SIGNED)
-    body_struct = _BODY[mtype]
-    expected = HEADER_LEN + body_struct.size + (TAG_LEN if signed else 0)
+    slot_at = HEADER_LEN + _SLOT_AT[mtype]
+    got_slot = _read_slot(data, slot_at)
+    if got_slot is None:
+        raise CodecError("malformed", f"{mtype.name} with a truncated or overlong slot field")
+    slot, slot_len = got_slot
+    expected = HEADER_LEN + _FIXED_BODY[mtype] + slot_len + (TAG_LEN if signed else 0)
     if len(data) != expected:
         raise CodecError("malformed", f"{mtype.name} of {len(data)} bytes, expected {expected}")
     if keys:
@@ -188,18 +242,59 @@ def decode(data: bytes, keys: Sequence[bytes] = ()) -> Frame:
             raise CodecError("auth", "bad authentication tag")
     elif signed:
         raise CodecError("auth", "signed frame but no swarm key configured")
-    a, b, c = body_struct.unpack_from(data, HEADER_LEN)
+    after = slot_at + slot_len
     msg: Message
     match mtype:
         case MsgType.HEARTBEAT:
-            msg = Heartbeat(function=a, epoch=b, role=c & 0x0F, health=c >> 4)
+            epoch, rh = _HB_TAIL.unpack_from(data, after)
+            msg = Heartbeat(function=slot, epoch=epoch, role=rh & 0x0F, health=rh >> 4)
         case MsgType.WARN:
-            msg = Warn(suspect=a, function=b, epoch=c)
+            msg = Warn(suspect=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
+                       epoch=_U16.unpack_from(data, after)[0])
         case MsgType.CLAIM:
-            msg = Claim(failed=a, function=b, epoch=c)
+            msg = Claim(failed=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
+                        epoch=_U16.unpack_from(data, after)[0])
         case MsgType.LEAVE:
-            msg = Leave(function=a, epoch=b, reason=c)
+            epoch, reason = _HB_TAIL.unpack_from(data, after)
+            msg = Leave(function=slot, epoch=epoch, reason=reason)
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg)
+
+
+class Peek(NamedTuple):
+    """What a receiver can read of a frame before verifying it (`peek`)."""
+
+    swarm_id: int
+    sender: int
+    mtype: MsgType
+    slot: int
+    robot: int
+    """WARN's suspect or CLAIM's failed robot; 0 for HEARTBEAT and LEAVE."""
+
+
+def peek(data: bytes) -> Peek | None:
+    """Header and slot of a frame, unverified: None for anything `decode` would reject
+    as malformed at a glance. Whatever it returns still goes through `decode` before it
+    is believed; a receiver uses it only to drop frames it would ignore anyway."""
+    # Runs on every frame a robot receives: table look-ups, no enum construction.
+    if len(data) < HEADER_LEN + 3:
+        return None
+    first, swarm_id, sender = _PEEK.unpack_from(data)
+    if first >> 4 != VERSION:
+        return None
+    mtype = _TYPES[first & _TYPE_MASK]
+    if mtype is None:
+        return None
+    at = _SLOT_AT[mtype]
+    byte = data[HEADER_LEN + at]
+    if byte < 0x80:  # the common case: a swarm of fewer than 128 functions
+        slot = byte
+    else:
+        got = _read_slot(data, HEADER_LEN + at)
+        if got is None:
+            return None
+        slot = got[0]
+    robot = (data[HEADER_LEN] << 8) | data[HEADER_LEN + 1] if at else 0
+    return Peek(swarm_id, sender, mtype, slot, robot)
 
 
 def seq_seed(unix_time: float) -> int:
