@@ -114,3 +114,24 @@ def test_restart_of_the_failed_robot_excuses(paper: tuple[SwarmPlan, Params]) ->
 
 def test_run_too_short_to_tell(paper: tuple[SwarmPlan, Params]) -> None:
     assert kinds(judge(paper, ["crash:2@3"], [], duration=4.0)) == []
+
+
+def warn(t: float, robot: int, subject: int, function: str) -> dict[str, Any]:
+    return {"t": t, "robot": robot, "event": "warn", "subject": subject, "function": function}
+
+
+def test_a_warning_about_an_already_replaced_holder_is_resolved_by_that_takeover(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Robot 1 was cut off when 6 took f2 over; it warns about robot 2 afterwards, then
+    # learns of the takeover it missed (no event says so): not an unresolved warning.
+    events = [takeover(4.5, 6, "f2", 2), warn(5.0, 1, 2, "f2")]
+    assert kinds(judge(paper, ["crash:2@3"], events)) == []
+
+
+def test_a_warning_about_a_holder_that_took_its_slot_back_still_counts(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # 2 was replaced, then took f2 back (6 died): a warning about 2 on f2 after that is
+    # a live episode again, and nothing resolved it.
+    events = [takeover(4.5, 6, "f2", 2), takeover(7.0, 2, "f2", 6), warn(8.0, 1, 2, "f2")]
+    checker = judge(paper, ["crash:2@3", "crash:6@6"], events, duration=14.0)
+    assert ("warning_unresolved", 1) in kinds(checker)

@@ -135,6 +135,10 @@ class Checker:
     in_partition: bool = False
     dual_since: dict[str, float] = field(default_factory=dict)
     episodes: dict[tuple[int, str], tuple[float, int]] = field(default_factory=dict)
+    held_since: dict[tuple[str, int], float] = field(default_factory=dict)
+    """(function, robot) -> when the robot last began to execute the function."""
+    replaced_at: dict[tuple[str, int], float] = field(default_factory=dict)
+    """(function, robot) -> when a takeover last replaced the robot on the function."""
     expects: list[_Expect] = field(default_factory=list)
     takeovers: list[dict[str, Any]] = field(default_factory=list)
     false_takeovers: list[dict[str, Any]] = field(default_factory=list)
@@ -230,9 +234,13 @@ class Checker:
             f = rec["function"]
             for key in [k for k in self.episodes if k[1] == f]:
                 del self.episodes[key]  # the warning ended in a takeover
+            self.held_since[(f, r)] = t
+            self.replaced_at[(f, int(rec.get("replaced", 0)))] = t
             self._takeover(t, r, f, int(rec.get("replaced", 0)))
         elif name == "started":
             self.started.add(r)
+            if rec.get("function") is not None:
+                self.held_since[(str(rec["function"]), r)] = t
         elif name == "suspect":
             if self._healthy_and_reachable(int(rec["subject"]), t):
                 self.false_suspicions += 1
@@ -240,7 +248,12 @@ class Checker:
             self._close_watcher(r)
         elif name == "warn":
             key = (r, rec["function"])
-            if key not in self.episodes:
+            subject = (str(rec["function"]), int(rec["subject"]))
+            if self.replaced_at.get(subject, -1.0) > self.held_since.get(subject, -1.0):
+                # About a holder already replaced: this watcher had not heard the takeover
+                # yet (a partition, loss); the takeover it missed resolves the warning.
+                pass
+            elif key not in self.episodes:
                 self.episodes[key] = (t, int(rec["subject"]))
         elif name in ("refute", "alert"):
             f = rec.get("function")
