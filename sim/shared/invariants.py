@@ -248,8 +248,8 @@ class Checker:
             self._close_watcher(r)
         elif name == "warn":
             key = (r, rec["function"])
-            subject = (str(rec["function"]), int(rec["subject"]))
-            if self.replaced_at.get(subject, -1.0) > self.held_since.get(subject, -1.0):
+            about = (str(rec["function"]), int(rec["subject"]))
+            if self.replaced_at.get(about, -1.0) > self.held_since.get(about, -1.0):
                 # About a holder already replaced: this watcher had not heard the takeover
                 # yet (a partition, loss); the takeover it missed resolves the warning.
                 pass
