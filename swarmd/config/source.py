@@ -3,6 +3,13 @@ turned into `Problem`s that name the file and the field.
 
 PyYAML's `safe_load` silently keeps the last of two equal keys; in a swarm file that
 would drop a function or a robot without a word, so duplicates are reported here.
+
+Hostile or broken files get one line, never a hang, a crash or a memory blow-up: only a
+regular file of at most `MAX_FILE_BYTES` is read (`swarmd.files`); before the nodes are
+composed, one pass over libyaml's parser events (iterative, safe at any depth) refuses
+nesting deeper than `MAX_DEPTH` (libyaml's composer recurses in C and segfaults near
+30,000 nested `[`) and documents whose aliases would expand to more than `MAX_NODES`
+nodes (the "billion laughs": a few lines that expand to 10^9 items).
 """
 
 from __future__ import annotations
@@ -19,6 +26,14 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Loc, Problem, format_loc
+from swarmd.files import FileRefused, read_regular_file
+
+MAX_FILE_BYTES = 16 * 1024 * 1024
+"""A 255-function swarm with 5,000 standbys is about 0.35 MB; 16 MiB is room to spare."""
+MAX_DEPTH = 64
+"""Nesting of mappings and lists; a real config nests 5 deep (robots[i].home)."""
+MAX_NODES = 2_000_000
+"""Nodes of the document with every alias expanded (a 5,255-robot swarm has ~70,000)."""
 
 
 @dataclass
@@ -61,7 +76,9 @@ def read_source(path: str | Path) -> Source:
     """Read and parse a YAML file. Raises ConfigUnreadable / ConfigError."""
     name = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_regular_file(path, MAX_FILE_BYTES).decode("utf-8")
+    except FileRefused as exc:
+        raise ConfigUnreadable([Problem(name, "<file>", exc.reason)]) from None
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise ConfigUnreadable(
@@ -75,9 +92,13 @@ _LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 def parse_source(text: str, name: str = "<string>", path: Path | None = None) -> Source:
     """Parse YAML text. Syntax errors and duplicate keys raise ConfigError with lines."""
+    if len(text) > MAX_FILE_BYTES:
+        raise ConfigError([Problem(name, "<file>", f"is {len(text)} characters, above the "
+                                   f"limit of {MAX_FILE_BYTES}")])
     # libyaml parses ~10x faster (grid100: 0.25 s -> 0.03 s) and keeps the marks.
     loader = _LOADER(text)
     try:
+        _check_shape(text, name)
         node = loader.get_single_node()
         lines: dict[Loc, int] = {}
         dups: list[Problem] = []
@@ -98,6 +119,48 @@ def parse_source(text: str, name: str = "<string>", path: Path | None = None) ->
     finally:
         loader.dispose()
     return Source(name=name, path=path, data=data, lines=lines)
+
+
+_OPEN = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
+_CLOSE = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+
+
+def _check_shape(text: str, name: str) -> None:
+    """Refuse too deep nesting and alias bombs from the parser's event stream, before
+    anything recursive sees the document. Syntax errors surface here as YAMLError."""
+    # Per open collection: [its expanded size so far, its anchor]; sizes of anchors.
+    stack: list[list[Any]] = [[0, None]]
+    anchors: dict[str, int] = {}
+    total = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, _OPEN):
+            if len(stack) > MAX_DEPTH:
+                raise ConfigError([Problem(
+                    name, "<yaml>", f"nested more than {MAX_DEPTH} levels deep",
+                    line=event.start_mark.line + 1)])
+            stack.append([1, event.anchor])
+            added = 1
+        elif isinstance(event, _CLOSE):
+            size, anchor = stack.pop()
+            if anchor is not None:
+                anchors[anchor] = size
+            stack[-1][0] += size
+            continue
+        elif isinstance(event, yaml.AliasEvent):
+            added = anchors.get(event.anchor, 1)
+            stack[-1][0] += added
+        elif isinstance(event, yaml.ScalarEvent):
+            added = 1
+            stack[-1][0] += 1
+            if event.anchor is not None:
+                anchors[event.anchor] = 1
+        else:
+            continue
+        total += added
+        if total > MAX_NODES:
+            raise ConfigError([Problem(
+                name, "<yaml>", f"aliases expand the document to more than {MAX_NODES:,} "
+                "nodes (an alias bomb?)", line=event.start_mark.line + 1)])
 
 
 def _walk(
