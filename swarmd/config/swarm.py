@@ -25,11 +25,11 @@ from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
     PlainValidator,
     PrivateAttr,
-    StrictFloat,
     StrictInt,
     field_validator,
 )
@@ -54,6 +54,17 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
+def _not_bool(value: Any) -> Any:
+    # YAML `t_max: yes` is a mistake, not 1 second; numbers written as text ("1e3",
+    # which YAML 1.1 leaves a string) stay accepted.
+    if isinstance(value, bool):
+        raise ValueError(f"must be a number of seconds, got {value!r}")
+    return value
+
+
+Seconds = Annotated[float, BeforeValidator(_not_bool)]
+
+
 class SwarmInfo(_Model):
     # Strict: YAML `id: true` or `id: 1.0` is a mistake, not robot / swarm 1.
     id: StrictInt = Field(ge=0, le=0xFFFF, description="16-bit swarm id carried by every frame")
@@ -64,17 +75,17 @@ class Timing(_Model):
     """A preset of `swarmd.core.params` plus overrides of any of its fields."""
 
     preset: Literal["udp", "radio"] = "udp"
-    heartbeat_interval: StrictFloat | None = None
-    standby_heartbeat_interval: StrictFloat | None = None
-    t_max: StrictFloat | None = None
-    warn_interval: StrictFloat | None = None
-    vote_window: StrictFloat | None = None
+    heartbeat_interval: Seconds | None = None
+    standby_heartbeat_interval: Seconds | None = None
+    t_max: Seconds | None = None
+    warn_interval: Seconds | None = None
+    vote_window: Seconds | None = None
     quorum: StrictInt | None = None
-    claim_hold: StrictFloat | None = None
-    startup_grace: StrictFloat | None = None
-    standby_timeout: StrictFloat | None = None
-    alert_after: StrictFloat | None = None
-    rejoin_hold: StrictFloat | None = None
+    claim_hold: Seconds | None = None
+    startup_grace: Seconds | None = None
+    standby_timeout: Seconds | None = None
+    alert_after: Seconds | None = None
+    rejoin_hold: Seconds | None = None
 
     def overrides(self) -> dict[str, float | int]:
         """The Params fields this file sets explicitly."""
