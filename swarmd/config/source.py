@@ -8,8 +8,8 @@ Hostile or broken files get one line, never a hang, a crash or a memory blow-up:
 regular file of at most `MAX_FILE_BYTES` is read (`swarmd.files`); before the nodes are
 composed, one pass over libyaml's parser events (iterative, safe at any depth) refuses
 nesting deeper than `MAX_DEPTH` (libyaml's composer recurses in C and segfaults near
-30,000 nested `[`) and documents whose aliases would expand to more than `MAX_NODES`
-nodes (the "billion laughs": a few lines that expand to 10^9 items).
+30,000 nested `[`) and aliases that would add more than `MAX_ALIAS_NODES` nodes when
+expanded (the "billion laughs": a few lines that expand to 10^9 items).
 """
 
 from __future__ import annotations
@@ -28,12 +28,15 @@ from pydantic import BaseModel, ValidationError
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Loc, Problem, format_loc
 from swarmd.files import FileRefused, read_regular_file
 
-MAX_FILE_BYTES = 16 * 1024 * 1024
-"""A 255-function swarm with 5,000 standbys is about 0.35 MB; 16 MiB is room to spare."""
+MAX_FILE_BYTES = 8 * 1024 * 1024
+"""A 255-function swarm with 5,000 standbys is about 0.35 MB; 8 MiB is room to spare."""
 MAX_DEPTH = 64
 """Nesting of mappings and lists; a real config nests 5 deep (robots[i].home)."""
-MAX_NODES = 2_000_000
-"""Nodes of the document with every alias expanded (a 5,255-robot swarm has ~70,000)."""
+MAX_NUMBER_CHARS = 100
+"""A plain scalar that looks like a number and is longer than this is refused."""
+MAX_ALIAS_NODES = 100_000
+"""Nodes that aliases add when expanded (`home: *park` adds 3). The whole 5,255-robot
+swarm file has ~60,000 nodes; a billion-laughs file adds 10^9."""
 
 
 @dataclass
@@ -116,6 +119,9 @@ def parse_source(text: str, name: str = "<string>", path: Path | None = None) ->
         ) from None
     except yaml.YAMLError as exc:
         raise ConfigError([Problem(name, "<yaml>", f"YAML error: {exc}")]) from exc
+    except (ValueError, RecursionError, MemoryError) as exc:  # a value YAML cannot build
+        raise ConfigError([Problem(name, "<yaml>", f"unusable YAML: {type(exc).__name__}: "
+                                   f"{str(exc)[:120]}")]) from None
     finally:
         loader.dispose()
     return Source(name=name, path=path, data=data, lines=lines)
@@ -131,7 +137,7 @@ def _check_shape(text: str, name: str) -> None:
     # Per open collection: [its expanded size so far, its anchor]; sizes of anchors.
     stack: list[list[Any]] = [[0, None]]
     anchors: dict[str, int] = {}
-    total = 0
+    expanded = 0
     for event in yaml.parse(text, Loader=_LOADER):
         if isinstance(event, _OPEN):
             if len(stack) > MAX_DEPTH:
@@ -139,28 +145,30 @@ def _check_shape(text: str, name: str) -> None:
                     name, "<yaml>", f"nested more than {MAX_DEPTH} levels deep",
                     line=event.start_mark.line + 1)])
             stack.append([1, event.anchor])
-            added = 1
         elif isinstance(event, _CLOSE):
             size, anchor = stack.pop()
             if anchor is not None:
                 anchors[anchor] = size
             stack[-1][0] += size
-            continue
         elif isinstance(event, yaml.AliasEvent):
             added = anchors.get(event.anchor, 1)
             stack[-1][0] += added
+            expanded += added
+            if expanded > MAX_ALIAS_NODES:
+                raise ConfigError([Problem(
+                    name, "<yaml>", f"aliases expand to more than {MAX_ALIAS_NODES:,} "
+                    "nodes (an alias bomb?)", line=event.start_mark.line + 1)])
         elif isinstance(event, yaml.ScalarEvent):
-            added = 1
             stack[-1][0] += 1
             if event.anchor is not None:
                 anchors[event.anchor] = 1
-        else:
-            continue
-        total += added
-        if total > MAX_NODES:
-            raise ConfigError([Problem(
-                name, "<yaml>", f"aliases expand the document to more than {MAX_NODES:,} "
-                "nodes (an alias bomb?)", line=event.start_mark.line + 1)])
+            value = event.value
+            if (len(value) > MAX_NUMBER_CHARS and event.implicit[0]
+                    and value.lstrip("+-.")[:1].isdigit()):
+                # YAML would turn it into an int: a ValueError beyond 4300 digits.
+                raise ConfigError([Problem(
+                    name, "<yaml>", f"a number of {len(value)} characters (at most "
+                    f"{MAX_NUMBER_CHARS})", line=event.start_mark.line + 1)])
 
 
 def _walk(
@@ -169,14 +177,24 @@ def _walk(
     lines: dict[Loc, int],
     dups: list[Problem],
     name: str,
-    path: frozenset[int] = frozenset(),
+    path: set[int] | None = None,
 ) -> None:
+    if path is None:
+        path = set()
     lines.setdefault(loc, node.start_mark.line + 1)
     if id(node) in path:
         # `&a [*a]`: an alias inside itself would recurse forever in any consumer.
         raise ConfigError([Problem(name, format_loc(loc), "recursive YAML alias",
                                    line=node.start_mark.line + 1)])
-    path = path | {id(node)}
+    if not isinstance(node, yaml.MappingNode | yaml.SequenceNode):
+        return
+    path.add(id(node))
+    _walk_children(node, loc, lines, dups, name, path)
+    path.discard(id(node))
+
+
+def _walk_children(node: yaml.Node, loc: Loc, lines: dict[Loc, int], dups: list[Problem],
+                   name: str, path: set[int]) -> None:
     if isinstance(node, yaml.MappingNode):
         seen: set[Any] = set()
         for key_node, value_node in node.value:
