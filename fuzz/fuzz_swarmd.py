@@ -115,7 +115,7 @@ TARGETS: dict[str, Callable[[bytes], None]] = {
 def main(argv: list[str]) -> None:  # pragma: no cover - long runs only, needs atheris
     if len(argv) < 2 or argv[1] not in TARGETS:
         raise SystemExit(f"usage: {argv[0]} {{{'|'.join(TARGETS)}}} [libFuzzer options]")
-    import atheris  # type: ignore[import-not-found]
+    import atheris
 
     target = TARGETS[argv[1]]
     logging.disable(logging.CRITICAL)  # a bad line logs a warning; millions of them

@@ -92,8 +92,8 @@ def billion_laughs() -> str:
      "timing.t_max: t_max 1e+308 s: a failed robot would go unnoticed", 1),
     (lambda: swarm_text(robot_one="true"), "robots[0].id: input should be a valid integer, "
      "got True", 1),
-], ids=["billion-laughs", "int-5000-digits", "nested-1000", "nested-30000-segfault", "block-nesting-200",
-        "heartbeat-1e-9", "t_max-1e308", "id-true"])
+], ids=["billion-laughs", "int-5000-digits", "nested-1000", "nested-30000-segfault",
+        "block-nesting-200", "heartbeat-1e-9", "t_max-1e308", "id-true"])
 def test_check_refuses_hostile_config(tmp_path: Path, content: object, message: str,
                                       code: int) -> None:
     assert callable(content)
@@ -112,7 +112,8 @@ def test_check_warns_on_odd_timings(tmp_path: Path) -> None:
     path.write_text(swarm_text("timing: {heartbeat_interval: 0.01, t_max: 90.0}\n"))
     proc = swarmd("check", str(path))
     no_traceback(proc)
-    assert "timing.heartbeat_interval: warning: heartbeat_interval 0.01 s (100 Hz)" in proc.stdout
+    assert ("timing.heartbeat_interval: warning: heartbeat_interval 0.01 s (100 Hz)"
+            in proc.stdout)
     assert "timing.t_max: warning: t_max 90 s" in proc.stdout
 
 
@@ -143,7 +144,8 @@ def test_check_and_start_refuse_a_config_that_is_not_a_regular_file(
 def test_check_refuses_a_key_file_that_is_a_fifo(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "swarm.key")
     path = tmp_path / "swarm.yaml"
-    path.write_text(swarm_text().replace("swarm: {id: 9}\n", "swarm: {id: 9}\nkey_file: swarm.key\n"))
+    path.write_text(swarm_text().replace("swarm: {id: 9}\n",
+                                         "swarm: {id: 9}\nkey_file: swarm.key\n"))
     proc = swarmd("check", str(path), timeout=30)
     no_traceback(proc)
     assert proc.returncode == 1

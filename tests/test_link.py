@@ -99,7 +99,7 @@ async def test_socket_link_skips_an_overlong_line_and_keeps_the_client(tmp_path:
     health = HealthLog()
     await link.start(health)
     try:
-        reader, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
         writer.write(b"x" * (200 * 1024))  # no newline yet: buffered only up to the cap
         await writer.drain()
         writer.write(b"still the same line\n" + b'{"health": "degraded"}\n')
@@ -122,7 +122,7 @@ async def test_socket_link_contains_any_parse_failure(tmp_path: Path, garbage: b
     health = HealthLog()
     await link.start(health)
     try:
-        reader, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
         writer.write(garbage + b"\n" + b'{"health": "faulty"}\n')
         assert await health.next() == Health.FAULTY  # the line after the garbage counts
         assert link.counters == {**link.counters, "bad_lines": 1, "health": 1,

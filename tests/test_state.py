@@ -157,7 +157,7 @@ def test_state_any_exception_while_reading_is_a_state_error(
     def boom(*_: object, **__: object) -> object:
         raise MemoryError("out of memory")
 
-    monkeypatch.setattr(state.json, "loads", boom)
+    monkeypatch.setattr(json, "loads", boom)
     with pytest.raises(state.StateError, match="MemoryError"):
         state.StateFile(path, robot=2, swarm=1543).load()
 

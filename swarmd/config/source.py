@@ -127,6 +127,11 @@ def parse_source(text: str, name: str = "<string>", path: Path | None = None) ->
     return Source(name=name, path=path, data=data, lines=lines)
 
 
+def _line_of(event: yaml.Event) -> int | None:
+    mark = event.start_mark
+    return mark.line + 1 if mark is not None else None
+
+
 _OPEN = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
 _CLOSE = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
 
@@ -143,7 +148,7 @@ def _check_shape(text: str, name: str) -> None:
             if len(stack) > MAX_DEPTH:
                 raise ConfigError([Problem(
                     name, "<yaml>", f"nested more than {MAX_DEPTH} levels deep",
-                    line=event.start_mark.line + 1)])
+                    line=_line_of(event))])
             stack.append([1, event.anchor])
         elif isinstance(event, _CLOSE):
             size, anchor = stack.pop()
@@ -151,13 +156,13 @@ def _check_shape(text: str, name: str) -> None:
                 anchors[anchor] = size
             stack[-1][0] += size
         elif isinstance(event, yaml.AliasEvent):
-            added = anchors.get(event.anchor, 1)
+            added = anchors.get(event.anchor or "", 1)
             stack[-1][0] += added
             expanded += added
             if expanded > MAX_ALIAS_NODES:
                 raise ConfigError([Problem(
                     name, "<yaml>", f"aliases expand to more than {MAX_ALIAS_NODES:,} "
-                    "nodes (an alias bomb?)", line=event.start_mark.line + 1)])
+                    "nodes (an alias bomb?)", line=_line_of(event))])
         elif isinstance(event, yaml.ScalarEvent):
             stack[-1][0] += 1
             if event.anchor is not None:
@@ -168,7 +173,7 @@ def _check_shape(text: str, name: str) -> None:
                 # YAML would turn it into an int: a ValueError beyond 4300 digits.
                 raise ConfigError([Problem(
                     name, "<yaml>", f"a number of {len(value)} characters (at most "
-                    f"{MAX_NUMBER_CHARS})", line=event.start_mark.line + 1)])
+                    f"{MAX_NUMBER_CHARS})", line=_line_of(event))])
 
 
 def _walk(
