@@ -108,8 +108,8 @@ def _int(value: Any, what: str) -> int:
 
 
 def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -> PersistedState:
-    """Validate a decoded JSON object; with `plan`, also against the swarm (functions,
-    robots) and the wire's ranges. Raises ValueError saying what is wrong."""
+    """Validate a decoded JSON object against the wire's ranges and, with `plan`, the
+    swarm's robots. Raises ValueError saying what is wrong."""
     if not isinstance(data, dict):
         raise ValueError("top level is not a JSON object")
     if data.get("version") != FORMAT_VERSION:
@@ -138,10 +138,14 @@ def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -
     if seq > SEQ_MAX - SEQ_RESERVE:
         # Every frame would be sent with a seq receivers already saw (a mute robot).
         raise ValueError(f"seq_reserved {seq} leaves no room below the 48-bit maximum")
+    problems = restored_problems(known, held)
     if plan is not None:
-        problems = restored_problems(plan, known, held)
-        if problems:
-            raise ValueError("; ".join(problems))
+        # A holder the swarm does not have: a foreign or corrupt file. (A function the
+        # swarm file no longer has is fine: the node ignores its entries.)
+        problems += [f"known[{f!r}] holder {h} is not a robot of the swarm"
+                     for f, (h, _) in known.items() if h != 0 and h not in plan.robots]
+    if problems:
+        raise ValueError("; ".join(problems))
     return PersistedState(robot=robot, swarm=swarm, known=known, held=held, seq_reserved=seq)
 
 

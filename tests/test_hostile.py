@@ -181,7 +181,6 @@ def state_cases() -> dict[str, str]:
         "int-5000-digits": json.dumps(good).replace('"seq_reserved": 0',
                                                     '"seq_reserved": ' + "7" * 5000),
         "seq-above-2^48": json.dumps({**good, "seq_reserved": wire.SEQ_MAX + 1}),
-        "unknown-function": json.dumps({**good, "held": ["f99", 1]}),
         "unknown-holder": json.dumps({**good, "known": {"f2": [77, 3]}}),
     }
 
