@@ -23,8 +23,8 @@ def test_in_range_restored_state_passes() -> None:
     ({"f2": (2, -1)}, None, 0, "epoch -1"),
     ({"f2": (2, True)}, None, 0, "epoch True"),
     ({"f2": (70000, 1)}, None, 0, "holder 70000 is not in 0..65535"),
-    ({"f2": (2, 1, 3)}, None, 0, "is not (holder, epoch)"),  # type: ignore[dict-item]
-    ({}, ("f2",), 0, "is not (function, epoch)"),  # type: ignore[arg-type]
+    ({"f2": (2, 1, 3)}, None, 0, "is not (holder, epoch)"),
+    ({}, ("f2",), 0, "is not (function, epoch)"),
     ({}, None, SEQ_MAX + 1, "is not in 0..281474976710655 (48 bits)"),
     ({}, None, -5, "sequence number -5"),
 ])
