@@ -289,3 +289,21 @@ def test_sim_refuses_a_fault_with_a_huge_number(spec: str, message: str) -> None
     assert proc.returncode == 2
     lines = [ln for ln in (proc.stdout + proc.stderr).splitlines() if message in ln]
     assert len(lines) == 1 and len(lines[0]) < 300, proc.stderr
+
+
+@pytest.mark.parametrize(("swarm", "message"), [
+    (billion_laughs, "aliases expand to more than 100,000 nodes"),
+    (lambda: "swarm: " + "[" * 30000 + "]" * 30000 + "\n", "nested more than 64 levels"),
+], ids=["billion-laughs", "nested-30000-segfault"])
+def test_start_refuses_a_hostile_swarm_file_at_once(tmp_path: Path, swarm: object,
+                                                    message: str) -> None:
+    assert callable(swarm)
+    (tmp_path / "swarm.yaml").write_text(swarm())
+    config = tmp_path / "robot.yaml"
+    config.write_text("robot: 1\nswarm: swarm.yaml\ntransport: {kind: udp}\n"
+                      f"state_dir: {tmp_path / 'state'}\n")
+    proc = swarmd("start", "--config", str(config), timeout=30)
+    no_traceback(proc)
+    assert proc.returncode == 2
+    assert message in proc.stdout + proc.stderr
+    assert not (tmp_path / "state").exists()  # refused before anything was set up
