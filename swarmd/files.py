@@ -15,7 +15,7 @@ import os
 import stat
 from pathlib import Path
 
-__all__ = ["FileRefused", "file_kind", "read_regular_file"]
+__all__ = ["FileRefused", "file_kind", "output_problem", "read_regular_file"]
 
 
 class FileRefused(OSError):
@@ -69,3 +69,25 @@ def read_regular_file(path: Path | str, limit: int) -> bytes:
         return b"".join(chunks)
     finally:
         os.close(fd)
+
+
+def output_problem(path: Path | str) -> str | None:
+    """Why `path` cannot take an output file (None when it can): an existing path that
+    is not a regular file (a FIFO would block the write forever; a device or directory
+    is never the file the user meant, also through a symlink), or a parent directory
+    that is missing or not writable. Checked before a command does any work."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        return f"it is {file_kind(st.st_mode)}, not a regular file"
+    parent = path.parent
+    if not parent.is_dir():
+        return f"directory {parent} does not exist"
+    if not os.access(parent if st is None else path, os.W_OK):
+        return f"{'directory ' + str(parent) if st is None else 'the file'} is not writable"
+    return None

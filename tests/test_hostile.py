@@ -307,3 +307,40 @@ def test_start_refuses_a_hostile_swarm_file_at_once(tmp_path: Path, swarm: objec
     assert proc.returncode == 2
     assert message in proc.stdout + proc.stderr
     assert not (tmp_path / "state").exists()  # refused before anything was set up
+
+
+# -- import-launch: its input and its -o output ----------------------------------------
+
+LAUNCH = ROOT / "tests" / "fixtures" / "paper.launch"
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device-symlink", "directory", "no-parent"])
+def test_import_launch_checks_its_output_before_anything_runs(tmp_path: Path,
+                                                              kind: str) -> None:
+    out = tmp_path / "swarm.yaml"
+    what = {"fifo": "it is a FIFO, not a regular file",
+            "device-symlink": "it is a character device, not a regular file",
+            "directory": "it is a directory, not a regular file",
+            "no-parent": "does not exist"}[kind]
+    if kind == "fifo":
+        os.mkfifo(out)
+    elif kind == "device-symlink":
+        out.symlink_to("/dev/null")
+    elif kind == "directory":
+        out.mkdir()
+    else:
+        out = tmp_path / "missing" / "swarm.yaml"
+    proc = swarmd("import-launch", str(LAUNCH), "-o", str(out), timeout=30)
+    no_traceback(proc)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{out}: cannot write: ") and what in lines[0]
+
+
+def test_import_launch_refuses_a_fifo_as_launch_file(tmp_path: Path) -> None:
+    fifo = tmp_path / "paper.launch"
+    os.mkfifo(fifo)
+    proc = swarmd("import-launch", str(fifo), timeout=30)
+    no_traceback(proc)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == f"{fifo}: cannot read the file: is a FIFO, not a regular file"
