@@ -19,6 +19,8 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run as a script
+
 from swarmd import state
 from swarmd.config.errors import ConfigError, ConfigUnreadable
 from swarmd.config.source import parse_source
