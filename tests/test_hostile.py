@@ -141,6 +141,29 @@ def test_check_and_start_refuse_a_config_that_is_not_a_regular_file(
     assert what in proc.stdout + proc.stderr
 
 
+def test_check_refuses_a_config_above_the_size_cap(tmp_path: Path) -> None:
+    path = tmp_path / "swarm.yaml"
+    with path.open("w") as fh:
+        fh.write(swarm_text())
+        fh.write(("# " + "x" * 1021 + "\n") * (9 * 1024))  # 9 MiB of comments
+    proc = swarmd("check", str(path), timeout=30)
+    no_traceback(proc)
+    assert proc.returncode == 2
+    assert f"{path}: <file>: is {path.stat().st_size} bytes, above the limit of 8388608" \
+        in proc.stdout.splitlines()
+
+
+def test_check_accepts_ordinary_anchors_and_aliases(tmp_path: Path) -> None:
+    path = tmp_path / "swarm.yaml"
+    path.write_text(swarm_text().replace("state: standby, subs: [f1, f2, f3]}",
+                                         "state: standby, subs: &all [f1, f2, f3]}\n"
+                                         "  - {id: 5, state: standby, subs: *all}"))
+    proc = swarmd("check", str(path), timeout=30)
+    no_traceback(proc)
+    assert proc.returncode == 0, proc.stdout
+    assert f"{path}: OK" in proc.stdout
+
+
 def test_check_refuses_a_key_file_that_is_a_fifo(tmp_path: Path) -> None:
     os.mkfifo(tmp_path / "swarm.key")
     path = tmp_path / "swarm.yaml"
