@@ -133,7 +133,7 @@ class Daemon:
         self.runtime: Runtime | None = None
         self.state_file = state_mod.StateFile(
             state_mod.state_path(cfg.state_dir, self.swarm_id, cfg.robot),
-            robot=cfg.robot, swarm=self.swarm_id)
+            robot=cfg.robot, swarm=self.swarm_id, plan=cfg.swarm.to_plan())
         self.state_errors = 0
         self.reload_errors = 0
         """SIGHUPs whose config or keys were refused (logged; the old ones stay)."""

@@ -20,12 +20,21 @@ File format (JSON, one object)::
      "seq_reserved": 123456789}
 
 Writes are atomic: a temporary file in the same directory, fsync, os.replace, fsync of the
-directory. A reader therefore sees the old file or the new one, never half of one.
+directory. A reader therefore sees the old file or the new one, never half of one. A
+write interrupted before its rename (SIGKILL, power cut) leaves its temporary file; the
+next start removes those of this robot (`clean_stale_tmp`).
+
+Reading trusts nothing: only a regular file of at most `MAX_STATE_BYTES`; epochs,
+holders, functions and the seq reservation are checked against the wire's ranges and the
+swarm plan (`swarmd.core.limits`); any failure at all while reading (deep nesting, a
+number of thousands of digits, ...) is a `StateError`, and the daemon sets the file aside
+and starts fresh (docs/daemon.md).
 """
 
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import tempfile
@@ -35,14 +44,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from swarmd.core.limits import restored_problems
 from swarmd.core.node import Restored, Snapshot
+from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Role
+from swarmd.core.wire import SEQ_MAX
+from swarmd.files import FileRefused, read_regular_file
 
 FORMAT_VERSION = 1
 
 SEQ_RESERVE = 1_000_000
 """How far ahead of the current seq a reservation reaches. At 10 Hz heartbeats this is a
 rewrite of the file about once a day, and covers any burst of frames in between."""
+
+
+MAX_STATE_BYTES = 256 * 1024
+"""A state file of 255 functions is under 8 kB."""
 
 
 class StateError(Exception):
@@ -90,8 +107,9 @@ def _int(value: Any, what: str) -> int:
     return value
 
 
-def parse(data: Any, *, robot: int, swarm: int) -> PersistedState:
-    """Validate a decoded JSON object. Raises ValueError saying what is wrong."""
+def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -> PersistedState:
+    """Validate a decoded JSON object against the wire's ranges and, with `plan`, the
+    swarm's robots. Raises ValueError saying what is wrong."""
     if not isinstance(data, dict):
         raise ValueError("top level is not a JSON object")
     if data.get("version") != FORMAT_VERSION:
@@ -117,29 +135,66 @@ def parse(data: Any, *, robot: int, swarm: int) -> PersistedState:
             raise ValueError("'held' is not [function, epoch] or null")
         held = (held_raw[0], _int(held_raw[1], "held epoch"))
     seq = _int(data.get("seq_reserved", 0), "seq_reserved")
+    if seq > SEQ_MAX - SEQ_RESERVE:
+        # Every frame would be sent with a seq receivers already saw (a mute robot).
+        raise ValueError(f"seq_reserved {seq} leaves no room below the 48-bit maximum")
+    problems = restored_problems(known, held)
+    if plan is not None:
+        # A holder the swarm does not have: a foreign or corrupt file. (A function the
+        # swarm file no longer has is fine: the node ignores its entries.)
+        problems += [f"known[{f!r}] holder {h} is not a robot of the swarm"
+                     for f, (h, _) in known.items() if h != 0 and h not in plan.robots]
+    if problems:
+        raise ValueError("; ".join(problems))
     return PersistedState(robot=robot, swarm=swarm, known=known, held=held, seq_reserved=seq)
 
 
-def load(path: Path, *, robot: int, swarm: int) -> PersistedState | None:
+def load(path: Path, *, robot: int, swarm: int,
+         plan: SwarmPlan | None = None) -> PersistedState | None:
     """Read the state file. None when there is none (first start); StateError when it is
     unreadable or corrupt (the caller logs it, sets the file aside and starts fresh)."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        raw = read_regular_file(path, MAX_STATE_BYTES)
     except FileNotFoundError:
         return None
+    except FileRefused as exc:
+        raise StateError(f"{path}: state file {exc.reason}") from exc
+    except OSError as exc:
+        raise StateError(f"{path}: cannot read state file: {exc}") from exc
+    try:
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:  # binary garbage (a disk error, a wrong file)
         raise StateError(f"{path}: state file is not UTF-8 text ({exc.reason} at byte "
                          f"{exc.start})") from exc
-    except OSError as exc:
-        raise StateError(f"{path}: cannot read state file: {exc}") from exc
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise StateError(f"{path}: state file is not valid JSON ({exc})") from exc
+    except RecursionError as exc:
+        raise StateError(f"{path}: state file is nested too deeply") from exc
+    except ValueError as exc:  # e.g. an integer beyond Python's 4300-digit limit
+        raise StateError(f"{path}: state file is not usable JSON ({exc})") from exc
     try:
-        return parse(data, robot=robot, swarm=swarm)
+        return parse(data, robot=robot, swarm=swarm, plan=plan)
     except ValueError as exc:
         raise StateError(f"{path}: state file is invalid: {exc}") from exc
+
+
+def clean_stale_tmp(path: Path) -> list[Path]:
+    """Remove the temporary files of interrupted writes of `path` (`save`'s
+    `.<name>.*.tmp`); other robots' files in a shared directory are left alone. Returns
+    what was removed."""
+    path = Path(path)
+    removed: list[Path] = []
+    try:
+        candidates = list(path.parent.glob(f".{glob.escape(path.name)}.*.tmp"))
+    except OSError:
+        return removed
+    for tmp in candidates:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+            removed.append(tmp)
+    return removed
 
 
 def set_aside(path: Path) -> Path | None:
@@ -189,15 +244,25 @@ class StateFile:
     """The daemon's handle on its state file: remembers the reservation and turns core
     snapshots into `PersistedState` writes (used as the runtime's `state_writer`)."""
 
-    def __init__(self, path: Path, *, robot: int, swarm: int) -> None:
+    def __init__(self, path: Path, *, robot: int, swarm: int,
+                 plan: SwarmPlan | None = None) -> None:
         self.path = Path(path)
         self.robot = robot
         self.swarm = swarm
+        self.plan = plan
         self.seq_reserved = 0
 
     def load(self) -> PersistedState | None:
-        """`load()` of this file (raises StateError when corrupt)."""
-        return load(self.path, robot=self.robot, swarm=self.swarm)
+        """`load()` of this file (raises StateError when unusable), after removing the
+        temporary files of interrupted writes."""
+        clean_stale_tmp(self.path)
+        try:
+            return load(self.path, robot=self.robot, swarm=self.swarm, plan=self.plan)
+        except StateError:
+            raise
+        except Exception as exc:  # anything at all: the robot must still start fresh
+            raise StateError(f"{self.path}: state file could not be read: "
+                             f"{type(exc).__name__}: {exc}") from exc
 
     def write_initial(self, persisted: PersistedState | None, seq_start: int) -> int:
         """At start-up: keep what was persisted, reserve sequence numbers from
@@ -214,7 +279,7 @@ class StateFile:
         function the robot was executing is ever resumed, after the rejoin hold)."""
         held = (snap.function, snap.epoch) if snap.role == Role.ACTIVE and snap.function else None
         if snap.seq + SEQ_RESERVE // 2 >= self.seq_reserved:
-            self.seq_reserved = snap.seq + SEQ_RESERVE
+            self.seq_reserved = min(SEQ_MAX, snap.seq + SEQ_RESERVE)
         self._save(PersistedState(robot=self.robot, swarm=self.swarm, known=snap.known,
                                   held=held, seq_reserved=self.seq_reserved))
         return self.seq_reserved - SEQ_RESERVE // 2

@@ -94,14 +94,42 @@ async def test_socket_link_refuses_to_replace_a_regular_file(tmp_path: Path) -> 
     assert path.read_text() == "precious"
 
 
-async def test_socket_link_drops_a_client_sending_an_endless_line(tmp_path: Path) -> None:
+async def test_socket_link_skips_an_overlong_line_and_keeps_the_client(tmp_path: Path) -> None:
     link = SocketLink(tmp_path / "r.sock", health_timeout=5.0)
-    await link.start(HealthLog())
+    health = HealthLog()
+    await link.start(health)
     try:
-        reader, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
-        writer.write(b"x" * (200 * 1024))
-        assert await asyncio.wait_for(reader.read(), 3.0) == b""  # closed by the link
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
+        writer.write(b"x" * (200 * 1024))  # no newline yet: buffered only up to the cap
+        await writer.drain()
+        writer.write(b"still the same line\n" + b'{"health": "degraded"}\n')
+        assert await health.next() == Health.DEGRADED  # the next good line counts
         assert link.counters["bad_lines"] == 1
+        assert link.counters["health"] == 1
+        writer.close()
+    finally:
+        await link.close()
+
+
+@pytest.mark.parametrize("garbage", [
+    b"[" * 60000,                                   # RecursionError in json.loads
+    b'{"health": ' + b"9" * 5000 + b"}",            # ValueError: > 4300 digits
+    b"{" * 20000,
+    b'{"health": [[[[1]]]]}',
+], ids=["brackets-60k", "int-5000-digits", "braces-20k", "nested-health"])
+async def test_socket_link_contains_any_parse_failure(tmp_path: Path, garbage: bytes) -> None:
+    link = SocketLink(tmp_path / "r.sock", health_timeout=5.0)
+    health = HealthLog()
+    await link.start(health)
+    try:
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "r.sock"))
+        writer.write(garbage + b"\n" + b'{"health": "faulty"}\n')
+        assert await health.next() == Health.FAULTY  # the line after the garbage counts
+        assert link.counters == {**link.counters, "bad_lines": 1, "health": 1,
+                                 "connections": 1}
+        writer.write(b'{"health": "ok"}\n')  # and the same connection still works
+        assert await health.next() == Health.OK
+        writer.close()
     finally:
         await link.close()
 

@@ -228,17 +228,19 @@ async def test_robot_processes_that_end_on_their_own_are_reported(
 async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # Robot 3's robot file is a FIFO nobody writes: its process blocks reading it.
-    write = robotfiles.write_robot_file
+    # Robot 3's process is stopped (SIGSTOP) as soon as it is spawned, before it can load
+    # its file and say ready. (A FIFO as robot file no longer hangs a robot: it is
+    # refused at once, swarmd.files.) The orchestrator's SIGKILL ends a stopped process.
+    spawn = Orchestrator._spawn
 
-    def robot_file(run_dir: Path, swarm: Path, robot: int, **kw: Any) -> Path:
-        path = write(run_dir, swarm, robot, **kw)
+    def spawn_stopped(self: Orchestrator, robot: int, t0: float | None) -> Any:
+        proc = spawn(self, robot, t0)
         if robot == 3:
-            path.unlink()
-            os.mkfifo(path)
-        return path
+            assert proc.process.pid is not None
+            os.kill(proc.process.pid, signal.SIGSTOP)
+        return proc
 
-    monkeypatch.setattr(realtime, "write_robot_file", robot_file)
+    monkeypatch.setattr(Orchestrator, "_spawn", spawn_stopped)
     monkeypatch.setattr(realtime, "READY_TIMEOUT", 1.5)
     monkeypatch.setattr(realtime, "READY_PER_ROBOT", 0.0)
     with pytest.raises(RuntimeError, match=r"robots \[3\] not ready after 1.5 s"):

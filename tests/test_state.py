@@ -10,7 +10,9 @@ import pytest
 
 from swarmd import state
 from swarmd.core.node import Restored, Snapshot
+from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
+from swarmd.core.wire import SEQ_MAX
 
 
 def snap(role: Role, function: str | None, epoch: int, seq: int) -> Snapshot:
@@ -103,3 +105,77 @@ def test_state_initial_seq_survives_a_clock_that_went_backwards() -> None:
     assert state.initial_seq(4_000, persisted) == 5_000  # clock behind: reservation wins
     assert state.initial_seq(6_000, persisted) == 6_000
     assert state.initial_seq(10, None) == 10
+
+
+# -- validation against the plan and the wire's ranges ---------------------------------
+
+GOOD = {"version": 1, "robot": 2, "swarm": 1543, "known": {"f2": [2, 3]}, "held": None,
+        "seq_reserved": 10}
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (json.dumps({**GOOD, "held": ["f2", 70000]}), "held epoch 70000 is not in 0..65535"),
+    (json.dumps({**GOOD, "known": {"f2": [2, 70000]}}), "epoch 70000 is not in 0..65535"),
+    (json.dumps({**GOOD, "known": {"f2": [99, 1]}}), "holder 99 is not a robot"),
+    (json.dumps({**GOOD, "known": {"f2": [70000, 1]}}), "holder 70000 is not in 0..65535"),
+    (json.dumps({**GOOD, "seq_reserved": 1 << 48}), "no room below the 48-bit maximum"),
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    (json.dumps(GOOD).replace('"seq_reserved": 10', '"seq_reserved": ' + "7" * 5000),
+     "not usable JSON"),
+    (b"\xff\xfe".decode("latin-1"), "not UTF-8|not valid JSON"),
+])
+def test_state_out_of_range_or_hostile_is_refused(tmp_path: Path, paper_plan: SwarmPlan,
+                                                  content: str, message: str) -> None:
+    path = state.state_path(tmp_path, 1543, 2)
+    path.write_text(content, encoding="latin-1" if content.startswith("\xff") else "utf-8")
+    sf = state.StateFile(path, robot=2, swarm=1543, plan=paper_plan)
+    with pytest.raises(state.StateError, match=message):
+        sf.load()
+
+
+def test_state_in_range_loads_with_the_plan(tmp_path: Path, paper_plan: SwarmPlan) -> None:
+    path = state.state_path(tmp_path, 1543, 2)
+    # f9: the swarm file dropped it since; the node ignores such entries (rule 2 kept)
+    path.write_text(json.dumps({**GOOD, "known": {"f2": [6, 0xFFFF], "f1": [0, 0],
+                                                  "f9": [2, 4]}, "held": ["f9", 4]}))
+    loaded = state.StateFile(path, robot=2, swarm=1543, plan=paper_plan).load()
+    assert loaded is not None and loaded.held == ("f9", 4)
+    assert loaded.known["f2"] == (6, 0xFFFF)
+
+
+def test_state_file_that_is_not_a_regular_file_is_refused_at_once(tmp_path: Path) -> None:
+    path = state.state_path(tmp_path, 1543, 2)
+    os.mkfifo(path)  # opened non-blocking: no writer needed, no hang
+    with pytest.raises(state.StateError, match="is a FIFO, not a regular file"):
+        state.load(path, robot=2, swarm=1543)
+
+
+def test_state_any_exception_while_reading_is_a_state_error(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = state.state_path(tmp_path, 1543, 2)
+    path.write_text(json.dumps(GOOD))
+
+    def boom(*_: object, **__: object) -> object:
+        raise MemoryError("out of memory")
+
+    monkeypatch.setattr(json, "loads", boom)
+    with pytest.raises(state.StateError, match="MemoryError"):
+        state.StateFile(path, robot=2, swarm=1543).load()
+
+
+def test_state_stale_tmp_files_of_this_robot_are_removed(tmp_path: Path) -> None:
+    path = state.state_path(tmp_path, 1543, 2)
+    mine = [tmp_path / f".{path.name}.abc{i}.tmp" for i in range(5)]
+    theirs = tmp_path / ".swarm1543-robot3.json.abc0.tmp"
+    for p in [*mine, theirs]:
+        p.write_text("{")
+    assert state.StateFile(path, robot=2, swarm=1543).load() is None
+    assert not any(p.exists() for p in mine)
+    assert theirs.exists()
+
+
+def test_state_seq_reservation_never_passes_the_wire_maximum(tmp_path: Path) -> None:
+    sf = state.StateFile(state.state_path(tmp_path, 1543, 2), robot=2, swarm=1543)
+    sf.write_initial(None, 0)
+    sf.write_snapshot(snap(Role.STANDBY, None, 0, SEQ_MAX - 10))
+    assert sf.seq_reserved == SEQ_MAX

@@ -140,18 +140,19 @@ def parse_fault(spec: str) -> Fault:
     not (`crash:2 3@3` is an error, never robot 23).
     """
     text = spec.strip()
+    shown = _clip(spec)
     head, colon, rest = text.partition(":")
     kind = head.strip()
     if kind not in KINDS:
-        close = difflib.get_close_matches(kind.lower(), KINDS, n=1)
+        close = difflib.get_close_matches(kind.lower()[:40], KINDS, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise FaultSpecError(
-            f"fault {spec!r}: unknown kind {kind!r}{hint}; kinds: {', '.join(KINDS)}"
+            f"fault {shown}: unknown kind {_clip(kind)}{hint}; kinds: {', '.join(KINDS)}"
         )
     form = _FORMS[kind]
 
     def bad(what: str) -> FaultSpecError:
-        return FaultSpecError(f"fault {spec!r}: {what}; expected {form}")
+        return FaultSpecError(f"fault {shown}: {what}; expected {form}")
 
     if not colon:
         raise bad("no ':' after the kind")
@@ -187,18 +188,30 @@ def parse_fault(spec: str) -> Fault:
     return Fault(kind, at, tuple(named), dur, groups)
 
 
+_MAX_NUMBER_CHARS = 32
+"""A robot id longer than this is a mistake; refusing it early also keeps a number of
+thousands of digits away from `int()` (a ValueError beyond 4300 digits). Times go
+through `float()`, which has no such limit (a huge one is `inf`: "too large")."""
+
+
+def _clip(text: str, width: int = 60) -> str:
+    """`repr(text)`, shortened so that a message stays one readable line."""
+    shown = repr(text)
+    return shown if len(shown) <= width else f"{shown[:width - 5]}...{shown[-2:]}"
+
+
 def _seconds(text: str, what: str, bad: Callable[[str], FaultSpecError]) -> float:
     """A non-negative decimal number of seconds (`3`, `2.5`, `.5`, `3.`)."""
     t = text.strip()
     if not t:
         raise bad(f"{what} is missing")
     if t.startswith("-"):
-        raise bad(f"{what} must not be negative, got {t!r}")
+        raise bad(f"{what} must not be negative, got {_clip(t)}")
     if not _SECONDS.fullmatch(t):
-        raise bad(f"{what} must be a number of seconds like 3 or 2.5, got {t!r}")
+        raise bad(f"{what} must be a number of seconds like 3 or 2.5, got {_clip(t)}")
     value = float(t)
     if not math.isfinite(value):
-        raise bad(f"{what} {t!r} is too large")
+        raise bad(f"{what} {_clip(t)} is too large")
     return value
 
 
@@ -207,6 +220,8 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
     t = text.strip()
     if not t:
         raise bad("a robot id is missing")
+    if len(t) > _MAX_NUMBER_CHARS:
+        raise bad(f"{_clip(t)} is not a robot id (1..65535)")
     if not _ROBOT.fullmatch(t):
         raise bad(f"{t!r} is not a robot id (1..65535)")
     rid = int(t)

@@ -42,10 +42,19 @@ def register(app: typer.Typer) -> None:
         Example: swarmd import-launch tests/fixtures/paper.launch -o my-swarm.yaml
         """
         from swarmd.config import ConfigError, parse_swarm
+        from swarmd.files import FileRefused, output_problem
         from swarmd.launch import LaunchError, import_launch_file
 
+        # The output path is checked before anything runs: a FIFO would block the write
+        # forever, a device or a directory is never a swarm file.
+        if output is not None and (why := output_problem(output)) is not None:
+            typer.echo(f"{output}: cannot write: {why}", err=True)
+            raise typer.Exit(2)
         try:
             text = import_launch_file(file, swarm_id=swarm_id, name=name)
+        except FileRefused as exc:
+            typer.echo(f"{file}: cannot read the file: {exc.reason}", err=True)
+            raise typer.Exit(2) from None
         except (OSError, UnicodeDecodeError) as exc:
             typer.echo(f"{file}: cannot read the file: {exc}", err=True)
             raise typer.Exit(2) from None

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictInt, field_validator
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem
 from swarmd.config.source import Source, parse_source, read_source, validate
@@ -191,7 +191,7 @@ class MetricsConfig(_Model):
 class RobotFile(_Model):
     """The robot file's schema, as written."""
 
-    robot: int = Field(ge=1, le=0xFFFF)
+    robot: StrictInt = Field(ge=1, le=0xFFFF)  # `robot: true` is not robot 1
     swarm: str
     transport: TransportConfig = Field(default_factory=UdpTransportConfig)
     link: LinkConfig = Field(default_factory=NoneLinkConfig)

@@ -3,6 +3,13 @@ turned into `Problem`s that name the file and the field.
 
 PyYAML's `safe_load` silently keeps the last of two equal keys; in a swarm file that
 would drop a function or a robot without a word, so duplicates are reported here.
+
+Hostile or broken files get one line, never a hang, a crash or a memory blow-up: only a
+regular file of at most `MAX_FILE_BYTES` is read (`swarmd.files`); before the nodes are
+composed, one pass over libyaml's parser events (iterative, safe at any depth) refuses
+nesting deeper than `MAX_DEPTH` (libyaml's composer recurses in C and segfaults near
+30,000 nested `[`) and aliases that would add more than `MAX_ALIAS_NODES` nodes when
+expanded (the "billion laughs": a few lines that expand to 10^9 items).
 """
 
 from __future__ import annotations
@@ -19,6 +26,17 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Loc, Problem, format_loc
+from swarmd.files import FileRefused, read_regular_file
+
+MAX_FILE_BYTES = 8 * 1024 * 1024
+"""A 255-function swarm with 5,000 standbys is about 0.35 MB; 8 MiB is room to spare."""
+MAX_DEPTH = 64
+"""Nesting of mappings and lists; a real config nests 5 deep (robots[i].home)."""
+MAX_NUMBER_CHARS = 100
+"""A plain scalar that looks like a number and is longer than this is refused."""
+MAX_ALIAS_NODES = 100_000
+"""Nodes that aliases add when expanded (`home: *park` adds 3). The whole 5,255-robot
+swarm file has ~60,000 nodes; a billion-laughs file adds 10^9."""
 
 
 @dataclass
@@ -61,7 +79,9 @@ def read_source(path: str | Path) -> Source:
     """Read and parse a YAML file. Raises ConfigUnreadable / ConfigError."""
     name = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_regular_file(path, MAX_FILE_BYTES).decode("utf-8")
+    except FileRefused as exc:
+        raise ConfigUnreadable([Problem(name, "<file>", exc.reason)]) from None
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise ConfigUnreadable(
@@ -75,9 +95,13 @@ _LOADER: type[yaml.SafeLoader] = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 def parse_source(text: str, name: str = "<string>", path: Path | None = None) -> Source:
     """Parse YAML text. Syntax errors and duplicate keys raise ConfigError with lines."""
+    if len(text) > MAX_FILE_BYTES:
+        raise ConfigError([Problem(name, "<file>", f"is {len(text)} characters, above the "
+                                   f"limit of {MAX_FILE_BYTES}")])
     # libyaml parses ~10x faster (grid100: 0.25 s -> 0.03 s) and keeps the marks.
     loader = _LOADER(text)
     try:
+        _check_shape(text, name)
         node = loader.get_single_node()
         lines: dict[Loc, int] = {}
         dups: list[Problem] = []
@@ -95,9 +119,61 @@ def parse_source(text: str, name: str = "<string>", path: Path | None = None) ->
         ) from None
     except yaml.YAMLError as exc:
         raise ConfigError([Problem(name, "<yaml>", f"YAML error: {exc}")]) from exc
+    except (ValueError, RecursionError, MemoryError) as exc:  # a value YAML cannot build
+        raise ConfigError([Problem(name, "<yaml>", f"unusable YAML: {type(exc).__name__}: "
+                                   f"{str(exc)[:120]}")]) from None
     finally:
         loader.dispose()
     return Source(name=name, path=path, data=data, lines=lines)
+
+
+def _line_of(event: yaml.Event) -> int | None:
+    mark = event.start_mark
+    return mark.line + 1 if mark is not None else None
+
+
+_OPEN = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
+_CLOSE = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+
+
+def _check_shape(text: str, name: str) -> None:
+    """Refuse too deep nesting and alias bombs from the parser's event stream, before
+    anything recursive sees the document. Syntax errors surface here as YAMLError."""
+    # Per open collection: [its expanded size so far, its anchor]; sizes of anchors.
+    stack: list[list[Any]] = [[0, None]]
+    anchors: dict[str, int] = {}
+    expanded = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        if isinstance(event, _OPEN):
+            if len(stack) > MAX_DEPTH:
+                raise ConfigError([Problem(
+                    name, "<yaml>", f"nested more than {MAX_DEPTH} levels deep",
+                    line=_line_of(event))])
+            stack.append([1, event.anchor])
+        elif isinstance(event, _CLOSE):
+            size, anchor = stack.pop()
+            if anchor is not None:
+                anchors[anchor] = size
+            stack[-1][0] += size
+        elif isinstance(event, yaml.AliasEvent):
+            added = anchors.get(event.anchor or "", 1)
+            stack[-1][0] += added
+            expanded += added
+            if expanded > MAX_ALIAS_NODES:
+                raise ConfigError([Problem(
+                    name, "<yaml>", f"aliases expand to more than {MAX_ALIAS_NODES:,} "
+                    "nodes (an alias bomb?)", line=_line_of(event))])
+        elif isinstance(event, yaml.ScalarEvent):
+            stack[-1][0] += 1
+            if event.anchor is not None:
+                anchors[event.anchor] = 1
+            value = event.value
+            if (len(value) > MAX_NUMBER_CHARS and event.implicit[0]
+                    and value.lstrip("+-.")[:1].isdigit()):
+                # YAML would turn it into an int: a ValueError beyond 4300 digits.
+                raise ConfigError([Problem(
+                    name, "<yaml>", f"a number of {len(value)} characters (at most "
+                    f"{MAX_NUMBER_CHARS})", line=_line_of(event))])
 
 
 def _walk(
@@ -106,14 +182,24 @@ def _walk(
     lines: dict[Loc, int],
     dups: list[Problem],
     name: str,
-    path: frozenset[int] = frozenset(),
+    path: set[int] | None = None,
 ) -> None:
+    if path is None:
+        path = set()
     lines.setdefault(loc, node.start_mark.line + 1)
     if id(node) in path:
         # `&a [*a]`: an alias inside itself would recurse forever in any consumer.
         raise ConfigError([Problem(name, format_loc(loc), "recursive YAML alias",
                                    line=node.start_mark.line + 1)])
-    path = path | {id(node)}
+    if not isinstance(node, yaml.MappingNode | yaml.SequenceNode):
+        return
+    path.add(id(node))
+    _walk_children(node, loc, lines, dups, name, path)
+    path.discard(id(node))
+
+
+def _walk_children(node: yaml.Node, loc: Loc, lines: dict[Loc, int], dups: list[Problem],
+                   name: str, path: set[int]) -> None:
     if isinstance(node, yaml.MappingNode):
         seen: set[Any] = set()
         for key_node, value_node in node.value:

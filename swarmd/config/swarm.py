@@ -23,7 +23,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PlainValidator, PrivateAttr, field_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    PrivateAttr,
+    StrictInt,
+    field_validator,
+)
 
 from swarmd.config.errors import ConfigError, Problem
 from swarmd.core.params import PRESETS, Params
@@ -45,8 +54,20 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
+def _not_bool(value: Any) -> Any:
+    # YAML `t_max: yes` is a mistake, not 1 second; numbers written as text ("1e3",
+    # which YAML 1.1 leaves a string) stay accepted.
+    if isinstance(value, bool):
+        raise ValueError(f"must be a number of seconds, got {value!r}")
+    return value
+
+
+Seconds = Annotated[float, BeforeValidator(_not_bool)]
+
+
 class SwarmInfo(_Model):
-    id: int = Field(ge=0, le=0xFFFF, description="16-bit swarm id carried by every frame")
+    # Strict: YAML `id: true` or `id: 1.0` is a mistake, not robot / swarm 1.
+    id: StrictInt = Field(ge=0, le=0xFFFF, description="16-bit swarm id carried by every frame")
     name: str = ""
 
 
@@ -54,17 +75,17 @@ class Timing(_Model):
     """A preset of `swarmd.core.params` plus overrides of any of its fields."""
 
     preset: Literal["udp", "radio"] = "udp"
-    heartbeat_interval: float | None = None
-    standby_heartbeat_interval: float | None = None
-    t_max: float | None = None
-    warn_interval: float | None = None
-    vote_window: float | None = None
-    quorum: int | None = None
-    claim_hold: float | None = None
-    startup_grace: float | None = None
-    standby_timeout: float | None = None
-    alert_after: float | None = None
-    rejoin_hold: float | None = None
+    heartbeat_interval: Seconds | None = None
+    standby_heartbeat_interval: Seconds | None = None
+    t_max: Seconds | None = None
+    warn_interval: Seconds | None = None
+    vote_window: Seconds | None = None
+    quorum: StrictInt | None = None
+    claim_hold: Seconds | None = None
+    startup_grace: Seconds | None = None
+    standby_timeout: Seconds | None = None
+    alert_after: Seconds | None = None
+    rejoin_hold: Seconds | None = None
 
     def overrides(self) -> dict[str, float | int]:
         """The Params fields this file sets explicitly."""
@@ -112,10 +133,10 @@ SubRef = Annotated[int | str, PlainValidator(_sub_ref)]
 
 
 class RobotEntry(_Model):
-    id: int = Field(ge=1, le=0xFFFF)
+    id: StrictInt = Field(ge=1, le=0xFFFF)
     state: Literal["active", "standby"]
     function: str | None = None
-    neighbors: list[int] = Field(default_factory=list)
+    neighbors: list[StrictInt] = Field(default_factory=list)
     subs: list[SubRef] = Field(default_factory=list)
     home: tuple[float, float] | None = None
 
@@ -158,7 +179,11 @@ class SwarmConfig(_Model):
     _source: str = PrivateAttr(default="<string>")
     _directory: Path = PrivateAttr(default_factory=Path.cwd)
     _warnings: tuple[Problem, ...] = PrivateAttr(default=())
-    _robots_by_id: dict[int, RobotEntry] | None = PrivateAttr(default=None)
+    # Built once: `sub_functions` and `coverage` are called per robot and per function,
+    # and rebuilding these per call made a 5,000-robot swarm take minutes to check.
+    _by_id: dict[int, RobotEntry] | None = PrivateAttr(default=None)
+    _subs: dict[int, tuple[str, ...]] = PrivateAttr(default_factory=dict)
+    _coverage: list[Coverage] | None = PrivateAttr(default=None)
 
     # -- where it came from --------------------------------------------------------------
     @property
@@ -189,11 +214,16 @@ class SwarmConfig(_Model):
         """Timing preset plus overrides (swarmd.core.params)."""
         return self.timing.params()
 
+    def _robots_by_id(self) -> dict[int, RobotEntry]:
+        if self._by_id is None:
+            by_id: dict[int, RobotEntry] = {}
+            for r in self.robots:
+                by_id.setdefault(r.id, r)  # the first of a duplicate id, as `robot()` did
+            self._by_id = by_id
+        return self._by_id
+
     def robot(self, robot_id: int) -> RobotEntry:
-        for r in self.robots:
-            if r.id == robot_id:
-                return r
-        raise KeyError(robot_id)
+        return self._robots_by_id()[robot_id]
 
     def robot_ids(self) -> tuple[int, ...]:
         return tuple(r.id for r in self.robots)
@@ -209,17 +239,13 @@ class SwarmConfig(_Model):
                 return r.id
         return None
 
-    def _by_id(self) -> dict[int, RobotEntry]:
-        """id -> entry, built once (the model is frozen): resolving every robot's
-        `subs` stays linear in the swarm."""
-        if self._robots_by_id is None:
-            self._robots_by_id = {r.id: r for r in self.robots}
-        return self._robots_by_id
-
     def sub_functions(self, robot: RobotEntry) -> tuple[str, ...]:
         """`robot.subs` resolved to function names (robot ids -> their functions);
         unresolvable entries are skipped (errors of `swarm_rules.cross_check`)."""
-        by_id = self._by_id()
+        cached = self._subs.get(id(robot))
+        if cached is not None:
+            return cached
+        by_id = self._robots_by_id()
         out: list[str] = []
         for ref in robot.subs:
             if isinstance(ref, int):
@@ -229,36 +255,46 @@ class SwarmConfig(_Model):
                 f = ref if ref in self.functions else None
             if f is not None and f not in out:
                 out.append(f)
-        return tuple(out)
+        result = tuple(out)
+        if by_id.get(robot.id) is robot:  # a robot of this swarm: its id() stays valid
+            self._subs[id(robot)] = result
+        return result
 
     def coverage(self) -> list[Coverage]:
-        """One row per function, in wire order; tolerant of a swarm with errors."""
-        rows = []
-        # Indexed once, so a swarm of thousands of robots is checked in linear time.
-        holders_of: dict[str, list[int]] = {}
-        watchers_of: dict[int, set[int]] = {}
-        standbys_of: dict[str, set[int]] = {}
+        """One row per function, in wire order; tolerant of a swarm with errors.
+        Linear in the swarm's size (one pass over the robots), computed once."""
+        if self._coverage is not None:
+            return list(self._coverage)
+        holders: dict[str, list[int]] = {name: [] for name in self.functions}
+        held_by: dict[int, list[str]] = {}
         for r in self.robots:
-            if r.holds is not None:
-                holders_of.setdefault(r.holds, []).append(r.id)
+            f = r.holds
+            if f in holders:
+                holders[f].append(r.id)
+                held_by.setdefault(r.id, []).append(f)
+        watchers: dict[str, set[int]] = {name: set() for name in self.functions}
+        standbys: dict[str, set[int]] = {name: set() for name in self.functions}
+        for r in self.robots:
             if r.state == "active":
                 for n in set(r.neighbors):
-                    watchers_of.setdefault(n, set()).add(r.id)
-            elif r.state == "standby":
+                    for f in held_by.get(n, ()):
+                        if r.id not in holders[f]:
+                            watchers[f].add(r.id)
+            else:
                 for f in self.sub_functions(r):
-                    standbys_of.setdefault(f, set()).add(r.id)
-        for name, spec in self.functions.items():
-            holders = tuple(holders_of.get(name, ()))
-            watchers = sorted(
-                {w for h in holders for w in watchers_of.get(h, ()) if w not in holders})
-            standbys = sorted(standbys_of.get(name, ()))
-            rows.append(Coverage(name, spec.kind, holders, tuple(watchers), tuple(standbys)))
-        return rows
+                    standbys[f].add(r.id)
+        rows = [
+            Coverage(name, spec.kind, tuple(holders[name]), tuple(sorted(watchers[name])),
+                     tuple(sorted(standbys[name])))
+            for name, spec in self.functions.items()
+        ]
+        self._coverage = rows
+        return list(rows)
 
     def to_plan(self) -> SwarmPlan:
         """The core's view (DESIGN rule 1): watches[f_R] = functions of R's neighbours;
         subs (robot ids or names) resolved to functions."""
-        by_id = {r.id: r for r in self.robots}
+        by_id = self._robots_by_id()
         watches: dict[str, tuple[str, ...]] = {}
         robots: dict[int, RobotPlan] = {}
         for r in self.robots:

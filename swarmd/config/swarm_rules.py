@@ -22,7 +22,7 @@ from swarmd.config.swarm import (
     SwarmConfig,
     Timing,
 )
-from swarmd.core.params import PRESETS, ParamsError
+from swarmd.core.params import PRESETS, Params, ParamsError
 from swarmd.core.plan import MAX_FUNCTIONS
 from swarmd.keys import KeyFileError, load_key
 
@@ -91,9 +91,13 @@ def cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
     # Timing: Params validates itself; name the field its message is about.
     quorum: int | None = None
     try:
-        quorum = cfg.params().quorum
+        params = cfg.params()
     except (ParamsError, TypeError) as exc:
         err(("timing", _params_field(str(exc), cfg.timing)), str(exc))
+    else:
+        quorum = params.quorum
+        for loc, msg, severity in timing_bounds(params):
+            out.append(src.problem(("timing", loc), msg, severity))
 
     if cfg.key_file is not None and cfg.key_path is not None:
         try:
@@ -190,6 +194,46 @@ def cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
             if math.dist(r.home, s.home) < MIN_HOME_SPACING:
                 warn(("robots", i, "home"), f"robot {r.id}'s home is within "
                      f"{MIN_HOME_SPACING} m of robot {s.id}'s (robots[{j}])")
+    return out
+
+
+MIN_HEARTBEAT = 0.005
+"""s. 200 heartbeats a second per robot: beyond what an 802.15.4 radio carries for even
+two robots (~4 ms of airtime a frame at 250 kbit/s) and a busy loop for the CPU."""
+ODD_HEARTBEAT = 0.02
+"""s. Faster than 50 Hz works on loopback UDP but is odd for any radio: a warning."""
+MAX_T_MAX = 600.0
+"""s. A watchdog of more than ten minutes leaves a failed function unserved that long."""
+ODD_T_MAX = 60.0
+"""s. Detection beyond a minute is possible but odd for a flying swarm: a warning."""
+MAX_SECONDS = 3600.0
+"""s. Any other timing beyond an hour is a typo (units?), never a working swarm."""
+
+
+def timing_bounds(params: Params) -> list[tuple[str, str, str]]:
+    """(field, message, severity) for timings no radio or CPU can carry (errors) and
+    for merely odd ones (warnings). Params itself only checks their relations."""
+    out: list[tuple[str, str, str]] = []
+    for name in ("heartbeat_interval", "standby_heartbeat_interval"):
+        value = getattr(params, name)
+        if value < MIN_HEARTBEAT:
+            out.append((name, f"{name} {value:g} s is {1 / value:,.0f} frames/s per robot; "
+                        f"no radio or CPU carries that (at least {MIN_HEARTBEAT:g} s)",
+                        "error"))
+        elif value < ODD_HEARTBEAT:
+            out.append((name, f"{name} {value:g} s ({1 / value:.0f} Hz) is faster than any "
+                        "radio medium swarmd speaks carries for a swarm; fine on loopback "
+                        "only", "warning"))
+    if params.t_max > MAX_T_MAX:
+        out.append(("t_max", f"t_max {params.t_max:g} s: a failed robot would go unnoticed "
+                    f"for that long (at most {MAX_T_MAX:g} s)", "error"))
+    elif params.t_max > ODD_T_MAX:
+        out.append(("t_max", f"t_max {params.t_max:g} s: a failure is detected only after "
+                    "more than a minute", "warning"))
+    for name, value in params.as_dict().items():
+        if name not in ("quorum", "t_max") and value > MAX_SECONDS:
+            out.append((name, f"{name} {value:g} s is beyond an hour (at most "
+                        f"{MAX_SECONDS:g} s; seconds, not milliseconds?)", "error"))
     return out
 
 

@@ -27,6 +27,7 @@ from typing import NamedTuple
 from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.limits import check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
@@ -133,6 +134,7 @@ class Node:
     ) -> None:
         if robot_id not in plan.robots:
             raise NodeError(f"robot {robot_id} is not in the swarm plan")
+        check_restored(restored, seq_start)  # out-of-range state: refuse, never loop
         self._robot_id = robot_id
         self._plan = plan
         self._params = params

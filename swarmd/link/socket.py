@@ -15,7 +15,10 @@ next good health line clears it.
 
 Bad input never takes the daemon down: a line that is not JSON, not an object, too long,
 or with an unknown health value is counted in `counters["bad_lines"]`, logged, and
-ignored (it does not refresh the health timer).
+ignored (it does not refresh the health timer). Whatever parsing a line raises (a
+RecursionError for `[` nested thousands deep, a ValueError for an integer of thousands
+of digits) is such a bad line too; a line longer than `LINE_LIMIT` is skipped up to its
+newline. The connection stays up and the next good line counts.
 
 Each connection is an `asyncio.Protocol` (`_Connection`) whose lines are handled in
 `data_received`, as they arrive. A robot that writes its health and closes without
@@ -46,7 +49,7 @@ log = logging.getLogger(__name__)
 
 HEALTH_NAMES = {"ok": Health.OK, "degraded": Health.DEGRADED, "faulty": Health.FAULTY}
 LINE_LIMIT = 64 * 1024
-"""bytes. A longer line is garbage; the connection is dropped (and counted)."""
+"""bytes. A longer line is garbage: counted as one bad line and skipped to its newline."""
 WRITE_BUFFER_LIMIT = 256 * 1024
 """bytes. A robot that stops reading is disconnected rather than growing our memory."""
 
@@ -139,12 +142,20 @@ class SocketLink:
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             self._bad(f"not JSON: {exc}")
             return
+        except RecursionError:
+            self._bad("JSON nested too deeply")
+            return
+        except Exception as exc:  # e.g. ValueError: an integer beyond 4300 digits
+            self._bad(f"unusable JSON: {type(exc).__name__}: {str(exc)[:120]}")
+            return
         if not isinstance(msg, dict) or "health" not in msg:
             self._bad("expected an object with a 'health' key")
             return
         health = HEALTH_NAMES.get(msg["health"]) if isinstance(msg["health"], str) else None
         if health is None:
-            self._bad(f"unknown health {msg['health']!r}; expected ok, degraded or faulty")
+            shown = repr(msg["health"]) if isinstance(msg["health"], str) else \
+                type(msg["health"]).__name__
+            self._bad(f"unknown health {shown[:60]}; expected ok, degraded or faulty")
             return
         self.counters["health"] += 1
         self._timed_out = False
@@ -207,6 +218,7 @@ class _Connection(asyncio.Protocol):
         self.link = link
         self.transport: asyncio.WriteTransport | None = None
         self._buffer = bytearray()
+        self._skipping = False
         self._fd = -1
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -217,17 +229,25 @@ class _Connection(asyncio.Protocol):
         self.link._connected(self)
 
     def data_received(self, data: bytes) -> None:
+        if self._skipping:  # the rest of an overlong line, up to its newline
+            end = data.find(b"\n")
+            if end < 0:
+                return
+            self._skipping = False
+            data = data[end + 1:]
         self._buffer += data
         start = 0
         while (end := self._buffer.find(b"\n", start)) >= 0:
-            self.link._line(bytes(self._buffer[start : end + 1]))
+            if end - start > LINE_LIMIT:
+                self.link._bad(f"line longer than {LINE_LIMIT} bytes; skipped")
+            else:
+                self.link._line(bytes(self._buffer[start : end + 1]))
             start = end + 1
         del self._buffer[:start]
         if len(self._buffer) > LINE_LIMIT:
-            self.link._bad(f"line longer than {LINE_LIMIT} bytes; dropping connection")
+            self.link._bad(f"line longer than {LINE_LIMIT} bytes; skipped")
             self._buffer.clear()
-            if self.transport is not None:
-                self.transport.close()
+            self._skipping = True
 
     def eof_received(self) -> bool:
         self._rest()

@@ -1,0 +1,1 @@
+"""Fuzz targets (fuzz_swarmd.py); see docs/testing.md."""
