@@ -4,7 +4,7 @@
 #   (MUJOCO_GL=egl or osmesa, see shared notes/mujoco.md)
 # - systemd: `systemd-analyze verify` of deploy/ units
 # - iproute2: network-namespace multicast test (`ip netns`)
-# - shellcheck: lint of deploy/install.sh and this script
+# - shellcheck: lint of deploy/install.sh and this script (tests/test_deploy.py)
 set -euo pipefail
 pkgs=(libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 systemd iproute2 shellcheck)
 missing=()
