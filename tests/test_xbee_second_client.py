@@ -15,12 +15,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from test_xbee_transport import Sink
 
 from sim.xbee_emu import Medium
 from swarmd.core import wire
 from swarmd.core.roles import Health, Role
 from swarmd.transport.xbee import XBeeTransport
-from tests.test_xbee_transport import Sink
 
 xbee = pytest.importorskip("xbee", reason="python-xbee (the `xbee` package) not installed")
 serial = pytest.importorskip("serial")
