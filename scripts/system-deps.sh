@@ -4,8 +4,9 @@
 #   (MUJOCO_GL=egl or osmesa, see shared notes/mujoco.md)
 # - systemd: `systemd-analyze verify` of deploy/ units
 # - iproute2: network-namespace multicast test (`ip netns`)
+# - shellcheck: lint of deploy/install.sh and this script (tests/test_deploy.py)
 set -euo pipefail
-pkgs=(libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 systemd iproute2)
+pkgs=(libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6 systemd iproute2 shellcheck)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

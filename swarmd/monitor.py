@@ -6,9 +6,14 @@ the thin I/O part: it opens the swarm's transport, never sends anything (a base 
 that transmitted would be a robot), and feeds received frames with the loop's clock.
 
 What it shows, per robot: role, function and epoch from its last HEARTBEAT, how long ago
-it was heard, its reported health, who currently warns about it (the paper's warnings,
-Fig. 2) and how many distinct witnesses that is within the vote window (what a standby
-counts, Fig. 9 and DESIGN rule 3). Alerts are the things an operator must look at:
+it was heard, its reported health, its status, who currently warns about it (the paper's
+warnings, Fig. 2) and how many distinct witnesses that is within the vote window (what a
+standby counts, Fig. 9 and DESIGN rule 3). The status is `live`; `silent` when nothing
+was heard from it for longer than its heartbeat timeout (`t_max` for an active,
+`standby_timeout` for a standby, whose heartbeats are rarer: DESIGN rule 6);
+`superseded` when another robot has since been heard executing its function at a newer
+epoch, so its last heartbeat is history, not the holder (DESIGN rule 2); `left` after a
+LEAVE. Alerts are the things an operator must look at:
 - a function whose holder has been silent longer than `t_max` (nobody heartbeats it);
 - warnings about a robot for longer than `alert_after` with no CLAIM (DESIGN rule 8:
   nobody is coming to take over);
@@ -24,8 +29,15 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+from pydantic import BaseModel, ConfigDict, Field
+
+from swarmd.config import ConfigError, SwarmConfig, load_robot, load_swarm
+from swarmd.config.errors import ConfigUnreadable, Problem
+from swarmd.config.robot import TransportConfig, UdpTransportConfig
+from swarmd.config.source import read_source, validate
 from swarmd.core import wire
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -71,6 +83,8 @@ class MonitorState:
         self.frames = 0
         self.claims: dict[str, tuple[int, int, float]] = {}
         """function -> (claimant, epoch, time) of the last CLAIM heard."""
+        self.newest: dict[str, tuple[int, int]] = {}
+        """function -> (epoch, robot) of the newest-epoch ACTIVE heartbeat heard for it."""
 
     def _drop(self, reason: str) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
@@ -104,6 +118,10 @@ class MonitorState:
                 seen.function = self.plan.function_at(function)
                 seen.epoch = epoch
                 seen.health = _name(Health, health)
+                if seen.function is not None and seen.role == Role.ACTIVE.name:
+                    newest = self.newest.get(seen.function)
+                    if newest is None or epoch >= newest[0]:
+                        self.newest[seen.function] = (epoch, frame.sender)
             case wire.Warn(suspect, function, _epoch):
                 target = self.robots.get(suspect)
                 if target is None and suspect in self.plan.robots:
@@ -130,6 +148,30 @@ class MonitorState:
         window = self.params.vote_window
         return {w: t for w, t in seen.warned_by.items() if now - t <= window}
 
+    def silent(self, seen: Heard, now: float) -> bool:
+        """No frame from this robot for longer than its heartbeat timeout (rules 1, 6)."""
+        if seen.frames == 0:
+            return True
+        timeout = (self.params.standby_timeout if seen.role == Role.STANDBY.name
+                   else self.params.t_max)
+        return now - seen.last_heard > timeout
+
+    def superseded(self, seen: Heard) -> bool:
+        """Another robot was heard executing this robot's function at a newer epoch."""
+        if seen.function is None or seen.role != Role.ACTIVE.name or seen.epoch is None:
+            return False
+        newest = self.newest.get(seen.function)
+        return newest is not None and newest[0] > seen.epoch and newest[1] != seen.robot
+
+    def status(self, seen: Heard, now: float) -> str:
+        """`live`, `silent`, `superseded`, `superseded, silent` or `left`."""
+        if seen.leave_at is not None and seen.last_heard <= seen.leave_at:
+            return "left"  # nothing heard since its LEAVE
+        parts = ["superseded"] if self.superseded(seen) else []
+        if self.silent(seen, now):
+            parts.append("silent")
+        return ", ".join(parts) or "live"
+
     def rows(self, now: float) -> list[dict[str, Any]]:
         """One dict per robot heard (or warned about), by robot id."""
         out = []
@@ -143,6 +185,7 @@ class MonitorState:
                 "epoch": seen.epoch,
                 "last_heard_s": None if seen.frames == 0 else round(now - seen.last_heard, 3),
                 "health": seen.health,
+                "status": self.status(seen, now),
                 "warned_by": sorted(fresh),
                 "votes": len(fresh),
                 "alerts": self._robot_alerts(seen, now),
@@ -154,6 +197,7 @@ class MonitorState:
             rid for rid, seen in self.robots.items()
             if seen.function == function and seen.role == Role.ACTIVE.name
             and seen.frames and now - seen.last_heard <= self.params.t_max
+            and not self.superseded(seen)
         )
 
     def _robot_alerts(self, seen: Heard, now: float) -> list[str]:
@@ -161,7 +205,7 @@ class MonitorState:
         alerts = []
         silent = seen.frames == 0 or now - seen.last_heard > p.t_max
         if (seen.function is not None and silent and seen.role == Role.ACTIVE.name
-                and not self._live_holders(seen.function, now)):
+                and not self.superseded(seen) and not self._live_holders(seen.function, now)):
             alerts.append(f"holder of {seen.function} silent for "
                           f"{now - seen.last_heard:.1f} s")
         fresh = self._fresh_warnings(seen, now)
@@ -181,7 +225,8 @@ class MonitorState:
         holders: dict[tuple[str, int], list[int]] = {}
         for rid, seen in self.robots.items():
             live = seen.frames and now - seen.last_heard <= self.params.t_max
-            if live and seen.function is not None and seen.role == Role.ACTIVE.name:
+            if (live and seen.function is not None and seen.role == Role.ACTIVE.name
+                    and not self.superseded(seen)):
                 holders.setdefault((seen.function, seen.epoch or 0), []).append(rid)
         for (function, epoch), rids in sorted(holders.items()):
             if len(rids) > 1:
@@ -210,13 +255,16 @@ class MonitorState:
 
         table = Table(title=f"swarm {self.plan.swarm_id}: {len(self.robots)} robots heard, "
                             f"{self.frames} frames, {sum(self.drops.values())} dropped")
-        for col in ("robot", "role", "function", "epoch", "last heard", "health",
+        for col in ("robot", "status", "role", "function", "epoch", "last heard", "health",
                     "warned by", "votes", "alerts"):
             table.add_column(col)
+        styles = {"live": "", "left": "dim"}
         for row in self.rows(now):
             heard = row["last_heard_s"]
             table.add_row(
-                str(row["robot"]), row["role"] or "-", row["function"] or "-",
+                str(row["robot"]),
+                Text(row["status"], style=styles.get(row["status"], "bold yellow")),
+                row["role"] or "-", row["function"] or "-",
                 "-" if row["epoch"] is None else str(row["epoch"]),
                 "never" if heard is None else f"{heard:.1f} s ago", row["health"] or "-",
                 ",".join(map(str, row["warned_by"])) or "-", str(row["votes"]),
@@ -225,6 +273,62 @@ class MonitorState:
         alerts = self.alerts(now)
         lines = [Text(f"ALERT {a}", style="bold red") for a in alerts]
         return Group(table, *lines)
+
+
+class _BaseStationFile(BaseModel):
+    """A base station file: a robot file without `robot:` (it is no robot) and without
+    link, state or metrics (it executes nothing and sends nothing)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    swarm: str
+    transport: TransportConfig = Field(default_factory=UdpTransportConfig)
+    key_files: list[str] = Field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class BaseStation:
+    """What `swarmd monitor --config` listens with: the swarm, a transport section (any
+    kind: UDP, an XBee coordinator, a serial radio) and the keys frames are checked with."""
+
+    swarm: SwarmConfig
+    transport: Any
+    keys: tuple[bytes, ...]
+
+
+def load_base_station(path: str | Path) -> BaseStation:
+    """A base station file, or a robot file (its swarm, transport and keys are used).
+    Raises ConfigUnreadable or ConfigError, like `load_robot`."""
+    from swarmd.keys import KeyFileError, load_key
+
+    src = read_source(path)
+    if isinstance(src.data, dict) and "robot" in src.data:
+        robot = load_robot(path)
+        return BaseStation(robot.swarm, robot.transport, robot.keys())
+    f: _BaseStationFile = validate(_BaseStationFile, src)
+    problems: list[Problem] = []
+    swarm: SwarmConfig | None = None
+    swarm_path = src.resolve(f.swarm)
+    try:
+        swarm = load_swarm(swarm_path)
+    except ConfigUnreadable as exc:
+        reason = exc.problems[0].message if exc.problems else "unreadable"
+        problems.append(src.problem(("swarm",), f"swarm file {swarm_path}: {reason}"))
+    except ConfigError as exc:
+        problems.extend(exc.problems)
+    keys: list[bytes] = []
+    if swarm is not None and (swarm_key := swarm.key()) is not None:
+        keys.append(swarm_key)
+    for i, name in enumerate(f.key_files):
+        try:
+            key = load_key(src.resolve(name))
+        except KeyFileError as exc:
+            problems.append(src.problem(("key_files", i), str(exc)))
+            continue
+        if key not in keys:
+            keys.append(key)
+    if swarm is None or any(p.severity == "error" for p in problems):
+        raise ConfigError(problems)
+    return BaseStation(swarm, f.transport, tuple(keys))
 
 
 async def listen(

@@ -207,3 +207,49 @@ def test_monitor_unusable_swarm_file_exits_2_like_start_and_sim(tmp_path: Path) 
     result = CliRunner().invoke(app, ["monitor", "--swarm", str(bad), "--once"])
     assert result.exit_code == 2
     assert "position" in result.stderr and "[" in result.stderr  # plain text, not markup
+
+
+def test_a_robot_taken_over_at_a_newer_epoch_is_superseded_and_a_quiet_one_silent() -> None:
+    p = params.udp()  # t_max 0.5 s, standby_timeout 2 s
+    state = MonitorState(paper_plan(), p)
+    tx = Sender()
+    for t in (0.0, 0.1, 0.2):
+        healthy_swarm(state, tx, t)
+    status = {r["robot"]: r["status"] for r in state.rows(0.3)}
+    assert set(status.values()) == {"live"}
+    # Robot 2 dies; standby 6 takes f2 over at epoch 1 and heartbeats it; the rest go on.
+    for t in (1.0, 1.1, 1.2, 3.1):
+        for r in (1, 3, 4):
+            state.feed(tx.hb(r, r), t)
+        state.feed(tx.hb(6, 2, epoch=1), t)
+    state.feed(tx.hb(5, 0, role=Role.STANDBY), 1.0)
+    rows = {r["robot"]: r for r in state.rows(3.2)}
+    assert rows[2]["status"] == "superseded, silent"
+    assert (rows[2]["role"], rows[2]["function"], rows[2]["epoch"]) == ("ACTIVE", "f2", 0)
+    assert rows[6]["status"] == "live" and rows[6]["epoch"] == 1
+    assert rows[2]["alerts"] == []  # f2 has a live holder: nothing to do
+    # Standby 5, last heard at 1.0: its heartbeats are rarer, so it is silent only past
+    # standby_timeout (2 s), not past t_max.
+    assert {r["robot"]: r["status"] for r in state.rows(2.9)}[5] == "live"
+    assert {r["robot"]: r["status"] for r in state.rows(3.05)}[5] == "silent"
+    # An active that stops is silent after t_max (0.5 s), not after the standby timeout.
+    assert {r["robot"]: r["status"] for r in state.rows(3.5)}[1] == "live"
+    assert {r["robot"]: r["status"] for r in state.rows(3.7)}[1] == "silent"
+    # Robot 2 restarts and wins f2 back at a newer epoch: now 6's heartbeat is the old one.
+    state.feed(tx.hb(2, 2, epoch=2), 4.0)
+    rows = {r["robot"]: r for r in state.rows(4.0)}
+    assert rows[2]["status"] == "live" and rows[6]["status"] == "superseded, silent"
+    assert not any("split brain" in a for a in state.alerts(4.0))
+
+
+def test_the_table_shows_the_status() -> None:
+    from rich.console import Console
+
+    state = MonitorState(paper_plan(), params.udp())
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    state.feed(tx.hb(6, 2, epoch=1), 1.0)
+    console = Console(width=200, record=True)
+    console.print(state.table(1.0))
+    text = console.export_text()
+    assert "superseded, silent" in text and "live" in text

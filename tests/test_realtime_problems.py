@@ -275,12 +275,18 @@ def test_sigterm_to_the_command_writes_a_partial_report_and_exits_143(tmp_path: 
          "--duration", "60", "--fault", "crash:2@0.5", "--report", str(tmp_path)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
+        pids_file = tmp_path / "realtime" / "pids.json"
         deadline = time.monotonic() + 30
-        while not (tmp_path / "realtime" / "pids.json").exists() \
-                or not list((tmp_path / "realtime" / "logs").glob("*")):
+        robots: list[int] = []
+        # Every robot spawned and running: the family below then holds all six robots,
+        # the forkserver and multiprocessing's resource tracker.
+        while len(robots) < 6 or not all(_alive(p) for p in robots):
             assert proc.poll() is None and time.monotonic() < deadline
             time.sleep(0.05)
+            if pids_file.exists():
+                robots = list(json.loads(pids_file.read_text())["robots"].values())
         family = _descendants(proc.pid)
+        assert set(robots) <= family
         time.sleep(1.5)  # past t0 and the crash
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
@@ -293,6 +299,17 @@ def test_sigterm_to_the_command_writes_a_partial_report_and_exits_143(tmp_path: 
     assert summary["interrupted"]["signal"] == "SIGTERM"
     assert json.loads((tmp_path / "summary.json").read_text()) == summary
     assert (tmp_path / "events.jsonl").exists() and (tmp_path / "timeline.png").exists()
+    # The robots are SIGKILLed and reaped before the command exits (kill_all).
+    assert [p for p in robots if _alive(p)] == []
+    # The forkserver and
+    # the resource tracker end on their own once the command has exited (EOF on their
+    # pipe from it), and they hold its stdout/stderr: communicate() returns the moment
+    # the kernel closes their files, a little before they are zombies, so a check at
+    # that instant can still see them running. Give them the same bounded grace as
+    # test_realtime_interrupt_leaves_no_process_behind.
+    deadline = time.monotonic() + 5
+    while any(_alive(p) for p in family) and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert [p for p in family if _alive(p)] == []
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from sim.xbee_emu import Medium, api
-from sim.xbee_emu.radio import EmulatedRadio, Reply, Transmit
+from sim.xbee_emu.radio import EmulatedRadio, RemoteCommand, Reply, Transmit
 
 NASTY = bytes([0x7E, 0x7D, 0x11, 0x13]) * 20  # every byte API mode 2 must escape
 
@@ -62,6 +62,31 @@ def test_radio_transmit_request_and_receive_frames() -> None:
     a.handle(b"\x08\x01MY\xff\xfe")
     frame = b.receive_frame(a, b"hi", True)
     assert frame[0] == 0x80 and frame[1:9] == a.address64.to_bytes(8, "big")
+
+
+def test_radio_tx16_remote_at_and_frames_a_firmware_does_not_take() -> None:
+    a, b = EmulatedRadio(1, "802.15.4"), EmulatedRadio(2, "802.15.4")
+    (tx16,) = a.handle(b"\x01\x09\xff\xff\x00hello")  # TX16 to 0xFFFF
+    assert isinstance(tx16, Transmit) and tx16.broadcast and tx16.data == b"hello"
+    assert a.status_frame(tx16, 0) == b"\x89\x09\x00"
+    b.handle(b"\x08\x01MY\x00\x42")
+    (unicast,) = a.handle(b"\x01\x0a\x00\x42\x00hi")
+    assert isinstance(unicast, Transmit) and not unicast.broadcast
+    assert b.addressed_by(unicast.dest64, unicast.dest16)
+    assert not a.addressed_by(unicast.dest64, unicast.dest16)
+    (remote,) = a.handle(b"\x17\x0b" + b.address64.to_bytes(8, "big") + b"\xff\xfe\x02NI")
+    assert isinstance(remote, RemoteCommand) and b.addressed_by(remote.dest64, remote.dest16)
+    status, value = b.remote_command(remote)
+    assert (status, value) == (0, b"robot2")
+    answer = b.remote_response(remote, status, value)
+    assert answer[:2] == b"\x97\x0b" and answer[2:10] == b.address64.to_bytes(8, "big")
+    assert answer[10:12] == b"\x00\x42" and answer[12:] == b"NI\x00robot2"
+    zigbee = EmulatedRadio(3, "zigbee")
+    assert zigbee.handle(b"\x01\x01\xff\xff\x00x") == []  # legacy 802.15.4 frames
+    assert zigbee.handle(b"\x00\x01" + bytes(8) + b"\x00x") == []
+    assert a.handle(b"\x11\x01" + bytes(20)) == []  # explicit addressing: not here
+    assert a.handle(b"\x2e\x01") == []
+    assert zigbee.counters["unsupported_frame"] == 2 and a.counters["unsupported_frame"] == 2
 
 
 def _pty_request(path: str, frame: bytes, mode: int = 1) -> bytes:

@@ -40,10 +40,12 @@ from pathlib import Path
 
 from sim.xbee_emu import api
 from sim.xbee_emu.radio import (
-    BROADCAST64,
+    REMOTE_NO_RESPONSE,
+    TX_NO_ACK,
     TX_OK,
     TX_PAYLOAD_TOO_LARGE,
     EmulatedRadio,
+    RemoteCommand,
     Reply,
     Transmit,
 )
@@ -273,6 +275,8 @@ class Medium:
                         self._at(self.reply_delay, functools.partial(self._write, n, reply))
                     case Transmit():
                         self._transmit(radio, out)
+                    case RemoteCommand():
+                        self._remote(radio, out)
             port.parser.api_mode = radio.current_api_mode
 
     def _transparent(self, radio: EmulatedRadio, data: bytes) -> None:
@@ -317,18 +321,56 @@ class Medium:
         end = start + airtime(radio.protocol, len(request.data))
         self._busy_until[net] = end
         done = end - now + radio.delay
-        status = radio.status_frame(request, TX_OK)
+        broadcast = request.broadcast
+        addressees = [
+            m for m, peer in self.radios.items()
+            if m != n and m in self._ports and peer.network == net
+            and (broadcast or peer.addressed_by(request.dest64, request.dest16))
+        ]
+        # 802.15.4 unicasts are MAC-acknowledged: nobody at that address -> No ACK (0x01).
+        # Broadcasts are never acknowledged, so they always report success.
+        ok = broadcast or bool(addressees) or radio.protocol != "802.15.4"
+        status = radio.status_frame(request, TX_OK if ok else TX_NO_ACK)
         if status is not None:
             self._at(max(done, self.reply_delay), functools.partial(self._write, n, status))
-        broadcast = request.dest64 == BROADCAST64
-        for m, peer in self.radios.items():
-            if m == n or m not in self._ports or peer.network != net:
-                continue
-            if not broadcast and peer.address64 != request.dest64:
-                continue
+        for m in addressees:
+            peer = self.radios[m]
             if self._rng.random() < radio.loss or self._rng.random() < peer.loss:
                 self.lost += 1
                 continue
             frame = peer.receive_frame(radio, request.data, broadcast)
             self.delivered += 1
             self._at(done, functools.partial(self._write, m, frame))
+
+    def _remote(self, radio: EmulatedRadio, request: RemoteCommand) -> None:
+        """A remote AT command: over the air to its target(s), which run it and answer
+        with a 0x97 to the requester. A unicast that reaches nobody answers status 0x04
+        (no response) once the request and its answer would have had time to travel."""
+        n = radio.number
+        net = radio.network
+        now = time.monotonic()
+        start = max(now, self._busy_until.get(net, 0.0))
+        end = start + airtime(radio.protocol, 15 + len(request.value))
+        self._busy_until[net] = end
+        done = end - now + radio.delay
+        answered = False
+        for m, peer in self.radios.items():
+            if m == n or m not in self._ports or peer.network != net:
+                continue
+            if not request.broadcast and not peer.addressed_by(request.dest64,
+                                                                 request.dest16):
+                continue
+            if self._rng.random() < radio.loss or self._rng.random() < peer.loss:
+                self.lost += 1
+                continue
+            status, value = peer.remote_command(request)
+            answered = True
+            if request.frame_id:
+                reply = peer.remote_response(request, status, value)
+                back = done + airtime(peer.protocol, 15 + len(value)) + peer.delay
+                self._at(max(back, self.reply_delay), functools.partial(self._write, n, reply))
+        if not answered and not request.broadcast and request.frame_id:
+            failed = (bytes((0x97, request.frame_id)) + request.dest64.to_bytes(8, "big")
+                      + request.dest16.to_bytes(2, "big") + request.command
+                      + bytes((REMOTE_NO_RESPONSE,)))
+            self._at(max(2 * done, self.reply_delay), functools.partial(self._write, n, failed))

@@ -23,7 +23,24 @@ BROADCAST64 = 0x000000000000FFFF
 AT_OK, AT_ERROR, AT_INVALID_COMMAND, AT_INVALID_PARAMETER = 0, 1, 2, 3
 # Delivery status in 0x8B / 0x89 (Digi API reference).
 TX_OK = 0x00
+TX_NO_ACK = 0x01
 TX_PAYLOAD_TOO_LARGE = 0x74
+# Remote AT status (0x97) when the target never answered.
+REMOTE_NO_RESPONSE = 0x04
+# A 16-bit address that is not one: MY=0xFFFE (or 0xFFFF) makes an 802.15.4 radio send
+# with its 64-bit source; a 0x17 with dest16 0xFFFE addresses by 64 bits.
+NO_ADDRESS16 = frozenset((0xFFFE, 0xFFFF))
+BROADCAST16 = 0xFFFF
+
+# API frame types each firmware takes from its UART (Digi's XBee 3 manuals). The
+# 802.15.4 firmware keeps the legacy TX64 (0x00) / TX16 (0x01) requests; Zigbee and
+# DigiMesh do not know them. Anything else is dropped without an answer, as the radio
+# does, and counted (`unsupported_frame`).
+ACCEPTED_FRAMES = {
+    "802.15.4": frozenset((0x00, 0x01, 0x08, 0x09, 0x10, 0x17)),
+    "zigbee": frozenset((0x08, 0x09, 0x10, 0x17)),
+    "digimesh": frozenset((0x08, 0x09, 0x10, 0x17)),
+}
 
 # Width in bytes of numeric parameters (values set with other widths are normalised).
 _WIDTH = {
@@ -46,12 +63,36 @@ class Transmit:
     """A transmit request accepted from the UART, to be put on the air by the medium."""
 
     frame_id: int
-    request_type: int  # 0x10 (Transmit Request) or 0x00 (TX64, 802.15.4)
+    request_type: int  # 0x10 (Transmit Request), 0x00 (TX64) or 0x01 (TX16, 802.15.4)
     dest64: int
     data: bytes
+    dest16: int | None = None
+    """Only for 0x01: the 16-bit destination (0xFFFF broadcast, else a radio's MY)."""
+
+    @property
+    def broadcast(self) -> bool:
+        if self.dest16 is not None:
+            return self.dest16 == BROADCAST16
+        return self.dest64 == BROADCAST64
 
 
-Output = Reply | Transmit
+@dataclass(frozen=True, slots=True)
+class RemoteCommand:
+    """A Remote AT Command Request (0x17) to be carried over the air to its target."""
+
+    frame_id: int
+    dest64: int
+    dest16: int
+    options: int  # bit 0x02: apply now (else queued until AC, like 0x09)
+    command: bytes  # two ASCII letters as sent
+    value: bytes
+
+    @property
+    def broadcast(self) -> bool:
+        return self.dest64 == BROADCAST64
+
+
+Output = Reply | Transmit | RemoteCommand
 
 
 @dataclass
@@ -143,13 +184,26 @@ class EmulatedRadio:
     def handle(self, frame: bytes) -> list[Output]:
         """Process one API frame's data (frame type first)."""
         ftype = frame[0]
+        if ftype not in ACCEPTED_FRAMES[self.protocol]:
+            self.count("unsupported_frame")
+            return []
         if ftype in (0x08, 0x09) and len(frame) >= 4:
             return self._at(frame, queued=ftype == 0x09)
         if ftype == 0x10 and len(frame) >= 14:
             return [Transmit(frame[1], 0x10, int.from_bytes(frame[2:10], "big"), frame[14:])]
         if ftype == 0x00 and len(frame) >= 11:
             return [Transmit(frame[1], 0x00, int.from_bytes(frame[2:10], "big"), frame[11:])]
-        self.count("unsupported_frame")
+        if ftype == 0x01 and len(frame) >= 5:
+            # type, frame id, dest16, options, data
+            dest16 = int.from_bytes(frame[2:4], "big")
+            dest64 = BROADCAST64 if dest16 == BROADCAST16 else 0
+            return [Transmit(frame[1], 0x01, dest64, frame[5:], dest16=dest16)]
+        if ftype == 0x17 and len(frame) >= 15:
+            # type, frame id, dest64, dest16, options, command, [value]
+            return [RemoteCommand(frame[1], int.from_bytes(frame[2:10], "big"),
+                                  int.from_bytes(frame[10:12], "big"), frame[12],
+                                  bytes(frame[13:15]), bytes(frame[15:]))]
+        self.count("short_frame")  # a known type cut short: the radio drops it too
         return []
 
     def _at(self, frame: bytes, *, queued: bool) -> list[Output]:
@@ -163,6 +217,29 @@ class EmulatedRadio:
         if fid == 0:
             return []  # frame id 0: the host asked for no response
         return [Reply(bytes((0x88, fid)) + frame[2:4] + bytes((status,)) + answer)]
+
+    def remote_command(self, request: RemoteCommand) -> tuple[int, bytes]:
+        """Run a remote AT command that reached this radio: (status, value)."""
+        try:
+            cmd = request.command.decode("ascii").upper()
+        except UnicodeDecodeError:
+            cmd = "??"
+        return self._command(cmd, request.value, queued=not request.options & 0x02)
+
+    def addressed_by(self, dest64: int, dest16: int | None) -> bool:
+        """Whether a unicast to (dest64, dest16) is for this radio. A 16-bit address
+        reaches only an 802.15.4 radio whose MY is that address (not 0xFFFE/0xFFFF)."""
+        if dest16 is not None and dest16 not in NO_ADDRESS16:
+            return (self.protocol == "802.15.4" and self.my16 not in NO_ADDRESS16
+                    and self.my16 == dest16)
+        return self.address64 == dest64
+
+    def remote_response(self, request: RemoteCommand, status: int,
+                        value: bytes) -> bytes:
+        """The 0x97 this radio's requester gets back from the radio that ran it."""
+        src16 = self.my16 if self.protocol != "digimesh" else 0xFFFE
+        return (bytes((0x97, request.frame_id)) + self.address64.to_bytes(8, "big")
+                + src16.to_bytes(2, "big") + request.command + bytes((status,)) + value)
 
     def _command(self, cmd: str, value: bytes, *, queued: bool) -> tuple[int, bytes]:
         if cmd == "AC":
@@ -214,7 +291,7 @@ class EmulatedRadio:
         """The transmit status for `request` (None when frame id 0 asked for none)."""
         if request.frame_id == 0:
             return None
-        if request.request_type == 0x00:
+        if request.request_type in (0x00, 0x01):
             return bytes((0x89, request.frame_id, status))
         return bytes((0x8B, request.frame_id, 0xFF, 0xFE, 0x00, status, 0x00))
 
@@ -223,7 +300,9 @@ class EmulatedRadio:
         options = 0x02 if broadcast else 0x01
         if self.protocol == "802.15.4":
             rssi = 0x28  # -40 dBm
-            if sender.my16 == 0xFFFE:
+            # The sender's MY picks the MAC source address: 0xFFFE/0xFFFF send the
+            # 64-bit one (received as 0x80), any other the 16-bit MY (0x81).
+            if sender.my16 in NO_ADDRESS16:
                 return bytes((0x80,)) + sender.address64.to_bytes(8, "big") + bytes(
                     (rssi, options)) + data
             return bytes((0x81,)) + sender.my16.to_bytes(2, "big") + bytes(

@@ -1,8 +1,10 @@
 """`swarmd monitor`: a live table of every robot on the channel (DESIGN section 3).
 
 The monitor joins the channel as a passive listener, the paper's base station; it never
-sends. `--once --json` listens for `--duration` seconds, prints one JSON document and
-exits (for scripts and tests).
+sends. With `--config` it listens through the transport that file names: UDP multicast,
+an XBee (the coordinator, as in the paper) or a transparent serial radio.
+`--once --json` listens for `--duration` seconds, prints one JSON document and exits
+(for scripts and tests).
 """
 
 from __future__ import annotations
@@ -21,8 +23,9 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def monitor(
         config: Annotated[Path | None, typer.Option(
-            "--config", help="A robot file: listen with its swarm, its UDP transport and "
-            "its keys (signed swarms).")] = None,
+            "--config", help="A base station file (swarm, transport, key_files; "
+            "docs/operations.md) or a robot file: listen with its swarm, its transport "
+            "(udp, xbee, serial) and its keys (signed swarms).")] = None,
         swarm: Annotated[Path | None, typer.Option(
             "--swarm", help="A swarm file instead of --config; the channel is then "
             "--group, --port, --interface.")] = None,
@@ -48,15 +51,16 @@ def register(app: typer.Typer) -> None:
         """Watch the swarm channel, like the paper's base station; sends nothing.
 
         A live table per robot: role, function, epoch, last heard, health, who warns
-        about it and how many distinct witnesses, alerts (a silent slot, a suspicion
-        nobody claims, two robots on one function). Give exactly one of --config or
-        --swarm. UDP only.
+        about it and how many distinct witnesses, status (live, silent, superseded by a
+        newer epoch, left), alerts (a silent slot, a suspicion nobody claims, two robots
+        on one function). Give exactly one of --config or --swarm. --config listens
+        through any transport its file names (udp, an XBee coordinator, serial).
 
         Exit codes: 0 done, 1 the channel cannot be opened, 2 unusable config or bad
-        usage (neither or both of --config and --swarm, a radio transport), 130 Ctrl-C
-        (as `start` and `sim`).
+        usage (neither or both of --config and --swarm), 130 Ctrl-C (as `start` and
+        `sim`).
 
-        Example: swarmd monitor --swarm configs/paper.yaml --once --json --duration 5
+        Example: swarmd monitor --config base.yaml --once --json --duration 5
         """
         import asyncio
         import json
@@ -64,9 +68,10 @@ def register(app: typer.Typer) -> None:
 
         from rich.console import Console
 
-        from swarmd.config import ConfigError, ConfigUnreadable, load_robot, load_swarm
-        from swarmd.monitor import MonitorState, listen
-        from swarmd.transport.base import TransportError
+        from swarmd.config import ConfigError, ConfigUnreadable, load_swarm
+        from swarmd.daemon import make_transport
+        from swarmd.monitor import MonitorState, listen, load_base_station
+        from swarmd.transport.base import Transport, TransportError
         from swarmd.transport.udp import UdpTransport
 
         console = Console()
@@ -75,16 +80,12 @@ def register(app: typer.Typer) -> None:
             err.print("give exactly one of --config ROBOT.yaml or --swarm SWARM.yaml")
             raise typer.Exit(2)
         try:
+            transport: Transport
             if config is not None:
-                robot = load_robot(config)
-                swarm_cfg = robot.swarm
-                keys = list(robot.keys())
-                tcfg = robot.transport
-                if tcfg.kind != "udp":
-                    err.print(f"{config}: monitor listens on udp only (transport is "
-                              f"{tcfg.kind}); use an emulated radio bridge")
-                    raise typer.Exit(2)
-                transport = UdpTransport.from_config(tcfg)
+                base = load_base_station(config)
+                swarm_cfg = base.swarm
+                keys = list(base.keys)
+                transport = make_transport(base.transport)
             else:
                 assert swarm is not None
                 swarm_cfg = load_swarm(swarm)
