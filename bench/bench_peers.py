@@ -271,7 +271,8 @@ def swarm_file(directory: Path, slow_down: float) -> Path:
 
 async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None, loss: float,
                       seed: int) -> tuple[dict[str, Any], list[tuple[float, int]], float]:
-    from sim.realtime.robotfiles import free_udp_port, run_realtime_async
+    from sim.realtime.orchestrator import run_realtime_async
+    from sim.realtime.robotfiles import free_udp_port
     from sim.realtime.summary import summarize_realtime
     from sim.shared.faults import parse_fault
     from swarmd.config import load_swarm
