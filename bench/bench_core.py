@@ -1,4 +1,4 @@
-"""Protocol-core benchmark on the virtual-time simulator (issue 2).
+"""Protocol-core benchmark on the virtual-time simulator.
 
 Prints, for the `udp()` preset on the paper swarm and on the 100-robot grid:
 - crash -> takeover latency p50 / p99 / max over many seeds, at 0% and 20% loss;
@@ -6,7 +6,7 @@ Prints, for the `udp()` preset on the paper swarm and on the 100-robot grid:
 - frame sizes (signed and unsigned);
 - simulator speed (simulated robot-seconds per wall second, one core).
 
-Goals (issue 2): p99 <= 1.0 s at 0% loss and <= 1.5 s at 20%; zero false takeovers;
+Goals: p99 <= 1.0 s at 0% loss and <= 1.5 s at 20%; zero false takeovers;
 >= 1,000 robot-seconds per wall second per core at 100 robots.
 
     python bench/bench_core.py            # CI-sized: ~1 minute

@@ -1,4 +1,4 @@
-"""CPU and memory of one idle daemon at 10 Hz heartbeats (issue 3: goal < 1% of a core,
+"""CPU and memory of one idle daemon at 10 Hz heartbeats (goal < 1% of a core,
 < 60 MB RSS).
 
 Runs the paper swarm as real `swarmd start` processes on loopback multicast (random

@@ -1,4 +1,4 @@
-"""Benchmarks of the MuJoCo quadrotors (issue 4, Must show).
+"""Benchmarks of the MuJoCo quadrotors.
 
 1. single: physics real-time factor of one robot process: steps/s and RTF at 500 Hz
    physics + 100 Hz control (QuadRobot flying a slot), X2 and Crazyflie.

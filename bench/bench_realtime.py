@@ -1,4 +1,4 @@
-"""Benchmarks of the real-time, multi-process `swarmd sim` (issue 3, Must show).
+"""Benchmarks of the real-time, multi-process `swarmd sim`.
 
 1. crash -> takeover latency over >= 20 real-process crashes (SIGKILL), p50 / p99
    (goal with the udp() preset: p99 <= 1.2 s). One run of the paper swarm in which the

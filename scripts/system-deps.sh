@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # System packages swarmd's tests and demo use, from Debian's archive. Idempotent.
 # - libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6: headless MuJoCo rendering
-#   (MUJOCO_GL=egl or osmesa, see shared notes/mujoco.md)
+#   (MUJOCO_GL=egl or osmesa, see docs/physics.md)
 # - systemd: `systemd-analyze verify` of deploy/ units
 # - iproute2: network-namespace multicast test (`ip netns`)
 # - shellcheck: lint of deploy/install.sh and this script (tests/test_deploy.py)

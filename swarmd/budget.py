@@ -1,6 +1,6 @@
 """Channel budget: what a swarm puts on the air, and whether the radio can carry it.
 
-`swarmd check` prints this (issue 5 point 6). The numbers come from the plan and the
+`swarmd check` prints this. The numbers come from the plan and the
 timing parameters, not from measurement:
 
 - frames/s: every ACTIVE robot heartbeats each `heartbeat_interval`, every STANDBY each
@@ -17,7 +17,7 @@ timing parameters, not from measurement:
 - broadcast copies: an 802.15.4 broadcast is one transmission. Zigbee routers relay
   every broadcast with up to 3 transmissions each (passive acknowledgement), and the
   broadcast transaction table (8 entries, 8 s) limits a network to about one broadcast
-  per second (notes/xbee.md, Digi 90001539): 3 x robots transmissions, worst case.
+  per second (docs/radios.md, Digi 90001539): 3 x robots transmissions, worst case.
   A DigiMesh broadcast goes out MT + 1 = 4 times (MT default 3); with every robot in
   one hop and NH=1 nobody relays it (more hops add relays: not counted here).
 """

@@ -157,7 +157,7 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
 
 
 def budget_section(cfg: SwarmConfig) -> Section | None:
-    """Channel budget on every medium swarmd speaks (issue 5, point 6): frames and
+    """Channel budget on every medium swarmd speaks: frames and
     bytes per second on the air, airtime at 250 kbps, whether a heartbeat fits."""
     from swarmd.budget import MEDIA, channel_budget
 
@@ -197,7 +197,7 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
 
 
 def flight_section(cfg: SwarmConfig) -> Section | None:
-    """What the simulator's quadrotors make of each function (issue 4): `swarmd sim`
+    """What the simulator's quadrotors make of each function: `swarmd sim`
     with physics refuses a swarm whose functions a craft cannot fly (a waypoint under
     the ground, a slot at ground level); said here first, as notes, since real robots
     interpret their functions themselves."""

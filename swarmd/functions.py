@@ -1,6 +1,6 @@
 """Functions a craft flies, from the swarm file's `functions:` mapping, as setpoints.
 
-Kinds (DESIGN section 3, issue 4):
+Kinds (DESIGN section 3):
 - `slot`: `{kind: slot, position: [x, y, z]}` - hold a position in a formation.
 - `patrol`: `{kind: patrol, waypoints: [[x, y, z], ...], speed: v}` - fly a closed loop
   of waypoints at `speed` m/s.

@@ -1,4 +1,4 @@
-"""Daemon logging: one JSON object a line on stdout (issue 3 point 4, journald-friendly).
+"""Daemon logging: one JSON object a line on stdout (journald-friendly).
 
 journald stores each stdout line as one message, and tools (`journalctl -o cat | jq`)
 can parse it when every line is a JSON object. Records carry `ts` (Unix time), `level`,

@@ -21,7 +21,7 @@ LEAVE. Alerts are the things an operator must look at:
 - two robots heartbeating the same function at the same epoch (split brain: DESIGN
   rule 2 says this must never last).
 Frames that do not decode (garbage, wrong key, another swarm, replays) are counted by
-reason, never raised (STYLE.md point 4).
+reason, never raised (DESIGN section 2).
 """
 
 from __future__ import annotations

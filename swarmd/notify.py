@@ -6,7 +6,7 @@ starts with ``@``); see sd_notify(3), section "Notes", which documents it as a s
 interface that may be reimplemented. It is small enough that a library would add a
 dependency for twenty lines.
 
-How the daemon uses it (issue 6, deploy/swarmd.service ``Type=notify``):
+How the daemon uses it (deploy/swarmd.service ``Type=notify``):
 
 - ``READY=1`` once the transport is up and the first heartbeat is out, so
   ``systemctl start`` returns only when the robot is really on the channel;

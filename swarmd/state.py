@@ -1,6 +1,6 @@
 """Persisted state of one robot: the epochs it knows, what it held, its sequence reservation.
 
-Why it exists (DESIGN rule 2, issue 3 point 4): a robot that crashes while executing a
+Why it exists (DESIGN rule 2): a robot that crashes while executing a
 function and reboots must not resume that function if a standby took it over meanwhile.
 So the daemon writes, on every role / function / epoch change, what it knows; on restart
 it hands that to the core as `Restored(known, held)` and the node listens for

@@ -1,4 +1,4 @@
-"""Channel budget (issue 5 point 6), checked against hand-computed numbers."""
+"""Channel budget, checked against hand-computed numbers."""
 
 from __future__ import annotations
 

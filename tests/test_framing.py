@@ -1,4 +1,4 @@
-"""COBS + CRC framing of byte-stream radios (issue 5 point 2)."""
+"""COBS + CRC framing of byte-stream radios."""
 
 from __future__ import annotations
 

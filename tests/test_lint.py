@@ -1,4 +1,4 @@
-"""ruff and mypy --strict run as part of the tests (issue 2, point 1)."""
+"""ruff and mypy --strict run as part of the tests."""
 
 from __future__ import annotations
 

@@ -168,7 +168,7 @@ def test_swarmd_start_speaks_sd_notify(
         mean_gap = (pings[-1] - pings[0]) / (len(pings) - 1)
         assert mean_gap == pytest.approx(WATCHDOG_USEC / 2e6, rel=0.25)
 
-        # Issue 6 point 5 end to end: the daemon's own endpoint, scraped over HTTP.
+        # End to end: the daemon's own endpoint, scraped over HTTP.
         scrape = httpx.get(f"http://127.0.0.1:{metrics_port}/metrics", timeout=5).text
         assert 'swarmd_role{swarmd_role="ACTIVE"} 1.0' in scrape
         assert 'swarmd_function_info{function="f2"} 1.0' in scrape

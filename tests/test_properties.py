@@ -1,6 +1,6 @@
 """Property: random fault schedules on random valid swarms never break an invariant.
 
-Issue 2 "Must show". A swarm is a ring of active slots, each watching `k` slots on
+A swarm is a ring of active slots, each watching `k` slots on
 each side plus a few random extra edges (so every slot has >= quorum watchers, the
 condition `swarmd check` enforces, DESIGN rule 3), and 1-3 standbys covering random
 slots (rule 6). Faults are any of DESIGN section 3's kinds at random times, on a

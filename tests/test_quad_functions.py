@@ -70,7 +70,7 @@ def test_parse_rejects_with_the_field_named(spec: dict[str, object], words: str)
 
 
 def test_flight_problems_name_the_swarm_file_field() -> None:
-    # What `swarmd sim` prints before starting any robot (issue 4 item 4).
+    # What `swarmd sim` prints before starting any robot.
     functions: dict[str, Any] = {
         "f1": {"kind": "slot", "position": [0, 0, 1.5]},
         "p1": {"kind": "patrol", "waypoints": [[0, 0, 1.5], [2, 0, -1.0]], "speed": 1.0},

@@ -1,4 +1,4 @@
-"""The real-time `swarmd sim`: real daemon processes on loopback multicast (issue 3 item 5).
+"""The real-time `swarmd sim`: real daemon processes on loopback multicast.
 
 Each test is one short run of the paper's swarm (a few seconds of real time), bounded by
 `asyncio.wait_for`; what happened is read from the merged event log and judged by the
@@ -202,7 +202,7 @@ def test_realtime_interrupt_leaves_no_process_behind(tmp_path: Path, sig: int) -
 
 @pytest.mark.parametrize("transport", ["xbee", "serial"])
 async def test_realtime_over_emulated_radios_fails_over(tmp_path: Path, transport: str) -> None:
-    """Issue 5 point 5: `swarmd sim --transport xbee|serial` runs the swarm over
+    """`swarmd sim --transport xbee|serial` runs the swarm over
     emulated radios on ptys (digi-xbee in API mode, or transparent mode + COBS/CRC)."""
     result = await run(5.0, "crash:2@3", tmp_path=tmp_path, transport=transport)
     takeover = named(result, "takeover", function="f2")

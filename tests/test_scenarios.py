@@ -1,4 +1,4 @@
-"""Issue 2 "Must show": scenarios on the paper's swarm in the virtual-time simulator.
+"""Scenarios on the paper's swarm in the virtual-time simulator.
 
 Each run is a pure function of (plan, params, faults, seed) (sim.virtual.simulator), so these are
 deterministic; every one also checks the event-log invariants (sim.shared.invariants).

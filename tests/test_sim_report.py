@@ -1,4 +1,4 @@
-"""`swarmd sim --report DIR` end to end, as `make demo` runs it (issue 4 item 5).
+"""`swarmd sim --report DIR` end to end, as `make demo` runs it.
 
 One flown run of the paper's swarm with robot 2 crashing, through the CLI in a
 subprocess (the forkserver, `-m swarmd.cli` and the report writing are what a user

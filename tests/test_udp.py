@@ -1,4 +1,4 @@
-"""UDP multicast transport on loopback (issue 3 point 2)."""
+"""UDP multicast transport on loopback."""
 
 from __future__ import annotations
 

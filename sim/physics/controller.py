@@ -4,16 +4,16 @@ Position loop: desired force F = -kx*sat(ex) - kv*ev - ki*integral + m*g*e3 + m*
 The position error is saturated (1.5 m) so a long move cruises at a bounded speed
 instead of tilting hard; the integral only runs near the target and is capped at 30% of
 the weight, so it trims the steady state without winding up during moves
-(notes/mujoco.md). The tilt of F is limited so the craft never trades all lift for speed.
+(docs/physics.md). The tilt of F is limited so the craft never trades all lift for speed.
 
 Attitude loop: b3d = F/|F|, yaw sets b1; eR = vee(Rd'R - R'Rd)/2; M = -kR*eR - kW*eW
 + W x JW. Gains are set from bandwidths: kR = J*w^2, kW = 2*zeta*J*w per axis. An
 attitude bandwidth of ~15 rad/s suits the X2's 40 ms motor lag (25 rad/s dipped 20-40 cm
-in moves, notes/mujoco.md).
+in moves, docs/physics.md).
 
 Mixing: [T, Mx, My, Mz] = A f with columns (1, y_i, -x_i, s_i*kappa) per rotor; f =
 A^-1 [...], clipped to the motor range. Cross products are written out by hand
-(np.cross on 3-vectors costs ~15 us, this ~2 us: notes/mujoco.md).
+(np.cross on 3-vectors costs ~15 us, this ~2 us: docs/physics.md).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ class Gains:
     """Integral gain ki = m * int_bw * w^2 / 3 (a third of the position stiffness a second)."""
     err_sat: float = 1.5
     """Horizontal position error saturation, m: cruise speed ~ w * err_sat / (2 zeta) =
-    2.25 m/s. 1.5 m moves 3 m in 2.6 s (notes/mujoco.md) and a standby 7 m to its slot
+    2.25 m/s. 1.5 m moves 3 m in 2.6 s (docs/physics.md) and a standby 7 m to its slot
     in ~4 s (1 m: 5 s), with the same ~1 cm overshoot."""
     err_sat_z: float = 1.0
     """Vertical position error saturation, m (climb ~1.5 m/s). Saturated apart from the

@@ -10,7 +10,7 @@ not only through silence.
 
 Timing: one asyncio task wakes every `wake` seconds (40 ms) and steps physics up to the
 loop's clock (500 Hz physics, 100 Hz control). Waking every control period instead cost
-about twice the CPU for the same result (notes/mujoco.md: 50 robots at 50 ms wakes used
+about twice the CPU for the same result (docs/physics.md: 50 robots at 50 ms wakes used
 0.67 of 2 cores, never late). Health goes to the daemon when it changes and at least
 every `health_period` (0.5 s), so a daemon that times robot health out never does so
 for a live craft.

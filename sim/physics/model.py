@@ -1,6 +1,6 @@
 """A self-contained MJCF quadrotor: presets from public numbers, rotors as site actuators.
 
-No mesh files and no downloads (notes/mujoco.md: the menagerie wheel fetches models at
+No mesh files and no downloads (docs/physics.md: the menagerie wheel fetches models at
 first use and fails offline). Only numbers are taken from the public models:
 
 - `crazyflie()`: Bitcraze Crazyflie 2 (mass, inertia, arm, kf/km, thrust-to-weight).
@@ -61,7 +61,7 @@ class Preset:
 
 
 def crazyflie() -> Preset:
-    """Crazyflie 2 class: 27 g, thrust-to-weight 2.25, 20 ms motor lag (notes/mujoco.md)."""
+    """Crazyflie 2 class: 27 g, thrust-to-weight 2.25, 20 ms motor lag (docs/physics.md)."""
     a = 0.0397 / math.sqrt(2.0)  # arm 0.0397 m from the centre, rotors on the diagonals
     mass = 0.027
     return Preset(

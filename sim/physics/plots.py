@@ -1,4 +1,4 @@
-"""Pictures of a run (issue 4 item 5): a timeline of roles and functions, and a top-down
+"""Pictures of a run: a timeline of roles and functions, and a top-down
 trajectory plot. matplotlib with the Agg backend (no display needed).
 
 The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records
@@ -30,7 +30,7 @@ ROLE_COLORS: dict[str, str] = {
     "fenced": "#d62728",
     "crashed": "#000000",
 }
-"""Role colours shared by the timeline and the video (issue 4: active green, standby grey,
+"""Role colours shared by the timeline and the video (active green, standby grey,
 claiming orange, fenced red, crashed black)."""
 
 FENCE_SHOW = 1.0

@@ -4,7 +4,7 @@ N crafts are mocap bodies (no physics here: the flying already happened in the r
 processes), each coloured by its role at that instant from the event log (the same
 spans as the timeline: active green, standby grey, claiming orange, fenced red, crashed
 black). A fixed camera sees the whole swarm; 640x480, shadows and reflections off and
-`offsamples=0` (about 20 ms a frame instead of 100-140 ms, notes/mujoco.md). Output:
+`offsamples=0` (about 20 ms a frame instead of 100-140 ms, docs/physics.md). Output:
 `swarm.mp4` (imageio-ffmpeg's bundled ffmpeg) or `swarm.gif` when that fails, and key
 frames `key-*.png` at the faults and takeovers.
 
@@ -198,7 +198,7 @@ def report_pictures(
     fps: int = 20,
     speed: float = 1.0,
 ) -> dict[str, Any]:
-    """The physics pictures of `swarmd sim --report DIR` (issue 4 item 5), from the
+    """The physics pictures of `swarmd sim --report DIR`, from the
     trajectory files the robots wrote: `trajectories.png` always, and where a GL backend
     loads `swarm.mp4` (or `.gif`) and `key-*.png`. Returns what was written, and why
     not (`"video_error"`); never raises for a robot's broken trajectory file."""

@@ -19,7 +19,7 @@ module's `child_main` in a forkserver child. What the simulator adds around the 
   when the machine could not keep up, instead of passing the false suspicions that
   follow off as protocol failures.
 
-Process hygiene (issue 3 item 5: Ctrl-C leaves no process behind): the child puts itself
+Process hygiene (Ctrl-C leaves no process behind): the child puts itself
 in its own process group (so the terminal's SIGINT reaches only the orchestrator, which
 decides) and asks the kernel to SIGKILL it if its parent (the forkserver, which exits
 with the orchestrator) dies.
@@ -273,7 +273,7 @@ class _Robot:
                 msg = json.loads(self.control.recv_bytes())
                 self._command(msg)
         except (EOFError, OSError):
-            # The orchestrator is gone: stop (no orphan daemons, issue 3 item 5).
+            # The orchestrator is gone: stop (no orphan daemons).
             asyncio.get_running_loop().remove_reader(self.control.fileno())
             if self.go is not None:
                 self.go.set()

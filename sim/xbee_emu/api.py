@@ -1,4 +1,4 @@
-"""XBee API frames on a UART: framing, checksum, API-mode-2 escaping (notes/xbee.md).
+"""XBee API frames on a UART: framing, checksum, API-mode-2 escaping (docs/radios.md).
 
     7E | length (2 B, big-endian) | frame data | checksum = 0xFF - (sum(data) & 0xFF)
 

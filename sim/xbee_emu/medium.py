@@ -1,4 +1,4 @@
-"""Software XBee radios on pseudo-terminals sharing one simulated medium (issue 5 pt 4).
+"""Software XBee radios on pseudo-terminals sharing one simulated medium.
 
 Each radio is a pty pair: the emulator keeps the master, the client (digi-xbee, the
 serial transport, minicom) opens the slave through a stable symlink such as
@@ -10,7 +10,7 @@ serial transport, minicom) opens the slave through a stable symlink such as
 
 Why the details:
 - AT replies come ~2 ms after the request, never at once: digi-xbee has a lost wake-up
-  race that makes an instant reply wait out its 4 s timeout (notes/xbee.md).
+  race that makes an instant reply wait out its 4 s timeout (docs/radios.md).
 - The emulator keeps its own slave fd open so the master never sees a hang-up while no
   client is attached; masters are non-blocking and a full pty buffer drops the frame
   (a real radio's UART buffer overflows the same way).

@@ -2,7 +2,7 @@
 
 Pure state machine (no I/O): `handle(frame)` returns what the radio answers on its UART
 (`Reply`) and what it puts on the air (`Transmit`); the `Medium` does the timing and the
-ptys. What is emulated follows notes/xbee.md, which was read off digi-xbee 1.5.0's
+ptys. What is emulated follows docs/radios.md, which was read off digi-xbee 1.5.0's
 `open()`: AT requests arrive as 0x09 (queued) as well as 0x08, HV must start with an
 XBee 3 code, VR's first digit selects the protocol.
 """
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from swarmd.transport.media import MAX_PAYLOAD, MAX_PAYLOAD_ENCRYPTED, PROTOCOLS
 
-# Firmware versions digi-xbee maps to each protocol on XBee 3 hardware (notes/xbee.md).
+# Firmware versions digi-xbee maps to each protocol on XBee 3 hardware (docs/radios.md).
 _VR = {"zigbee": b"\x10\x0d", "802.15.4": b"\x20\x14", "digimesh": b"\x30\x0d"}
 HV_XBEE3 = b"\x42\x40"
 

@@ -1,7 +1,7 @@
 """`swarmd xbee ...`: configure a radio the paper's way, show what it is, emulate radios.
 
 - `configure --port P --role coordinator|router --pan 0x607 [--channel C] [--write]`
-  applies the paper's settings (notes/xbee.md): PAN id, coordinator CE=1 with DH/DL
+  applies the paper's settings (docs/radios.md): PAN id, coordinator CE=1 with DH/DL
   0x0000/0xFFFF (broadcast), routers CE=0 (SM=0 on Zigbee) with DH/DL 0x0000/0x0000,
   and on 802.15.4 MY=0xFFFE (64-bit source addresses: the digi-xbee 0x81 stall). It
   prints every setting before and after; `--write` saves to flash (WR).

@@ -1,4 +1,4 @@
-"""The transport interface every channel implements (issue 3, point 2).
+"""The transport interface every channel implements.
 
 A transport moves opaque frames (bytes from `swarmd.core.wire`) to every robot in range.
 It never interprets them. The runtime owns exactly one transport:

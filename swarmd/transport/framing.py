@@ -2,7 +2,7 @@
 
 A transparent-mode XBee (AP=0) or a SiK telemetry radio hands us a byte stream, not
 frames: the radio packetises at its own timeout, merges writes, splits long ones, and
-noise on the air or the UART adds bytes (issue 5 point 2). So every swarmd frame goes
+noise on the air or the UART adds bytes. So every swarmd frame goes
 out as::
 
     00 | COBS(frame + CRC32_LE(frame)) | 00

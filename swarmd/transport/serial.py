@@ -1,4 +1,4 @@
-"""Transparent serial radios through pyserial-asyncio (issue 5 point 2).
+"""Transparent serial radios through pyserial-asyncio.
 
 For an XBee in transparent mode (AP=0, the paper's DH/DL 0x0000/0xFFFF broadcast
 setting on every robot) or a SiK telemetry radio: whatever is written comes out of

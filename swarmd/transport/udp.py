@@ -1,4 +1,4 @@
-"""UDP multicast transport (issue 3, point 2): the channel for `sim`, tests and Wi-Fi swarms.
+"""UDP multicast transport: the channel for `sim`, tests and Wi-Fi swarms.
 
 One socket per daemon, bound to the group address so that it receives only this group's
 datagrams, with SO_REUSEADDR and SO_REUSEPORT so that many daemons on one host share the
