@@ -9,6 +9,7 @@ Big inputs are generated in tmp_path, never committed.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import stat
@@ -52,19 +53,14 @@ def swarm_text(timing: str = "", robot_one: str = "1") -> str:
 
 def big_swarm(path: Path, actives: int, standbys: int) -> Path:
     """`actives` robots in a ring (each watched by its two neighbours), `standbys` each
-    covering four consecutive slots."""
-    lines = ["swarm: {id: 7}", "functions:"]
-    lines += [f"  f{i}: {{kind: slot, position: [{i}.0, 0.0, 1.0]}}"
-              for i in range(1, actives + 1)]
-    lines.append("robots:")
-    for i in range(1, actives + 1):
-        left, right = (i - 2) % actives + 1, i % actives + 1
-        lines.append(f"  - {{id: {i}, state: active, neighbors: [{left}, {right}]}}")
-    for j in range(standbys):
-        subs = ", ".join(f"f{(j + k) % actives + 1}" for k in range(4))
-        lines.append(f"  - {{id: {actives + 1 + j}, state: standby, subs: [{subs}]}}")
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    covering four consecutive slots: the swarm bench/bench_config.py times."""
+    spec = importlib.util.spec_from_file_location("bench_config",
+                                                  ROOT / "bench" / "bench_config.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    written: Path = bench.write_swarm(path, actives, standbys)
+    return written
 
 
 def billion_laughs() -> str:
