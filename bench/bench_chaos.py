@@ -206,6 +206,26 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
+def _chaos_chunk(args: tuple[int, int, int]) -> dict[str, list[tuple[int, Violation]]]:
+    first, last, max_robots = args
+    return chaos(range(first, last), max_robots, False)
+
+
+def _chaos_parallel(seeds: range, max_robots: int,
+                    jobs: int) -> dict[str, list[tuple[int, Violation]]]:
+    from concurrent.futures import ProcessPoolExecutor
+
+    step = 50
+    chunks = [(s, min(s + step, seeds.stop), max_robots)
+              for s in range(seeds.start, seeds.stop, step)]
+    found: dict[str, list[tuple[int, Violation]]] = {}
+    with ProcessPoolExecutor(jobs) as pool:
+        for part in pool.map(_chaos_chunk, chunks):
+            for kind, hits in part.items():
+                found.setdefault(kind, []).extend(hits)
+    return found
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=200, help="seeds 0..N-1 (default 200)")
@@ -214,13 +234,18 @@ def main() -> None:
     ap.add_argument("--verbose", action="store_true", help="print the swarm and its log")
     ap.add_argument("--ring8", action="store_true", help="the ring-of-eight figure only")
     ap.add_argument("--phases", type=int, default=20, help="--ring8: heartbeat phases")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="processes (seeds are independent: one per core)")
     a = ap.parse_args()
     if a.ring8:
         print_ring8(a.phases)
         return
     seeds = range(a.seed, a.seed + 1) if a.seed is not None else range(a.seeds)
     t0 = time.perf_counter()
-    found = chaos(seeds, a.max_robots, a.verbose)
+    if a.jobs > 1 and len(seeds) > 1:
+        found = _chaos_parallel(seeds, a.max_robots, a.jobs)
+    else:
+        found = chaos(seeds, a.max_robots, a.verbose)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
     print(f"{len(seeds)} seeds, {total} violation(s) in {wall:.1f} s")
