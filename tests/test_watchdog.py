@@ -28,8 +28,11 @@ def test_recently_heard_starts_running() -> None:
     w = SlotWatch("f2", P, now=10.0, last_heard=9.8)
     assert state(w) is WatchState.RUNNING
     assert w.deadline == pytest.approx(9.8 + P.t_max)
+    # Heard, but silent for T_max already: suspected at once (Fig. 7), not after the
+    # start-up grace, which is for slots never heard.
     stale = SlotWatch("f2", P, now=10.0, last_heard=9.0)
-    assert stale.state is WatchState.WAITING
+    assert stale.state is WatchState.RUNNING and stale.deadline == pytest.approx(10.0)
+    assert SlotWatch("f2", P, now=10.0).deadline == pytest.approx(10.0 + P.startup_grace)
 
 
 def test_running_fires_t_max_after_last_heartbeat() -> None:

@@ -53,9 +53,13 @@ class SlotWatch:
         self.handed_over = False  # a CLAIM or LEAVE silenced this episode once already
         self.alerted = False
         self.last_heard = last_heard
-        if last_heard is not None and now - last_heard < params.t_max:
+        if last_heard is not None:
+            # Fig. 7: T_max from the last heartbeat heard, also when that was before this
+            # watch began (a standby that takes a slot over has heard its new neighbours
+            # as a standby): a neighbour already silent for T_max is suspected at once,
+            # not after a start-up grace meant for robots never heard.
             self.state = WatchState.RUNNING
-            self.deadline = last_heard + params.t_max
+            self.deadline = max(now, last_heard + params.t_max)
         else:
             # Rule 5: a slot not heard yet gets a grace time instead of Fig. 7's
             # endless *waiting* state.
