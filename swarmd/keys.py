@@ -29,6 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from swarmd.core.wire import KEY_LEN
+from swarmd.files import file_kind
 
 __all__ = ["KEY_LEN", "KeyFileError", "generate_key", "load_key", "load_keys", "parse_key"]
 
@@ -48,7 +49,17 @@ def generate_key(path: Path | str, *, force: bool = False, hex_format: bool = Fa
     this robot off from the swarm until every robot has the new one).
     """
     path = Path(path)
-    if path.exists() and not force:
+    try:
+        st = os.stat(path)  # follows a symlink: a link to /dev/null is a device
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise KeyFileError(f"{path}: {exc.strerror}") from None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        # --force replaces a key, never a device node, FIFO or directory.
+        raise KeyFileError(f"{path} is {file_kind(st.st_mode)}, not a regular file; "
+                           "refusing to replace it (even with --force)")
+    if st is not None and not force:
         raise KeyFileError(f"{path} already exists; pass --force to replace it")
     key = secrets.token_bytes(KEY_LEN)
     data = (key.hex() + "\n").encode() if hex_format else key
@@ -80,7 +91,9 @@ def load_key(path: Path | str) -> bytes:
     try:
         # Check the permissions of the file actually opened (fstat), not of a path
         # that could be swapped between the check and the read.
-        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY)
+        # O_NONBLOCK: a FIFO given as key file opens at once (and is refused below)
+        # instead of blocking until some writer appears.
+        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
     except FileNotFoundError:
         raise KeyFileError(
             f"key file {path} does not exist (make one: swarmd keygen {path})"
@@ -95,7 +108,8 @@ def load_key(path: Path | str) -> bytes:
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise KeyFileError(f"key file {path} is not a regular file")
+            raise KeyFileError(f"key file {path} is {file_kind(st.st_mode)}, not a regular "
+                               "file")
         loose = stat.S_IMODE(st.st_mode) & 0o077
         if loose:
             who = []
