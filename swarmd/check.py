@@ -209,6 +209,9 @@ def auth_section(cfg: SwarmConfig) -> Section:
         "revoked": sorted(cfg.revoked)}
     if mode == "per-robot":
         line = f"auth: per-robot (Ed25519), public keys in {keys_dir}"
+        if keys_dir is not None and not keys_dir.exists():
+            line += (f" (not made yet: swarmd keygen --swarm {cfg.source} {keys_dir}; "
+                     "swarmd sim makes throwaway keys)")
         if cfg.revoked:
             line += f", revoked: {', '.join(map(str, sorted(cfg.revoked)))}"
         if key is not None:
@@ -217,8 +220,10 @@ def auth_section(cfg: SwarmConfig) -> Section:
         line = (f"auth: shared key {key} (any robot holding it can sign as any other; "
                 "docs/operations.md)")
     else:
-        line = "auth: none, frames unsigned" + ("" if cfg.auth_explicit else
-                                                " (not said: swarmd start refuses it)")
+        line = ("auth: none, frames UNSIGNED: anyone who can send on the channel can speak "
+                "for any robot and take over any function")
+        line += (" (chosen: auth: none)" if cfg.auth_explicit else
+                 " (not said: swarmd start refuses it)")
     return Section(key="auth", title="", columns=(), rows=(), data=data, notes=(line,))
 
 

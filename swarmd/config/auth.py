@@ -107,10 +107,7 @@ def auth_issues(cfg: SwarmConfig, *, deploying: bool = False) -> list[AuthIssue]
                              "error" if deploying else "warning"))
         return out
     if isinstance(auth, NoAuth):
-        out.append(AuthIssue(("auth",), "frames are unsigned (auth: none): anyone who can "
-                             "send on the channel can speak for any robot and take over "
-                             "any function", "warning"))
-        return out
+        return out  # chosen explicitly; `swarmd check` prints what it leaves open
     key_path = cfg.key_path
     if key_path is not None:
         loc: Loc = ("key_file",) if auth is None else ("auth", "key_file")
@@ -127,12 +124,14 @@ def auth_issues(cfg: SwarmConfig, *, deploying: bool = False) -> list[AuthIssue]
         keys_dir = cfg.keys_dir_path
         assert keys_dir is not None
         if not keys_dir.is_dir():
-            what = "is not a directory" if keys_dir.exists() else "does not exist"
-            out.append(AuthIssue(
-                ("auth", "keys_dir"),
-                f"keys dir {keys_dir} {what}: make the swarm's keys with "
-                f"{keygen_hint(cfg, keys_dir)} (swarmd sim makes throwaway ones)",
-                "error" if deploying or keys_dir.exists() else "warning"))
+            # A plan may be checked and simulated (throwaway keys) before its keys are
+            # made: `swarmd check` says so in its auth line; a robot cannot start.
+            if deploying or keys_dir.exists():
+                what = "is not a directory" if keys_dir.exists() else "does not exist"
+                out.append(AuthIssue(
+                    ("auth", "keys_dir"),
+                    f"keys dir {keys_dir} {what}: make the swarm's keys with "
+                    f"{keygen_hint(cfg, keys_dir)}"))
             return out
         for r in sorted(ids - set(auth.revoked)):
             try:
