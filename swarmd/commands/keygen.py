@@ -58,8 +58,8 @@ def register(app: typer.Typer) -> None:
         with --force. Exit codes: 0 written, 1 refused (exists without --force, cannot
         be written, bad swarm file).
 
-        Examples: swarmd keygen --swarm configs/paper.yaml configs/keys;
-        swarmd keygen --robot 3 keys; swarmd keygen swarm.key
+        Example: swarmd keygen --swarm configs/paper.yaml configs/keys (also:
+        swarmd keygen --robot 3 configs/keys; swarmd keygen swarm.key)
         """
         from swarmd.keys import KeyFileError
 

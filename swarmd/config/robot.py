@@ -367,13 +367,13 @@ def _deployable(swarm: SwarmConfig, robot: int, identity_file: Path | None, src:
                                f"{swarm.source} (auth.revoked): no robot accepts its frames"))
         return out
     keys_dir = swarm.keys_dir_path
+    if any(p.severity == "error" for p in deploying):
+        return out  # no keys dir: its message says how to make every key
     if identity_file is None:
         out.append(src.problem(("identity_file",), f"swarm {swarm.source} is signed per "
                                "robot: set identity_file to this robot's private key "
                                f"(make it: swarmd keygen --robot {robot} {keys_dir})"))
         return out
-    if any(p.severity == "error" for p in deploying):
-        return out  # no keys dir: its message says how to make every key
     try:
         private = read_private_key(identity_file)
     except KeyFileError as exc:
