@@ -37,6 +37,7 @@ from swarmd.link.mavlink_pilot import (
     ned_to_swarm,
     swarm_to_ned,
 )
+from tests.swarms import unsigned_paper
 
 ROOT = Path(__file__).resolve().parent.parent
 ARMED, CUSTOM = 128, 1
@@ -427,7 +428,7 @@ def test_robot_file_mavlink_link(tmp_path: Path) -> None:
     from swarmd.link.factory import make_link
     from swarmd.link.mavlink import MavlinkLink
 
-    swarm = (ROOT / "configs" / "paper.yaml").resolve()
+    swarm = unsigned_paper(tmp_path)
     text = (f"robot: 2\nswarm: {swarm}\nlink: {{kind: mavlink, url: 'udpin:127.0.0.1:14540',"
             " autopilot: ardupilot, release: land, health: {battery_faulty: 20,"
             " sensors: {mag: faulty}}}\n")
