@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from swarms import paper_text, unsigned_paper
 from test_runtime import GROUP, launch, robot_cfg, runtime_of, wait_until
 from test_start import listener
 
@@ -30,7 +31,6 @@ from swarmd.link.socket import SocketLink, SocketLinkError
 from swarmd.state import StateError, StateFile, StateWriteError, load, state_path
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import UdpTransport
-from tests.swarms import paper_text, unsigned_paper
 
 
 def _messages(caplog: pytest.LogCaptureFixture, msg: str) -> list[logging.LogRecord]:

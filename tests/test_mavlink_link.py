@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from swarms import unsigned_paper
 
 from swarmd.core.roles import Health
 from swarmd.link.mavlink_health import (
@@ -37,7 +38,6 @@ from swarmd.link.mavlink_pilot import (
     ned_to_swarm,
     swarm_to_ned,
 )
-from tests.swarms import unsigned_paper
 
 ROOT = Path(__file__).resolve().parent.parent
 ARMED, CUSTOM = 128, 1

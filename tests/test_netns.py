@@ -27,9 +27,9 @@ from typing import Any
 
 import pytest
 import yaml
+from swarms import unsigned_paper
 
 from swarmd.transport.addresses import DEFAULT_GROUP
-from tests.swarms import unsigned_paper
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"

@@ -12,9 +12,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from swarms import unsigned_paper
 
 from swarmd.notify import Notifier
-from tests.swarms import unsigned_paper
 
 
 @pytest.fixture

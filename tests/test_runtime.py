@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from swarms import paper_text, unsigned_paper
 
 import swarmd.daemon as daemon_mod
 from sim.realtime.robotfiles import free_udp_port
@@ -35,7 +36,6 @@ from swarmd.runtime import Runtime
 from swarmd.state import state_path
 from swarmd.transport.addresses import DEFAULT_GROUP
 from swarmd.transport.base import EventCallback, FrameCallback
-from tests.swarms import paper_text, unsigned_paper
 
 GROUP = DEFAULT_GROUP
 

@@ -15,12 +15,12 @@ from pathlib import Path
 from typing import IO, Any
 
 import pytest
+from swarms import unsigned_paper
 
 from sim.realtime.robotfiles import free_udp_port
 from swarmd.core import wire
 from swarmd.core.events import EVENTS
 from swarmd.transport.addresses import DEFAULT_GROUP
-from tests.swarms import unsigned_paper
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
 GROUP = DEFAULT_GROUP

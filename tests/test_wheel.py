@@ -20,9 +20,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from swarms import paper_text
 
 from sim.realtime.robotfiles import free_udp_port
-from tests.swarms import paper_text
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
