@@ -43,7 +43,7 @@ def grid_yaml(rows: int, cols: int, swarm_id: int = 4100, *, standbys: int = 1,
         *head,
         f"swarm: {{id: {swarm_id}, name: grid{n + standbys * rows}}}",
         f"timing: {{preset: {preset}}}",
-        "key_file: null",
+        "auth: {mode: per-robot, keys_dir: keys}   # swarmd keygen --swarm FILE configs/keys",
         "functions:",
     ]
     for r in range(rows):

@@ -168,7 +168,7 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
         plan = cfg.to_plan()
     except ConfigError:
         return None
-    signed = cfg.key_file is not None
+    signed = cfg.auth_mode != "none"
     rows = []
     data = []
     notes: list[str] = []
@@ -196,6 +196,37 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
     )
 
 
+def auth_section(cfg: SwarmConfig) -> Section:
+    """How frames are signed (config/auth.py): the mode, where the keys are, who is
+    revoked. An unsigned swarm is also a warning among the problems."""
+    mode = cfg.auth_mode
+    keys_dir = cfg.keys_dir_path
+    key = cfg.key_path
+    data: dict[str, Any] = {
+        "mode": mode, "explicit": cfg.auth_explicit,
+        "keys_dir": str(keys_dir) if keys_dir is not None else None,
+        "key_file": str(key) if key is not None else None,
+        "revoked": sorted(cfg.revoked)}
+    if mode == "per-robot":
+        line = f"auth: per-robot (Ed25519), public keys in {keys_dir}"
+        if keys_dir is not None and not keys_dir.exists():
+            line += (f" (not made yet: swarmd keygen --swarm {cfg.source} {keys_dir}; "
+                     "swarmd sim makes throwaway keys)")
+        if cfg.revoked:
+            line += f", revoked: {', '.join(map(str, sorted(cfg.revoked)))}"
+        if key is not None:
+            line += f", swarm key {key}"
+    elif mode == "shared":
+        line = (f"auth: shared key {key} (any robot holding it can sign as any other; "
+                "docs/operations.md)")
+    else:
+        line = ("auth: none, frames UNSIGNED: anyone who can send on the channel can speak "
+                "for any robot and take over any function")
+        line += (" (chosen: auth: none)" if cfg.auth_explicit else
+                 " (not said: swarmd start refuses it)")
+    return Section(key="auth", title="", columns=(), rows=(), data=data, notes=(line,))
+
+
 def flight_section(cfg: SwarmConfig) -> Section | None:
     """What the simulator's quadrotors make of each function: `swarmd sim`
     with physics refuses a swarm whose functions a craft cannot fly (a waypoint under
@@ -213,8 +244,8 @@ def flight_section(cfg: SwarmConfig) -> Section | None:
     return Section(key="flight", title="", columns=(), rows=(), data=problems, notes=notes)
 
 
-SECTIONS: list[SectionBuilder] = [coverage_section, timing_section, budget_section,
-                                  flight_section]
+SECTIONS: list[SectionBuilder] = [coverage_section, timing_section, auth_section,
+                                  budget_section, flight_section]
 """Report sections in order; append a builder to add one (e.g. the channel budget)."""
 
 

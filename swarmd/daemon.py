@@ -32,9 +32,11 @@ from typing import Any
 
 from swarmd import state as state_mod
 from swarmd.config import ConfigError, RobotConfig, load_robot
+from swarmd.core.auth import Identity
 from swarmd.core.node import Node
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
+from swarmd.identity import Ed25519Signer, Keyring
 from swarmd.link.base import RobotLink
 from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
@@ -140,6 +142,20 @@ class Daemon:
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
+        self.signer: Ed25519Signer | None = None
+        self.keyring: Keyring | None = None
+        """Per-robot auth: this robot's key and every robot's public keys, the objects
+        the node was given; SIGHUP replaces their keys in place (rotation, revocation)."""
+
+    def _identity(self, cfg: RobotConfig) -> Identity | None:
+        """The node's Identity in per-robot mode (None otherwise). Raises
+        IdentityFileError naming the file."""
+        material = cfg.identity_material()
+        if material is None:
+            return None
+        self.signer = Ed25519Signer(cfg.robot, material.private_key)
+        self.keyring = Keyring(material.public_keys, material.revoked)
+        return Identity(self.signer, self.keyring)
 
     @staticmethod
     def _specs(cfg: RobotConfig) -> dict[str, dict[str, Any]]:
@@ -207,6 +223,7 @@ class Daemon:
         cfg = self.cfg
         loop = asyncio.get_running_loop()
         keys = cfg.keys()  # signing key first, then those also accepted (rotation)
+        identity = self._identity(cfg)
         _ensure_dir("state_dir", cfg.state_dir)
         persisted = self._load_state()
         seq_start = state_mod.initial_seq(seq_seed(time.time()), persisted)
@@ -214,7 +231,7 @@ class Daemon:
         now = loop.time()
         restored = persisted.restored() if persisted is not None else None
         node = Node(cfg.robot, cfg.swarm.to_plan(), params, now, keys=keys,
-                    seq_start=seq_start, restored=restored)
+                    identity=identity, seq_start=seq_start, restored=restored)
         try:
             write_at = self.state_file.write_initial(persisted, seq_start)
         except OSError as exc:  # StateWriteError names the file
@@ -245,7 +262,7 @@ class Daemon:
             "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
             "restored": persisted.to_json() if persisted is not None else None,
-            "signed": bool(keys)})
+            "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode})
         await self.runtime.start()
         return self.runtime
 
@@ -298,6 +315,7 @@ class Daemon:
             log.error("SIGHUP: keys not reloaded; the old ones stay in use",
                       extra={"error": str(exc)})
             keys = None
+        self._reload_identity(new)
         try:
             self._reload_event_log(new.event_log)
         except OSError as exc:  # EventLogError: the old file (if any) stays in use
@@ -316,11 +334,32 @@ class Daemon:
             ("plan", old.swarm.to_plan(), new.swarm.to_plan()),
             ("state_dir", old.state_dir, new.state_dir),
             ("metrics", old.metrics, new.metrics),
+            ("auth", old.swarm.auth_mode, new.swarm.auth_mode),
         ) if a != b]
         self.cfg = new
         log.info("SIGHUP: config reloaded", extra={
             "keys": len(keys) if keys is not None else None,
             "restart_needed_for": restart_needed})
+
+    def _reload_identity(self, new: RobotConfig) -> None:
+        """SIGHUP in per-robot mode: the public keys of the keys dir and the `revoked`
+        list replace the keyring's, and this robot's identity_file its own key
+        (docs/operations.md: rotating and revoking a robot's key). A key that cannot be
+        read leaves the old ones in use. A change of auth mode needs a restart."""
+        if self.keyring is None or self.signer is None or new.swarm.auth_mode != "per-robot":
+            return
+        try:
+            material = new.identity_material()
+            assert material is not None
+            self.keyring.replace(material.public_keys, material.revoked)
+            self.signer.replace(material.private_key)
+        except Exception as exc:  # IdentityFileError, ValueError: a malformed key
+            self.reload_errors += 1
+            log.error("SIGHUP: identity keys not reloaded; the old ones stay in use",
+                      extra={"error": str(exc)})
+            return
+        log.info("SIGHUP: identity keys reloaded", extra={
+            "robots": sorted(self.keyring.robots), "revoked": sorted(self.keyring.revoked)})
 
     def _reload_event_log(self, path: Path | None) -> None:
         """SIGHUP: reopen the event log (logrotate moved it, or the path changed), start

@@ -139,7 +139,7 @@ def launch_to_swarm(
     return {
         "swarm": {"id": swarm_id, "name": name},
         "timing": {"preset": "udp"},
-        "key_file": None,
+        "auth": {"mode": "per-robot", "keys_dir": "keys"},
         "functions": functions,
         "robots": entries,
         "alert_hook": None,

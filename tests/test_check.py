@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ from swarmd import check as check_mod
 from swarmd.check import Section, run_check
 from swarmd.cli import app
 from swarmd.config import SwarmConfig
+from swarmd.identity import write_identity
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 runner = CliRunner()
@@ -85,10 +87,35 @@ def test_check_json(tmp_path: Path) -> None:
     assert json.loads(bad.output)["problems"][0]["field"] == "robots[1].id"
 
 
-def test_check_robot_file_checks_its_swarm() -> None:
-    result = runner.invoke(app, ["check", str(CONFIGS / "robot-example.yaml")])
+def test_check_robot_file_checks_its_swarm(tmp_path: Path) -> None:
+    for name in ("paper.yaml", "robot-example.yaml"):
+        shutil.copy(CONFIGS / name, tmp_path / name)
+    for robot in range(1, 7):
+        write_identity(tmp_path / "keys", robot)
+    result = runner.invoke(app, ["check", str(tmp_path / "robot-example.yaml")])
     assert result.exit_code == 0, result.output
     assert "│ f2 " in result.output
+    assert "auth: per-robot (Ed25519)" in result.output
+
+
+def test_check_prints_the_auth_mode_and_flags_an_unsigned_swarm(tmp_path: Path) -> None:
+    signed = run_check(CONFIGS / "paper.yaml")
+    assert signed.as_json()["auth"]["mode"] == "per-robot"
+    assert not [p for p in signed.problems if p.field == "auth"]
+    doc = yaml.safe_load((CONFIGS / "paper.yaml").read_text())
+    del doc["auth"]
+    (tmp_path / "quiet.yaml").write_text(yaml.safe_dump(doc))
+    quiet = runner.invoke(app, ["check", str(tmp_path / "quiet.yaml")])
+    assert quiet.exit_code == 0, quiet.output  # usable: a warning, not an error
+    text = " ".join(quiet.output.split())
+    assert "auth: warning: the swarm is unsigned and does not say so" in text
+    assert "swarmd start refuses it" in text
+    doc["auth"] = "none"
+    (tmp_path / "none.yaml").write_text(yaml.safe_dump(doc))
+    explicit = run_check(tmp_path / "none.yaml")
+    assert explicit.exit_code == 0 and not explicit.problems
+    assert explicit.as_json()["auth"] == {"mode": "none", "explicit": True, "keys_dir": None,
+                                          "key_file": None, "revoked": []}
 
 
 def test_sections_can_be_appended(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -97,8 +124,8 @@ def test_sections_can_be_appended(monkeypatch: pytest.MonkeyPatch) -> None:
 
     monkeypatch.setattr(check_mod, "SECTIONS", [*check_mod.SECTIONS, extra])
     report = run_check(CONFIGS / "paper.yaml")
-    assert [s.key for s in report.sections] == ["coverage", "timing", "channel_budget",
-                                                "flight", "extra"]
+    assert [s.key for s in report.sections] == ["coverage", "timing", "auth",
+                                                "channel_budget", "flight", "extra"]
     assert report.as_json()["extra"] == {"n": 6}
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,7 @@ from swarmd.config import (
     parse_swarm,
 )
 from swarmd.core.params import Params, radio, udp
+from swarmd.identity import write_identity
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -35,6 +37,7 @@ Doc = dict[str, Any]
 BASE: Doc = {
     "swarm": {"id": 1543, "name": "t"},
     "timing": {"preset": "udp"},
+    "auth": "none",
     "functions": {
         "f1": {"kind": "slot", "position": [2.0, 0.0, 1.5]},
         "f2": {"kind": "slot", "position": [0.0, 2.0, 1.5]},
@@ -167,7 +170,10 @@ ERROR_CASES: list[tuple[str, Doc | str, str, str]] = [
     ("numeric function name", _edit(lambda d: d["functions"].update({1: {"kind": "slot"}})),
      "functions[1]", "valid string"),
     ("robot not a mapping", _edit(_set(("robots", 0), 1)), "robots[0]", "valid dictionary"),
-    ("key file missing", _edit(_set(("key_file",), "nope.key")), "key_file", "nope.key"),
+    ("key file missing", _edit(_set(("auth",), {"mode": "shared", "key_file": "nope.key"})),
+     "auth.key_file", "nope.key"),
+    ("legacy key file missing", {k: v for k, v in BASE.items() if k != "auth"}
+     | {"key_file": "nope.key"}, "key_file", "nope.key"),
 ]
 
 @pytest.mark.parametrize(
@@ -331,8 +337,28 @@ def _robot(tmp_path: Path, extra: Doc | None = None, swarm: Doc | None = None) -
     return _write(tmp_path, doc, "robot.yaml")
 
 
-def test_robot_example() -> None:
-    cfg = load_robot(CONFIGS / "robot-example.yaml")
+def test_robot_example_without_keys_says_which_keygen_to_run() -> None:
+    if (CONFIGS / "keys").exists():
+        pytest.skip("configs/keys exists here (made by hand); the example then loads")
+    with pytest.raises(ConfigError) as info:
+        load_robot(CONFIGS / "robot-example.yaml")
+    (problem,) = info.value.problems
+    assert problem.field == "auth.keys_dir"
+    assert (f"swarmd keygen --swarm {CONFIGS / 'paper.yaml'} {CONFIGS / 'keys'}"
+            in problem.message)
+
+
+def test_robot_example(tmp_path: Path) -> None:
+    # The example as documented: the swarm's keys made first, beside the swarm file.
+    for name in ("paper.yaml", "robot-example.yaml"):
+        shutil.copy(CONFIGS / name, tmp_path / name)
+    for robot in range(1, 7):
+        write_identity(tmp_path / "keys", robot)
+    cfg = load_robot(tmp_path / "robot-example.yaml")
+    assert cfg.swarm.auth_mode == "per-robot"
+    assert cfg.identity_file == tmp_path / "keys" / "robot-2.key"
+    material = cfg.identity_material()
+    assert material is not None and set(material.public_keys) == {1, 2, 3, 4, 5, 6}
     assert cfg.robot == cfg.robot_id == 2
     assert cfg.entry.holds == "f2"
     assert cfg.transport == UdpTransportConfig()
@@ -425,7 +451,7 @@ def test_keys_signing_key_first(tmp_path: Path) -> None:
         (tmp_path / name).write_bytes(key)
         os.chmod(tmp_path / name, 0o600)
     cfg = load_robot(_robot(tmp_path, {"key_files": ["old.key"]},
-                            swarm=BASE | {"key_file": "swarm.key"}))
+                            swarm=BASE | {"auth": {"mode": "shared", "key_file": "swarm.key"}}))
     assert cfg.keys() == (swarm_key, old_key)
 
 

@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_runtime import GROUP, PAPER, launch, robot_cfg, runtime_of, wait_until
+from swarms import paper_text, unsigned_paper
+from test_runtime import GROUP, launch, robot_cfg, runtime_of, wait_until
 from test_start import listener
 
 from sim.realtime.robotfiles import free_udp_port
@@ -37,8 +38,12 @@ def _messages(caplog: pytest.LogCaptureFixture, msg: str) -> list[logging.LogRec
 
 
 def write_robot(tmp: Path, robot: int, port: int, extra: str = "",
-                swarm: Path = PAPER) -> Path:
+                swarm: Path | None = None) -> Path:
     path = tmp / f"robot{robot}.yaml"
+    if swarm is None:
+        swarm = tmp / "paper.yaml"
+        if not swarm.exists():
+            unsigned_paper(tmp)
     path.write_text(f"robot: {robot}\nswarm: {swarm}\ntransport: {{kind: udp, port: {port}}}\n"
                     f"state_dir: {tmp / 'state'}\n{extra}")
     return path
@@ -154,14 +159,14 @@ async def test_sighup_restart_needed_compares_with_the_running_config(
         tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.INFO)
     swarm = tmp_path / "swarm.yaml"
-    swarm.write_text(PAPER.read_text())
+    swarm.write_text(paper_text())
     path = write_robot(tmp_path, 1, free_udp_port(), swarm=swarm)
     daemon = Daemon(load_robot(path), config_path=path)
     await daemon.start()
     try:
-        swarm.write_text(PAPER.read_text().replace("preset: udp", "preset: radio"))
+        swarm.write_text(paper_text().replace("preset: udp", "preset: radio"))
         daemon.reload()
-        swarm.write_text(PAPER.read_text())  # changed back: nothing to restart for
+        swarm.write_text(paper_text())  # changed back: nothing to restart for
         daemon.reload()
         path.write_text(path.read_text().replace("robot: 1", "robot: 2"))
         daemon.reload()

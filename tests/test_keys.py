@@ -219,7 +219,7 @@ def test_swarmd_start_refuses_a_key_readable_by_others(tmp_path: Path) -> None:
     pytest.importorskip("swarmd.daemon", reason="daemon runtime not in this tree")
     repo = Path(__file__).resolve().parent.parent
     swarm = (repo / "configs" / "paper.yaml").read_text()
-    swarm, n = re.subn(r"(?m)^key_file:.*$", "key_file: swarm.key", swarm)
+    swarm, n = re.subn(r"(?m)^auth:.*$", "key_file: swarm.key", swarm)
     assert n == 1
     (tmp_path / "swarm.yaml").write_text(swarm)
     key = tmp_path / "swarm.key"

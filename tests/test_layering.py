@@ -25,7 +25,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "edge": ("swarmd.transport", "swarmd.link", "swarmd.config", "swarmd.keys",
              "swarmd.budget", "swarmd.state", "swarmd.eventlog", "swarmd.logs",
              "swarmd.metrics", "swarmd.notify", "swarmd.functions", "swarmd.launch",
-             "swarmd.runtime", "swarmd.files"),
+             "swarmd.runtime", "swarmd.files", "swarmd.identity"),
     "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.check"),
     "sim.shared": ("sim.shared",),
     "sim.virtual": ("sim.virtual",),

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from swarms import unsigned_paper
 
 from swarmd.core.roles import Health
 from swarmd.link.mavlink_health import (
@@ -427,7 +428,7 @@ def test_robot_file_mavlink_link(tmp_path: Path) -> None:
     from swarmd.link.factory import make_link
     from swarmd.link.mavlink import MavlinkLink
 
-    swarm = (ROOT / "configs" / "paper.yaml").resolve()
+    swarm = unsigned_paper(tmp_path)
     text = (f"robot: 2\nswarm: {swarm}\nlink: {{kind: mavlink, url: 'udpin:127.0.0.1:14540',"
             " autopilot: ardupilot, release: land, health: {battery_faulty: 20,"
             " sensors: {mag: faulty}}}\n")

@@ -27,6 +27,7 @@ from typing import Any
 
 import pytest
 import yaml
+from swarms import unsigned_paper
 
 from swarmd.transport.addresses import DEFAULT_GROUP
 
@@ -98,7 +99,7 @@ def test_netns_multicast_failover_across_real_interfaces(
     try:
         for r, ns in namespaces.items():
             cfg = {
-                "robot": r, "swarm": str(PAPER),
+                "robot": r, "swarm": str(unsigned_paper(tmp_path)),
                 "transport": {"kind": "udp", "group": DEFAULT_GROUP, "port": port,
                               "interface": f"10.77.0.{r}", "ttl": 1, "loopback": True},
                 "link": {"kind": "none"}, "event_log": None,

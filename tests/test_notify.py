@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -13,6 +12,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from swarms import unsigned_paper
 
 from swarmd.notify import Notifier
 
@@ -112,7 +112,7 @@ def _free_port(kind: socket.SocketKind) -> int:
 
 def _robot_dir(tmp_path: Path, metrics_port: int) -> Path:
     """Robot 2 of the paper's swarm, alone on a private loopback multicast port."""
-    shutil.copy(REPO / "configs" / "paper.yaml", tmp_path / "swarm.yaml")
+    unsigned_paper(tmp_path, "swarm.yaml")
     robot = tmp_path / "robot.yaml"
     robot.write_text(
         "robot: 2\n"

@@ -10,7 +10,6 @@ import asyncio
 import contextlib
 import json
 import os
-import re
 import subprocess
 import sys
 import textwrap
@@ -20,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from swarms import paper_text, unsigned_paper
 
 import swarmd.daemon as daemon_mod
 from sim.realtime.robotfiles import free_udp_port
@@ -37,15 +37,22 @@ from swarmd.state import state_path
 from swarmd.transport.addresses import DEFAULT_GROUP
 from swarmd.transport.base import EventCallback, FrameCallback
 
-PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
 GROUP = DEFAULT_GROUP
+
+
+def _unsigned(tmp: Path) -> Path:
+    path = tmp / "paper.yaml"
+    if not path.exists():
+        tmp.mkdir(parents=True, exist_ok=True)
+        unsigned_paper(tmp)
+    return path
 
 
 def robot_cfg(tmp: Path, robot: int, port: int, *, handover: bool = True,
               event_log: bool = False) -> RobotConfig:
     text = textwrap.dedent(f"""\
         robot: {robot}
-        swarm: {PAPER}
+        swarm: {_unsigned(tmp)}
         transport: {{kind: udp, port: {port}}}
         link: {{kind: none}}
         state_dir: {tmp / "state"}
@@ -356,9 +363,8 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> No
     swarm, robot = tmp_path / "swarm.yaml", tmp_path / "robot.yaml"
 
     def write(signing: Path | None, accepted: list[Path]) -> None:
-        key_file = "null" if signing is None else str(signing)
-        swarm.write_text(re.sub(r"(?m)^key_file:.*$", f"key_file: {key_file}",
-                                PAPER.read_text()))
+        auth = "auth: none" if signing is None else f"key_file: {signing}"
+        swarm.write_text(paper_text(auth))
         robot.write_text(
             f"robot: 1\nswarm: {swarm}\ntransport: {{kind: udp, port: {port}}}\n"
             f"link: {{kind: none}}\nstate_dir: {tmp_path / 'state'}\n"

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import IO, Any
 
 import pytest
+from swarms import unsigned_paper
 
 from sim.realtime.robotfiles import free_udp_port
 from swarmd.core import wire
@@ -75,7 +76,7 @@ def test_start_logs_json_reloads_and_leaves_on_sigterm(tmp_path: Path) -> None:
     config = tmp_path / "robot.yaml"
     events = tmp_path / "events.jsonl"
     config.write_text(
-        f"robot: 1\nswarm: {PAPER}\ntransport: {{kind: udp, port: {port}}}\n"
+        f"robot: 1\nswarm: {unsigned_paper(tmp_path)}\ntransport: {{kind: udp, port: {port}}}\n"
         f"state_dir: {tmp_path / 'state'}\nevent_log: {events}\nhandover_on_stop: true\n")
     sock = listener(port)
     proc = start(config)

@@ -20,6 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from swarms import paper_text
 
 from sim.realtime.robotfiles import free_udp_port
 
@@ -86,7 +87,7 @@ def test_version(venv: Path) -> None:
 
 def test_start_runs_one_robot_and_stops_on_sigterm(venv: Path, tmp_path: Path) -> None:
     swarm = tmp_path / "swarm.yaml"
-    swarm.write_text(PAPER.read_text())
+    swarm.write_text(paper_text("none", PAPER))
     events = tmp_path / "events.jsonl"
     config = tmp_path / "robot.yaml"
     config.write_text(

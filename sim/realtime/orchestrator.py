@@ -67,7 +67,7 @@ from sim.realtime.procs import (
     main_not_reimported,
 )
 from sim.realtime.result import RealtimeResult
-from sim.realtime.robotfiles import free_udp_port, robot_ids, write_robot_file
+from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, write_robot_file
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
 from sim.shared.faults import Fault, fault_record
@@ -137,6 +137,9 @@ class Orchestrator:
         )
         self.run_dir.mkdir(parents=True, exist_ok=True)
         (self.run_dir / "logs").mkdir(exist_ok=True)
+        # Throwaway keys for this run; the robots run from a copy of the swarm file
+        # that names them (robotfiles.sign_for_run).
+        self.swarm_path, self.identity_files = sign_for_run(self.run_dir, swarm_path)
         self.partitions = partition_windows(
             [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
         )
@@ -182,7 +185,8 @@ class Orchestrator:
         from sim.realtime.robot_proc import RobotSpec, child_main
 
         cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
-                               port=self.port, transport=self._transport_doc(robot))
+                               port=self.port, transport=self._transport_doc(robot),
+                               identity_file=self.identity_files.get(robot))
         spec = RobotSpec(
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),

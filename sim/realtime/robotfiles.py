@@ -1,6 +1,9 @@
 """The robot files of a real-time run: each simulated robot runs from a file that is
 literally what `swarmd start --config` takes, on a UDP port picked for the run (so runs
-and tests never hear each other) or an emulated radio."""
+and tests never hear each other) or an emulated radio.
+
+Signed by default: every run signs with throwaway keys made for it (`sign_for_run`), so
+a swarm file's real keys are never needed, nor touched, to simulate it."""
 
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ def robot_ids(swarm_path: Path) -> tuple[int, ...]:
 def write_robot_file(
     run_dir: Path, swarm_path: Path, robot: int, *, group: str, port: int,
     interface: str = DEFAULT_INTERFACE, transport: dict[str, Any] | None = None,
+    identity_file: Path | None = None,
 ) -> Path:
     """The robot file of one simulated robot: literally what `swarmd start` would take.
     `transport` replaces the default UDP multicast section (emulated radios)."""
@@ -46,7 +50,49 @@ def write_robot_file(
         "state_dir": str(run_dir / "state" / str(robot)),
         "handover_on_stop": True,
     }
+    if identity_file is not None:
+        doc["identity_file"] = str(identity_file)
     path = run_dir / "robots" / f"robot{robot}.yaml"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     return path
+
+
+def sign_for_run(run_dir: Path, swarm_path: Path) -> tuple[Path, dict[int, Path]]:
+    """The swarm file the run's robots use and each robot's private key file.
+
+    A swarm that says `auth: none` runs unsigned, as written. Any other gets keys made
+    for this run under `run_dir/keys` and a copy of the swarm file naming them: per-robot
+    Ed25519 keys (the default, also for a swarm that says nothing about signing), or a
+    throwaway swarm key for `auth: {mode: shared}`. Revocations are dropped: every
+    simulated robot must be able to start."""
+    from swarmd.config import load_swarm
+    from swarmd.config.source import read_source
+    from swarmd.identity import private_key_path, write_identity
+    from swarmd.keys import generate_key
+
+    cfg = load_swarm(swarm_path)
+    if cfg.auth_mode == "none" and cfg.auth_explicit:
+        return swarm_path, {}
+    data = read_source(swarm_path).data
+    assert isinstance(data, dict)  # load_swarm validated it
+    doc = {k: v for k, v in data.items() if k != "key_file"}
+    keys_dir = run_dir / "keys"
+    keys_dir.mkdir(parents=True, exist_ok=True)
+    identity_files: dict[int, Path] = {}
+    if cfg.auth_mode == "shared":
+        key = keys_dir / "swarm.key"
+        generate_key(key, force=True)
+        doc["auth"] = {"mode": "shared", "key_file": str(key)}
+    else:
+        for r in cfg.robot_ids():
+            write_identity(keys_dir, r, force=True)
+            identity_files[r] = private_key_path(keys_dir, r)
+        doc["auth"] = {"mode": "per-robot", "keys_dir": str(keys_dir)}
+        if cfg.key_path is not None:  # per-robot plus a swarm key
+            key = keys_dir / "swarm.key"
+            generate_key(key, force=True)
+            doc["auth"]["key_file"] = str(key)
+    out = run_dir / "swarm.yaml"
+    out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return out, identity_files

@@ -1,4 +1,9 @@
-"""`swarmd keygen FILE`: write a new 32-byte swarm key, mode 0600 (issue 6 point 3)."""
+"""`swarmd keygen`: a swarm key (shared mode), or per-robot Ed25519 key pairs.
+
+    swarmd keygen FILE                      # 32-byte shared swarm key, mode 0600
+    swarmd keygen --robot 3 DIR             # DIR/robot-3.key (0600) + DIR/robot-3.pub
+    swarmd keygen --swarm SWARM.yaml DIR    # one pair per robot of the swarm
+"""
 
 from __future__ import annotations
 
@@ -8,44 +13,110 @@ from typing import Annotated
 import typer
 
 
+def _fail(message: str) -> typer.Exit:
+    typer.echo(f"swarmd keygen: {message}", err=True)
+    return typer.Exit(1)
+
+
 def register(app: typer.Typer) -> None:
     """Add the `keygen` command to the CLI."""
 
     @app.command()
     def keygen(
         path: Annotated[
-            Path, typer.Argument(help="Key file to create (its directory must exist).")
+            Path, typer.Argument(help="Key file to create (its directory must exist); "
+                                 "with --robot or --swarm, the keys directory.")
         ],
+        robot: Annotated[
+            int | None, typer.Option("--robot", min=1, max=0xFFFF,
+                                     help="Make robot ID's key pair in PATH: robot-ID.key "
+                                     "(private, 0600) and robot-ID.pub.")
+        ] = None,
+        swarm: Annotated[
+            Path | None, typer.Option("--swarm", help="Make a key pair in PATH for every "
+                                      "robot of this swarm file (revoked ones skipped).")
+        ] = None,
         force: Annotated[
-            bool, typer.Option("--force", help="Replace an existing key file (default: "
+            bool, typer.Option("--force", help="Replace existing key files (default: "
                                "refuse).")
         ] = False,
         hex_format: Annotated[
-            bool, typer.Option("--hex", help="Write 64 hex digits instead of 32 raw bytes.")
+            bool, typer.Option("--hex", help="Shared key: write 64 hex digits instead of "
+                               "32 raw bytes.")
         ] = False,
     ) -> None:
-        """Generate a swarm key (32 random bytes, file mode 0600).
+        """Generate keys: a shared swarm key, or per-robot Ed25519 key pairs.
 
-        Every robot of a swarm needs the same key: generate it once and copy it to each
-        robot (scp -p keeps the mode), owned by the daemon's user; the swarm file's
-        key_file names it (docs/operations.md section 4).
+        Per-robot (the default for new swarms, `auth: {mode: per-robot}`): each robot's
+        robot-N.key goes to that robot only (identity_file in its robot file); every
+        robot-N.pub goes to the keys dir beside the swarm file on every robot
+        (docs/operations.md, "Keys").
 
-        Exit codes: 0 written, 1 the file exists (without --force) or cannot be written.
+        Shared (`auth: {mode: shared}`): one 32-byte key, the same on every robot.
 
-        Example: swarmd keygen swarm.key
+        A device node, FIFO or directory where a key would go is never replaced, even
+        with --force. Exit codes: 0 written, 1 refused (exists without --force, cannot
+        be written, bad swarm file).
+
+        Example: swarmd keygen --swarm configs/paper.yaml configs/keys (also:
+        swarmd keygen --robot 3 configs/keys; swarmd keygen swarm.key)
         """
-        from swarmd.keys import KeyFileError, generate_key
+        from swarmd.keys import KeyFileError
 
+        if robot is not None and swarm is not None:
+            raise _fail("give --robot or --swarm, not both")
         try:
-            generate_key(path, force=force, hex_format=hex_format)
+            if robot is not None:
+                _one_robot(path, robot, force)
+            elif swarm is not None:
+                _whole_swarm(path, swarm, force)
+            else:
+                _shared_key(path, force, hex_format)
         except KeyFileError as exc:
-            typer.echo(f"swarmd keygen: {exc}", err=True)
-            raise typer.Exit(1) from None
+            raise _fail(str(exc)) from None
         except OSError as exc:
-            typer.echo(f"swarmd keygen: cannot write {path}: {exc.strerror}", err=True)
-            raise typer.Exit(1) from None
-        typer.echo(
-            f"wrote a new swarm key to {path} (mode 0600). Copy it to every robot of the "
-            f"swarm, owned by the daemon's user: install -m 600 -o swarmd {path} "
-            "/etc/swarmd/swarm.key"
-        )
+            raise _fail(f"cannot write {exc.filename or path}: {exc.strerror}") from None
+
+
+def _shared_key(path: Path, force: bool, hex_format: bool) -> None:
+    from swarmd.keys import generate_key
+
+    generate_key(path, force=force, hex_format=hex_format)
+    typer.echo(
+        f"wrote a new swarm key to {path} (mode 0600). Copy it to every robot of the "
+        f"swarm, owned by the daemon's user: install -m 600 -o swarmd {path} "
+        "/etc/swarmd/swarm.key"
+    )
+
+
+def _one_robot(directory: Path, robot: int, force: bool) -> None:
+    from swarmd.identity import write_identity
+
+    key, pub = write_identity(directory, robot, force=force)
+    typer.echo(f"wrote {key} (private, mode 0600: robot {robot} only, its identity_file) "
+               f"and {pub} (copy it into the keys dir of every robot, then SIGHUP them)")
+
+
+def _whole_swarm(directory: Path, swarm: Path, force: bool) -> None:
+    from swarmd.config import ConfigError
+    from swarmd.config.source import read_source
+    from swarmd.config.swarm_rules import inspect_swarm
+    from swarmd.identity import check_writable, write_identity
+
+    try:
+        cfg, problems = inspect_swarm(read_source(swarm))
+    except ConfigError as exc:
+        raise _fail(str(exc)) from None
+    if cfg is None:
+        raise _fail("\n".join(str(p) for p in problems if p.severity == "error"))
+    robots = [r for r in cfg.robot_ids() if r not in cfg.revoked]
+    for r in robots:  # all or nothing: no half-made set
+        check_writable(directory, r, force=force)
+    for r in robots:
+        write_identity(directory, r, force=force)
+    typer.echo(f"wrote {len(robots)} key pairs to {directory}: robot-N.key (private, "
+               "0600) goes to robot N only; every robot-N.pub to every robot")
+    keys_dir = cfg.keys_dir_path
+    if keys_dir is None or keys_dir.resolve() != directory.resolve():
+        typer.echo(f"note: {swarm} does not name {directory} as its keys dir; set "
+                   "`auth: {mode: per-robot, keys_dir: ...}` there")

@@ -9,6 +9,7 @@
     handover_on_stop: true
     metrics: null                     # {host: 127.0.0.1, port: 9477}
     key_files: []
+    identity_file: keys/robot-2.key   # this robot's private key (per-robot auth)
 
 Every relative path in a config file is relative to that file, so a robot directory
 can be copied as a whole. See docs/config.md.
@@ -23,10 +24,12 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictInt, field_validator
 
-from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem
+from swarmd.config.auth import auth_issues, public_keys
+from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, format_loc
 from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.config.swarm import RobotEntry, SwarmConfig
 from swarmd.config.swarm_rules import load_swarm
+from swarmd.identity import IdentityFileError, public_key_of, read_private_key
 from swarmd.keys import KeyFileError, load_key
 from swarmd.transport.addresses import interface_address, multicast_group
 
@@ -200,6 +203,17 @@ class RobotFile(_Model):
     handover_on_stop: bool = True
     metrics: MetricsConfig | None = None
     key_files: list[str] = Field(default_factory=list)
+    identity_file: str | None = None
+
+
+@dataclass(frozen=True)
+class IdentityMaterial:
+    """Per-robot auth as read from the files: what `swarmd.identity` builds the
+    node's `Identity` from (the daemon keeps signer and keyring to reload on SIGHUP)."""
+
+    private_key: bytes
+    public_keys: dict[int, tuple[bytes, ...]]
+    revoked: frozenset[int]
 
 
 @dataclass(frozen=True)
@@ -218,6 +232,8 @@ class RobotConfig:
     key_files: tuple[Path, ...]
     source: str
     warnings: tuple[Problem, ...] = ()
+    identity_file: Path | None = None
+    """This robot's private key (per-robot auth), resolved."""
 
     @property
     def robot_id(self) -> int:
@@ -240,6 +256,16 @@ class RobotConfig:
             if k not in out:
                 out.append(k)
         return tuple(out)
+
+    def identity_material(self) -> IdentityMaterial | None:
+        """Per-robot auth: this robot's private key and every robot's public keys
+        (None in the other modes). Raises IdentityFileError (KeyFileError)."""
+        if self.swarm.auth_mode != "per-robot":
+            return None
+        if self.identity_file is None:
+            raise IdentityFileError(f"{self.source}: identity_file is not set")
+        return IdentityMaterial(read_private_key(self.identity_file),
+                                public_keys(self.swarm), self.swarm.revoked)
 
 
 def load_robot(path: str | Path) -> RobotConfig:
@@ -283,6 +309,9 @@ def from_source(src: Source) -> RobotConfig:
                             f"{swarm.source} (robots: {ids})")
             )
         problems.extend(swarm.warnings)
+    identity_file = src.resolve(f.identity_file) if f.identity_file is not None else None
+    if swarm is not None:
+        problems = _deployable(swarm, f.robot, identity_file, src, problems)
     key_files = tuple(src.resolve(k) for k in f.key_files)
     for i, k in enumerate(key_files):
         try:
@@ -312,7 +341,55 @@ def from_source(src: Source) -> RobotConfig:
         key_files=key_files,
         source=src.name,
         warnings=tuple(p for p in problems if p.severity == "warning"),
+        identity_file=identity_file,
     )
+
+
+def _deployable(swarm: SwarmConfig, robot: int, identity_file: Path | None, src: Source,
+                problems: list[Problem]) -> list[Problem]:
+    """The auth checks of a swarm a robot runs in (config/auth.py with `deploying`):
+    an unsigned swarm that does not say so and a missing keys dir become errors (they
+    replace the swarm file's warnings about the same field); per-robot mode needs
+    this robot's private key, matching its public key, and the robot not revoked."""
+    deploying = [Problem(swarm.source, format_loc(i.loc), i.message, i.severity)
+                 for i in auth_issues(swarm, deploying=True) if i.severity == "error"]
+    fields = {p.field for p in deploying}
+    out = [p for p in problems
+           if not (p.file == swarm.source and p.field in fields)] + deploying
+    if swarm.auth_mode != "per-robot":
+        if identity_file is not None:
+            out.append(src.problem(("identity_file",), f"ignored: swarm {swarm.source} "
+                                   f"is not signed per robot (auth: {swarm.auth_mode})",
+                                   "warning"))
+        return out
+    if robot in swarm.revoked:
+        out.append(src.problem(("robot",), f"robot {robot} is revoked in swarm file "
+                               f"{swarm.source} (auth.revoked): no robot accepts its frames"))
+        return out
+    keys_dir = swarm.keys_dir_path
+    if any(p.severity == "error" for p in deploying):
+        return out  # no keys dir: its message says how to make every key
+    if identity_file is None:
+        out.append(src.problem(("identity_file",), f"swarm {swarm.source} is signed per "
+                               "robot: set identity_file to this robot's private key "
+                               f"(make it: swarmd keygen --robot {robot} {keys_dir})"))
+        return out
+    try:
+        private = read_private_key(identity_file)
+    except KeyFileError as exc:
+        out.append(src.problem(("identity_file",),
+                               str(exc).replace("--robot ID", f"--robot {robot}")))
+        return out
+    try:
+        mine = public_keys(swarm).get(robot, ())
+    except KeyFileError:
+        return out  # reported by the swarm file's own checks
+    if public_key_of(private) not in mine:
+        out.append(src.problem(("identity_file",), f"{identity_file} is not robot {robot}'s "
+                               f"key: it does not match {keys_dir}/robot-{robot}.pub (a key "
+                               "of another robot, or the .pub was not updated after "
+                               "a new key was made)"))
+    return out
 
 
 def _is_loopback(host: str) -> bool:

@@ -4,7 +4,7 @@ Schema (fixed; runtime, sim and check code against it; see docs/config.md):
 
     swarm: {id: 1543, name: paper}
     timing: {preset: udp, t_max: 0.6}          # preset + overrides of Params fields
-    key_file: null                             # relative to this file
+    auth: {mode: per-robot, keys_dir: keys}    # or `none`, or {mode: shared, key_file: ...}
     functions: {f1: {kind: slot, position: [x, y, z]}, f2: {kind: patrol, ...}}
     robots: [{id: 1, state: active, function: f1, neighbors: [2, 4], home: [x, y]},
              {id: 5, state: standby, subs: [1, 4]}]
@@ -34,6 +34,7 @@ from pydantic import (
     field_validator,
 )
 
+from swarmd.config.auth import AuthMode, AuthSpec, NoAuth, PerRobotAuth, SharedAuth
 from swarmd.config.errors import ConfigError, Problem
 from swarmd.core.params import PRESETS, Params
 from swarmd.core.plan import PlanError, RobotPlan, SwarmPlan
@@ -171,7 +172,9 @@ class SwarmConfig(_Model):
 
     swarm: SwarmInfo
     timing: Timing = Field(default_factory=Timing)
+    auth: AuthSpec | None = None
     key_file: str | None = None
+    """The shared mode's key written at the top level (`auth: {mode: shared, ...}`)."""
     functions: dict[str, FunctionSpec] = Field(min_length=1)
     robots: list[RobotEntry] = Field(min_length=1)
     alert_hook: str | list[str] | None = None
@@ -196,16 +199,52 @@ class SwarmConfig(_Model):
         """Doubtful but workable things (e.g. a function no standby covers)."""
         return self._warnings
 
-    @property
-    def key_path(self) -> Path | None:
-        """The swarm key file, resolved relative to the swarm file."""
-        if self.key_file is None:
-            return None
-        p = Path(self.key_file).expanduser()
+    def _resolve(self, value: str) -> Path:
+        p = Path(value).expanduser()
         return p if p.is_absolute() else self._directory / p
 
+    @property
+    def auth_mode(self) -> AuthMode:
+        """How frames are signed: `none` (also a file that says nothing), `shared` (one
+        swarm key) or `per-robot` (Ed25519, config/auth.py)."""
+        if isinstance(self.auth, PerRobotAuth):
+            return "per-robot"
+        if isinstance(self.auth, SharedAuth) or (self.auth is None and self.key_file):
+            return "shared"
+        return "none"
+
+    @property
+    def auth_explicit(self) -> bool:
+        """False for a swarm file that says nothing about signing (`swarmd start`
+        refuses it; `auth: none` is the explicit unsigned choice)."""
+        return self.auth is not None or self.key_file is not None
+
+    @property
+    def key_path(self) -> Path | None:
+        """The swarm key file (shared mode), resolved relative to the swarm file."""
+        auth = self.auth
+        if isinstance(auth, SharedAuth | PerRobotAuth):
+            return self._resolve(auth.key_file) if auth.key_file is not None else None
+        if isinstance(auth, NoAuth) or self.key_file is None:
+            return None
+        return self._resolve(self.key_file)
+
+    @property
+    def keys_dir_path(self) -> Path | None:
+        """Per-robot mode: the directory of `robot-<id>.pub`, relative to this file."""
+        if isinstance(self.auth, PerRobotAuth):
+            return self._resolve(self.auth.keys_dir)
+        return None
+
+    @property
+    def revoked(self) -> frozenset[int]:
+        """Per-robot mode: robots whose signatures nobody accepts."""
+        if isinstance(self.auth, PerRobotAuth):
+            return frozenset(self.auth.revoked)
+        return frozenset()
+
     def key(self) -> bytes | None:
-        """The 32-byte swarm key, or None for an unsigned swarm."""
+        """The 32-byte swarm key, or None when the swarm has none."""
         path = self.key_path
         return load_key(path) if path is not None else None
 

@@ -13,6 +13,7 @@ import math
 import re
 from pathlib import Path
 
+from swarmd.config.auth import auth_issues
 from swarmd.config.errors import ConfigError, Loc, Problem, has_errors
 from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.config.swarm import (
@@ -24,7 +25,6 @@ from swarmd.config.swarm import (
 )
 from swarmd.core.params import PRESETS, Params, ParamsError
 from swarmd.core.plan import MAX_FUNCTIONS
-from swarmd.keys import KeyFileError, load_key
 
 
 def load_swarm(path: str | Path) -> SwarmConfig:
@@ -99,11 +99,10 @@ def cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
         for loc, msg, severity in timing_bounds(params):
             out.append(src.problem(("timing", loc), msg, severity))
 
-    if cfg.key_file is not None and cfg.key_path is not None:
-        try:
-            load_key(cfg.key_path)
-        except KeyFileError as exc:
-            err(("key_file",), str(exc))
+    # Signing (config/auth.py): a bad key is an error; an unsigned swarm, or a keys
+    # dir not made yet, a warning here (`swarmd start` refuses both).
+    for issue in auth_issues(cfg):
+        out.append(src.problem(issue.loc, issue.message, issue.severity))
 
     # Robots, one at a time.
     by_id: dict[int, RobotEntry] = {}

@@ -25,6 +25,7 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 from swarmd.core import events as ev
+from swarmd.core.auth import Identity
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.limits import check_restored
@@ -129,6 +130,7 @@ class Node:
         now: float,
         *,
         keys: Sequence[bytes] = (),
+        identity: Identity | None = None,
         seq_start: int = 0,
         restored: Restored | None = None,
     ) -> None:
@@ -139,6 +141,7 @@ class Node:
         self._plan = plan
         self._params = params
         self._keys = tuple(keys)
+        self._identity = identity
         self._seq = seq_start
         self._health = Health.OK
         self._drops: Counter[str] = Counter()

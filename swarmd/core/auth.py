@@ -1,0 +1,41 @@
+"""Per-robot signatures, injected (DESIGN section 2, "Who may say what").
+
+The core stays stdlib-only and sans-IO: it never imports a crypto library. In per-robot
+mode a `Node` is given an `Identity`: a `Signer` holding this robot's own key and a
+`Verifier` holding every robot's public key. `swarmd.identity` implements both with
+Ed25519; tests and simulators may use any object with the same shape.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Protocol
+
+SIGNATURE_LEN = 64
+"""bytes. An Ed25519 signature."""
+PUBLIC_KEY_LEN = 32
+"""bytes. An Ed25519 public key."""
+
+
+class Signer(Protocol):
+    robot: int
+
+    def sign(self, data: bytes) -> bytes:
+        """`SIGNATURE_LEN` bytes over `data`, with this robot's own key."""
+        ...
+
+
+class Verifier(Protocol):
+    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
+        """Is `signature` robot `robot`'s over `data`? False, never an exception, for an
+        unknown or revoked robot, a bad signature, or wrong lengths."""
+        ...
+
+
+class Identity(NamedTuple):
+    """What a `Node` is given in per-robot mode."""
+
+    signer: Signer
+    verifier: Verifier
+
+
+__all__ = ["PUBLIC_KEY_LEN", "SIGNATURE_LEN", "Identity", "Signer", "Verifier"]

@@ -1,0 +1,343 @@
+"""Per-robot identities: Ed25519 key pairs, their files, and the keyring of a swarm.
+
+Each robot signs the frames that change state with its own private key; every robot
+holds the swarm's public keys and checks that a frame said to come from robot N was
+signed by N (DESIGN section 2). The sans-IO core sees only `swarmd.core.auth`'s
+`Signer` / `Verifier`; this module implements them with `cryptography`'s Ed25519
+(PyCA: maintained, wheels for every platform swarmd runs on, OpenSSL underneath).
+
+Files (written by `swarmd keygen --robot N DIR` / `--swarm SWARM.yaml DIR`):
+
+- ``robot-N.key``: the private key, 64 hex digits and a newline (32 raw bytes are
+  accepted too), mode 0600, owned by the daemon's user. Refused if the group or others
+  may access it, as the swarm key is (`swarmd.keys`).
+- ``robot-N.pub``: the public key, 64 hex digits a line. More than one line means every
+  key listed is accepted for robot N: the window of a key rotation
+  (docs/operations.md, "Rotating a robot's key"). ``#`` starts a comment.
+
+The keyring is mutable in place (`Keyring.replace`), so a daemon reloads public keys
+and the revoked list on SIGHUP without rebuilding its node; `Ed25519Signer.replace`
+does the same for the robot's own key.
+"""
+
+from __future__ import annotations
+
+import binascii
+import os
+import secrets
+import stat
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+from cryptography.exceptions import InvalidSignature
+from cryptography.hazmat.primitives.asymmetric.ed25519 import (
+    Ed25519PrivateKey,
+    Ed25519PublicKey,
+)
+from cryptography.hazmat.primitives.serialization import (
+    Encoding,
+    NoEncryption,
+    PrivateFormat,
+    PublicFormat,
+)
+
+from swarmd.core.auth import PUBLIC_KEY_LEN, SIGNATURE_LEN, Identity
+from swarmd.files import FileRefused, file_kind, read_regular_file
+from swarmd.keys import KeyFileError
+
+__all__ = [
+    "PRIVATE_KEY_LEN",
+    "Ed25519Signer",
+    "IdentityFileError",
+    "Keyring",
+    "check_writable",
+    "generate_identity",
+    "private_key_path",
+    "public_key_of",
+    "public_key_path",
+    "read_private_key",
+    "read_public_keys",
+    "throwaway_identities",
+    "write_identity",
+]
+
+PRIVATE_KEY_LEN = 32
+"""An Ed25519 private key (its seed), as `cryptography` takes it raw."""
+_MAX_FILE = 4096  # a key file holds one key (a .pub a few): anything bigger is wrong
+
+
+class IdentityFileError(KeyFileError):
+    """A key file that cannot be used; the message names the file, why and the fix."""
+
+
+def private_key_path(directory: Path | str, robot: int) -> Path:
+    return Path(directory) / f"robot-{robot}.key"
+
+
+def public_key_path(directory: Path | str, robot: int) -> Path:
+    return Path(directory) / f"robot-{robot}.pub"
+
+
+# -- keys in memory -------------------------------------------------------------------------
+
+
+def generate_identity() -> tuple[bytes, bytes]:
+    """A new key pair: (private 32 B, public 32 B)."""
+    key = Ed25519PrivateKey.generate()
+    private = key.private_bytes(Encoding.Raw, PrivateFormat.Raw, NoEncryption())
+    return private, _public_bytes(key.public_key())
+
+
+def public_key_of(private_key: bytes) -> bytes:
+    """The public key that goes with a private key (32 B each)."""
+    return _public_bytes(_private(private_key).public_key())
+
+
+def _public_bytes(key: Ed25519PublicKey) -> bytes:
+    return key.public_bytes(Encoding.Raw, PublicFormat.Raw)
+
+
+def _private(private_key: bytes) -> Ed25519PrivateKey:
+    if len(private_key) != PRIVATE_KEY_LEN:
+        raise ValueError(f"an Ed25519 private key is {PRIVATE_KEY_LEN} bytes, "
+                         f"got {len(private_key)}")
+    return Ed25519PrivateKey.from_private_bytes(private_key)
+
+
+class Ed25519Signer:
+    """`swarmd.core.auth.Signer`: signs with one robot's private key."""
+
+    def __init__(self, robot: int, private_key: bytes) -> None:
+        self.robot = robot
+        self._key = _private(private_key)
+        self.public_key = _public_bytes(self._key.public_key())
+
+    def replace(self, private_key: bytes) -> None:
+        """Sign with a new key from now on (the robot's own key rotated, SIGHUP)."""
+        key = _private(private_key)
+        self._key, self.public_key = key, _public_bytes(key.public_key())
+
+    def sign(self, data: bytes) -> bytes:
+        return self._key.sign(data)
+
+
+PublicKeys = Mapping[int, bytes | Iterable[bytes]]
+"""robot -> its public key, or several (all accepted: a rotation window)."""
+
+
+class Keyring:
+    """`swarmd.core.auth.Verifier`: every robot's public key(s), minus the revoked.
+
+    `verify` never raises: an unknown or revoked robot, a signature of the wrong
+    length, a bad signature all give False (the core counts the drop).
+    """
+
+    def __init__(self, public_keys: PublicKeys, revoked: Iterable[int] = ()) -> None:
+        self._keys: dict[int, tuple[Ed25519PublicKey, ...]] = {}
+        self._revoked: frozenset[int] = frozenset()
+        self.replace(public_keys, revoked)
+
+    def replace(self, public_keys: PublicKeys, revoked: Iterable[int] = ()) -> None:
+        """Swap in a new set of keys and revocations (SIGHUP). Raises ValueError on a
+        malformed key, leaving the old set in place."""
+        keys: dict[int, tuple[Ed25519PublicKey, ...]] = {}
+        for robot, value in public_keys.items():
+            raw = (value,) if isinstance(value, bytes | bytearray) else tuple(value)
+            parsed = []
+            for k in raw:
+                if len(k) != PUBLIC_KEY_LEN:
+                    raise ValueError(f"robot {robot}: an Ed25519 public key is "
+                                     f"{PUBLIC_KEY_LEN} bytes, got {len(k)}")
+                parsed.append(Ed25519PublicKey.from_public_bytes(bytes(k)))
+            keys[robot] = tuple(parsed)
+        self._keys, self._revoked = keys, frozenset(revoked)
+
+    @property
+    def robots(self) -> frozenset[int]:
+        """Robots whose signatures are accepted (known and not revoked)."""
+        return frozenset(self._keys) - self._revoked
+
+    @property
+    def revoked(self) -> frozenset[int]:
+        return self._revoked
+
+    def public_keys(self, robot: int) -> tuple[bytes, ...]:
+        """The raw public keys accepted for `robot` (empty when unknown or revoked)."""
+        if robot in self._revoked:
+            return ()
+        return tuple(_public_bytes(k) for k in self._keys.get(robot, ()))
+
+    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
+        if robot in self._revoked or len(signature) != SIGNATURE_LEN:
+            return False
+        for key in self._keys.get(robot, ()):
+            try:
+                key.verify(bytes(signature), bytes(data))
+            except InvalidSignature:
+                continue
+            except Exception:  # never raise into the core (TypeError on odd input)
+                return False
+            return True
+        return False
+
+
+def throwaway_identities(robot_ids: Iterable[int]) -> dict[int, Identity]:
+    """A fresh key pair per robot and one shared keyring: `swarmd sim` and tests."""
+    ids = list(robot_ids)
+    pairs = {r: generate_identity() for r in ids}
+    keyring = Keyring({r: pub for r, (_, pub) in pairs.items()})
+    return {r: Identity(Ed25519Signer(r, priv), keyring) for r, (priv, _) in pairs.items()}
+
+
+# -- key files ------------------------------------------------------------------------------
+
+
+def _parse_hex_key(line: bytes, origin: str, what: str) -> bytes:
+    try:
+        key = binascii.unhexlify(line)
+    except (binascii.Error, ValueError):
+        key = b""
+    if len(key) != PUBLIC_KEY_LEN:
+        raise IdentityFileError(
+            f"{origin} is not a {what}: expected {2 * PUBLIC_KEY_LEN} hex digits a line "
+            "(make one with: swarmd keygen --robot ID DIR)")
+    return key
+
+
+def read_private_key(path: Path | str) -> bytes:
+    """A robot's private key from its file, refusing one not private to its owner.
+
+    Raises `IdentityFileError` naming the file, the problem and the fix."""
+    path = Path(path)
+    try:
+        # O_NONBLOCK: a FIFO opens at once and is refused below instead of hanging;
+        # the mode is checked on the descriptor read (no race with a swapped path).
+        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    except FileNotFoundError:
+        raise IdentityFileError(
+            f"private key {path} does not exist (make it: swarmd keygen --robot ID "
+            f"{path.parent})") from None
+    except PermissionError:
+        raise IdentityFileError(
+            f"private key {path} is not readable by this user (uid {os.getuid()}); it "
+            f"must be owned by the user the daemon runs as: chown swarmd {path}") from None
+    except OSError as exc:
+        raise IdentityFileError(f"private key {path}: {exc.strerror}") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise IdentityFileError(f"private key {path} is {file_kind(st.st_mode)}, not a "
+                                    "regular file")
+        loose = stat.S_IMODE(st.st_mode) & 0o077
+        if loose:
+            raise IdentityFileError(
+                f"private key {path} has mode {stat.S_IMODE(st.st_mode):04o}: other users "
+                "can access it, and whoever reads it can sign frames as this robot; fix "
+                f"it with: chmod 600 {path}")
+        data = os.read(fd, _MAX_FILE + 1)
+    finally:
+        os.close(fd)
+    if len(data) == PRIVATE_KEY_LEN:
+        return data
+    text = data.strip()
+    if len(text) == 2 * PRIVATE_KEY_LEN:
+        try:
+            return binascii.unhexlify(text)
+        except (binascii.Error, ValueError):
+            pass
+    raise IdentityFileError(
+        f"private key {path} holds {len(data)} bytes; a robot's private key is "
+        f"{2 * PRIVATE_KEY_LEN} hex digits (make one with: swarmd keygen --robot ID DIR)")
+
+
+def read_public_keys(path: Path | str) -> tuple[bytes, ...]:
+    """The public key(s) in a ``robot-N.pub`` file: one per line, at least one.
+
+    Raises `IdentityFileError` naming the file."""
+    path = Path(path)
+    try:
+        data = read_regular_file(path, _MAX_FILE)
+    except FileNotFoundError:
+        raise IdentityFileError(f"public key {path} does not exist") from None
+    except FileRefused as exc:
+        raise IdentityFileError(f"public key {path} {exc.reason}") from None
+    except OSError as exc:
+        raise IdentityFileError(f"public key {path}: {exc.strerror or exc}") from None
+    keys: list[bytes] = []
+    for line in data.splitlines():
+        line = line.split(b"#", 1)[0].strip()
+        if line:
+            key = _parse_hex_key(line, f"public key {path}", "public key file")
+            if key not in keys:
+                keys.append(key)
+    if not keys:
+        raise IdentityFileError(f"public key {path} is empty (make it: swarmd keygen "
+                                "--robot ID DIR)")
+    return tuple(keys)
+
+
+def _refuse_non_regular(path: Path) -> bool:
+    """True if `path` exists (a regular file); raises for anything else there."""
+    try:
+        st = os.stat(path)  # follows a symlink: a link to /dev/null is a device
+    except FileNotFoundError:
+        return False
+    except OSError as exc:
+        raise IdentityFileError(f"{path}: {exc.strerror}") from None
+    if not stat.S_ISREG(st.st_mode):
+        # --force replaces a key, never a device node, FIFO or directory.
+        raise IdentityFileError(f"{path} is {file_kind(st.st_mode)}, not a regular file; "
+                                "refusing to replace it (even with --force)")
+    return True
+
+
+def _write_atomic(path: Path, data: bytes, mode: int) -> None:
+    """Write to a temporary name created with `mode`, then rename into place: no reader
+    sees a partial key or a moment of wider permissions."""
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
+    try:
+        os.fchmod(fd, mode)  # the umask can only remove bits, but be explicit
+        os.write(fd, data)
+        os.fsync(fd)
+    except BaseException:
+        os.close(fd)
+        tmp.unlink(missing_ok=True)
+        raise
+    os.close(fd)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def check_writable(directory: Path | str, robot: int, *, force: bool = False) -> None:
+    """Raise IdentityFileError if `write_identity` would refuse (a whole swarm's set
+    is checked before any file is written)."""
+    if not 1 <= robot <= 0xFFFF:
+        raise IdentityFileError(f"robot id {robot} is outside 1..65535")
+    paths = (private_key_path(directory, robot), public_key_path(directory, robot))
+    exists = [p for p in paths if _refuse_non_regular(p)]
+    if exists and not force:
+        raise IdentityFileError(f"{exists[0]} already exists; pass --force to replace it")
+
+
+def write_identity(directory: Path | str, robot: int, *, force: bool = False,
+                   ) -> tuple[Path, Path]:
+    """Make robot `robot`'s key pair in `directory` (created 0755 if missing):
+    ``robot-N.key`` (0600) and ``robot-N.pub`` (0644). Returns their paths.
+
+    Nothing is written unless both can be: an existing key is kept unless `force`, and
+    a non-regular file in the way (FIFO, device, directory) is refused even with it."""
+    check_writable(directory, robot, force=force)
+    directory = Path(directory)
+    key_path, pub_path = private_key_path(directory, robot), public_key_path(directory, robot)
+    try:
+        directory.mkdir(mode=0o755, parents=True, exist_ok=True)
+    except FileExistsError:
+        raise IdentityFileError(f"{directory} exists and is not a directory") from None
+    private, public = generate_identity()
+    _write_atomic(key_path, (private.hex() + "\n").encode(), 0o600)
+    _write_atomic(pub_path, (public.hex() + "\n").encode(), 0o644)
+    return key_path, pub_path

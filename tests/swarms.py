@@ -1,0 +1,45 @@
+"""Swarm files for tests: the paper's swarm (configs/paper.yaml) with the auth a test
+wants. The committed file is signed per robot with keys nobody committed, so a test that
+runs daemons from it says `auth: none` (signing is not what it tests) or makes keys."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from swarmd.identity import private_key_path, write_identity
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ROOT / "configs" / "paper.yaml"
+_AUTH = re.compile(r"(?m)^auth:.*$")
+
+
+def paper_text(auth: str = "none", source: Path = PAPER) -> str:
+    """configs/paper.yaml with its `auth:` line replaced by `auth: <auth>` (or by
+    `auth` itself when it is a whole line such as `key_file: swarm.key`)."""
+    line = auth if ":" in auth.split("{")[0] else f"auth: {auth}"
+    text, n = _AUTH.subn(line, source.read_text(), count=1)
+    assert n == 1, f"{source} has no auth line"
+    return text
+
+
+def unsigned_paper(directory: Path, name: str = "paper.yaml") -> Path:
+    """The paper's swarm saying `auth: none`, written to directory/name."""
+    path = directory / name
+    path.write_text(paper_text("none"))
+    return path
+
+
+def signed_paper(directory: Path, name: str = "paper.yaml") -> tuple[Path, Path]:
+    """The paper's swarm signed per robot with keys made in directory/keys: (swarm
+    file, keys dir). Robot N's private key is `identity_file(keys, N)`."""
+    keys = directory / "keys"
+    for robot in range(1, 7):
+        write_identity(keys, robot)
+    path = directory / name
+    path.write_text(paper_text("{mode: per-robot, keys_dir: keys}"))
+    return path, keys
+
+
+def identity_file(keys: Path, robot: int) -> Path:
+    return private_key_path(keys, robot)
