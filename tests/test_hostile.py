@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
+from swarms import unsigned_paper
 
 from sim.realtime.robotfiles import free_udp_port
 from swarmd.config.swarm_rules import load_swarm
@@ -220,7 +221,7 @@ def test_start_sets_aside_an_unusable_state_file_and_starts_fresh(tmp_path: Path
     other = state_dir / ".swarm1543-robot3.json.x0.tmp"
     other.write_text("{")
     config = tmp_path / "robot.yaml"
-    config.write_text(f"robot: 2\nswarm: {PAPER}\n"
+    config.write_text(f"robot: 2\nswarm: {unsigned_paper(tmp_path)}\n"
                       f"transport: {{kind: udp, port: {free_udp_port()}}}\n"
                       f"state_dir: {state_dir}\n")
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}

@@ -25,9 +25,9 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 from swarmd.core import events as ev
-from swarmd.core.auth import Identity
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.auth import Identity
 from swarmd.core.limits import check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
