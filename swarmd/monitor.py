@@ -34,9 +34,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from swarmd.config import ConfigError, SwarmConfig, load_robot, load_swarm
-from swarmd.config.errors import ConfigUnreadable, Problem
-from swarmd.config.robot import TransportConfig, UdpTransportConfig
+from swarmd.config import ConfigError, SwarmConfig, load_robot
+from swarmd.config.errors import Problem
+from swarmd.config.robot import TransportConfig, UdpTransportConfig, load_referenced_swarm
 from swarmd.config.source import read_source, validate
 from swarmd.core import wire
 from swarmd.core.params import Params
@@ -306,15 +306,7 @@ def load_base_station(path: str | Path) -> BaseStation:
         return BaseStation(robot.swarm, robot.transport, robot.keys())
     f: _BaseStationFile = validate(_BaseStationFile, src)
     problems: list[Problem] = []
-    swarm: SwarmConfig | None = None
-    swarm_path = src.resolve(f.swarm)
-    try:
-        swarm = load_swarm(swarm_path)
-    except ConfigUnreadable as exc:
-        reason = exc.problems[0].message if exc.problems else "unreadable"
-        problems.append(src.problem(("swarm",), f"swarm file {swarm_path}: {reason}"))
-    except ConfigError as exc:
-        problems.extend(exc.problems)
+    swarm = load_referenced_swarm(src, f.swarm, problems)
     keys: list[bytes] = []
     if swarm is not None and (swarm_key := swarm.key()) is not None:
         keys.append(swarm_key)

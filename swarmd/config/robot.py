@@ -281,6 +281,20 @@ def parse_robot(text: str, name: str = "<string>", path: Path | None = None) -> 
     return from_source(parse_source(text, name, path))
 
 
+def load_referenced_swarm(src: Source, name: str, problems: list[Problem]) -> SwarmConfig | None:
+    """The swarm file a robot or base-station file names (`swarm:`), resolved relative to
+    that file; its problems are appended to `problems` (None when it cannot be used)."""
+    swarm_path = src.resolve(name)
+    try:
+        return load_swarm(swarm_path)
+    except ConfigUnreadable as exc:
+        reason = exc.problems[0].message if exc.problems else "unreadable"
+        problems.append(src.problem(("swarm",), f"swarm file {swarm_path}: {reason}"))
+    except ConfigError as exc:
+        problems.extend(exc.problems)
+    return None
+
+
 def from_source(src: Source) -> RobotConfig:
     """Validate a parsed robot file and load its swarm file. Raises ConfigError."""
     data = src.data
@@ -292,15 +306,7 @@ def from_source(src: Source) -> RobotConfig:
                                        "`swarm: <this file>`; docs/config.md)")])
     f: RobotFile = validate(RobotFile, src)
     problems: list[Problem] = []
-    swarm_path = src.resolve(f.swarm)
-    swarm: SwarmConfig | None = None
-    try:
-        swarm = load_swarm(swarm_path)
-    except ConfigUnreadable as exc:
-        reason = exc.problems[0].message if exc.problems else "unreadable"
-        problems.append(src.problem(("swarm",), f"swarm file {swarm_path}: {reason}"))
-    except ConfigError as exc:
-        problems.extend(exc.problems)
+    swarm = load_referenced_swarm(src, f.swarm, problems)
     if swarm is not None:
         if f.robot not in swarm.robot_ids():
             ids = ", ".join(map(str, swarm.robot_ids()))
@@ -331,7 +337,7 @@ def from_source(src: Source) -> RobotConfig:
     return RobotConfig(
         robot=f.robot,
         swarm=swarm,
-        swarm_path=swarm_path,
+        swarm_path=src.resolve(f.swarm),
         transport=f.transport,
         link=link,
         event_log=src.resolve(f.event_log) if f.event_log is not None else None,
