@@ -12,6 +12,7 @@ are read. Bad input gets one clear message (docs/DESIGN.md, "Standards").
 from __future__ import annotations
 
 import os
+import secrets
 import stat
 from pathlib import Path
 
@@ -91,3 +92,24 @@ def output_problem(path: Path | str) -> str | None:
     if not os.access(parent if st is None else path, os.W_OK):
         return f"{'directory ' + str(parent) if st is None else 'the file'} is not writable"
     return None
+
+
+def write_atomic(path: Path, data: bytes, mode: int) -> None:
+    """Write to a temporary name created with `mode`, then rename into place: no reader
+    sees a partial file (a key, a state file) or a moment of wider permissions."""
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
+    try:
+        os.fchmod(fd, mode)  # the umask can only remove bits, but be explicit
+        os.write(fd, data)
+        os.fsync(fd)
+    except BaseException:
+        os.close(fd)
+        tmp.unlink(missing_ok=True)
+        raise
+    os.close(fd)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

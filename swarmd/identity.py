@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import binascii
 import os
-import secrets
 import stat
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -42,7 +41,7 @@ from cryptography.hazmat.primitives.serialization import (
 )
 
 from swarmd.core.auth import PUBLIC_KEY_LEN, SIGNATURE_LEN, Identity
-from swarmd.files import FileRefused, file_kind, read_regular_file
+from swarmd.files import FileRefused, file_kind, read_regular_file, write_atomic
 from swarmd.keys import KeyFileError
 
 __all__ = [
@@ -291,27 +290,6 @@ def _refuse_non_regular(path: Path) -> bool:
     return True
 
 
-def _write_atomic(path: Path, data: bytes, mode: int) -> None:
-    """Write to a temporary name created with `mode`, then rename into place: no reader
-    sees a partial key or a moment of wider permissions."""
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
-    try:
-        os.fchmod(fd, mode)  # the umask can only remove bits, but be explicit
-        os.write(fd, data)
-        os.fsync(fd)
-    except BaseException:
-        os.close(fd)
-        tmp.unlink(missing_ok=True)
-        raise
-    os.close(fd)
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def check_writable(directory: Path | str, robot: int, *, force: bool = False) -> None:
     """Raise IdentityFileError if `write_identity` would refuse (a whole swarm's set
     is checked before any file is written)."""
@@ -338,6 +316,6 @@ def write_identity(directory: Path | str, robot: int, *, force: bool = False,
     except FileExistsError:
         raise IdentityFileError(f"{directory} exists and is not a directory") from None
     private, public = generate_identity()
-    _write_atomic(key_path, (private.hex() + "\n").encode(), 0o600)
-    _write_atomic(pub_path, (public.hex() + "\n").encode(), 0o644)
+    write_atomic(key_path, (private.hex() + "\n").encode(), 0o600)
+    write_atomic(pub_path, (public.hex() + "\n").encode(), 0o644)
     return key_path, pub_path

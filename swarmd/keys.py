@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from swarmd.core.wire import KEY_LEN
-from swarmd.files import file_kind
+from swarmd.files import file_kind, write_atomic
 
 __all__ = ["KEY_LEN", "KeyFileError", "generate_key", "load_key", "load_keys", "parse_key"]
 
@@ -63,22 +63,7 @@ def generate_key(path: Path | str, *, force: bool = False, hex_format: bool = Fa
         raise KeyFileError(f"{path} already exists; pass --force to replace it")
     key = secrets.token_bytes(KEY_LEN)
     data = (key.hex() + "\n").encode() if hex_format else key
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
-    try:
-        os.fchmod(fd, 0o600)  # the umask can only remove bits, but be explicit
-        os.write(fd, data)
-        os.fsync(fd)
-    except BaseException:
-        os.close(fd)
-        tmp.unlink(missing_ok=True)
-        raise
-    os.close(fd)
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_atomic(path, data, 0o600)
     return key
 
 
