@@ -95,8 +95,10 @@ def test_a_refused_arm_is_a_health_problem_and_the_standby_takes_over() -> None:
          "--autopilot", "ardupilot", "--refuse-arm", "3", "--duration", str(duration),
          "--json"],
         capture_output=True, text=True, timeout=duration + 60.0, check=False, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
-    summary = json.loads(proc.stdout)
+    summary = json.loads(proc.stdout) if proc.stdout.strip() else {}
+    why = {k: summary.get(k) for k in ("violations", "problems", "warnings", "faults",
+                                       "false_takeovers", "lateness_ms")}
+    assert proc.returncode == 0, (why, proc.stderr[-2000:])
     # Robot 3's daemon heard the COMMAND_ACK refusal as a health problem and left f3;
     # standby 6 (it covers 2 and 3) holds it, and nothing else moved.
     assert summary["holders"] == {"f1": [1], "f2": [2], "f3": [6], "f4": [4]}
