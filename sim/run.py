@@ -362,13 +362,19 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
                               link=options.robot_link, refuse_arm=options.refuse_arm)
     except (ValueError, RuntimeError) as exc:  # a swarm that could not start
         raise SimError(f"swarmd sim: {exc}") from None
-    # A robot whose autopilot refuses to arm is faulty from the start: its daemon hands
-    # its function over (DESIGN rule 7), so its replacement is no false takeover.
-    # It counts from its daemon's start, when it held its function (the fault table's
-    # `function`).
+    # A robot whose autopilot refuses to arm is faulty: its daemon hands its function
+    # over (DESIGN rule 7), so its replacement is no false takeover. The fault counts
+    # from the moment the health problem reached the daemon (its `leave`), as an
+    # injected `unhealthy` does: how long the link retried the arm first (COMMAND_ACK
+    # retries, slower on a loaded machine) is the link's time, not the protocol's.
+    # Without a leave, from its daemon's start, when it held its function.
     started = {e["robot"]: float(e["t"]) for e in reversed(result.events)
                if e.get("event") == "started"}
-    refused = [RefusedArm("unhealthy", round(started.get(r, 0.0), 6) + 1e-6, (r,))
+    left = {e["robot"]: float(e["t"]) for e in reversed(result.events)
+            if e.get("event") == "leave" and e.get("reason") == "fault"}
+    refused = [RefusedArm("unhealthy",
+                          round(left.get(r, started.get(r, 0.0)), 6) - 1e-6
+                          if r in left else round(started.get(r, 0.0), 6) + 1e-6, (r,))
                for r in options.refuse_arm]
     summary = summarize_realtime(result, [*refused, *faults], checked.plan, checked.params,
                                  loss=options.loss)
