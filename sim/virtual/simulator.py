@@ -21,11 +21,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sim.shared.fakeid import fake_identities
 from sim.shared.faults import Fault, fault_record
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.auth import Identity
 from swarmd.core.events import Event
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
@@ -33,6 +35,9 @@ from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
 
 _TICK, _DELIVER, _FAULT, _LIAR = 0, 1, 2, 3
+AUTH_MODES = ("none", "shared", "per-robot")
+"""`none`: unsigned; `shared`: one swarm key (HMAC); `per-robot`: each robot its own
+key for WARN, CLAIM and LEAVE, the swarm key on heartbeats (DESIGN section 2)."""
 _OP_TICK, _OP_RECEIVE, _OP_HEALTH, _OP_STOP, _OP_SEND = range(5)
 
 
@@ -92,6 +97,8 @@ class VirtualSwarm:
         channel: Channel | None = None,
         seed: int = 0,
         keys: Sequence[bytes] = (),
+        auth: str = "none",
+        identities: dict[int, Identity] | None = None,
         interest: bool = True,
         start_spread: float = 0.05,
         on_event: Callable[[dict[str, Any]], None] | None = None,
@@ -103,7 +110,19 @@ class VirtualSwarm:
         self.faults = sorted((part for f in faults for part in f.split()), key=lambda f: f.at)
         self.channel = channel or Channel()
         self.rng = random.Random(seed)
-        self.keys = tuple(keys)
+        if auth not in AUTH_MODES:
+            raise ValueError(f"auth must be one of {', '.join(AUTH_MODES)}, not {auth!r}")
+        if auth != "none" and not keys:
+            keys = (bytes(range(32)),)  # a throwaway swarm key for this run
+        self.keys = tuple(keys) if auth != "none" or keys else ()
+        self.auth = "shared" if auth == "none" and self.keys else auth
+        # Per-robot mode: throwaway identities (`sim.shared.fakeid`) unless given.
+        self.identities: dict[int, Identity] = {}
+        if self.auth == "per-robot":
+            self.identities = identities if identities is not None else \
+                fake_identities(plan.robots, seed)
+        self.verifier = self.identities[min(self.identities)].verifier \
+            if self.identities else None
         self.on_event = on_event
         self.now = 0.0
         self._heap: list[tuple[float, int, int, Any, Any]] = []
@@ -258,7 +277,7 @@ class VirtualSwarm:
 
     def _broadcast(self, sender: int, data: bytes) -> None:
         self.frames_sent += 1
-        frame = wire.decode(data, self.keys)  # our own nodes' frames: always valid
+        frame = wire.decode(data, self.keys, self.verifier)  # our own nodes': valid
         ch = self.channel
         rng = self.rng
         part = self.partition
@@ -278,6 +297,7 @@ class VirtualSwarm:
     def _boot(self, rid: int) -> None:
         r = self.robots[rid]
         r.node = Node(rid, self.plan, self.params, self.now, keys=self.keys,
+                      identity=self.identities.get(rid),
                       seq_start=self.rng.randrange(1 << 20))
         self._arm(rid)
 
@@ -306,6 +326,7 @@ class VirtualSwarm:
             case "restart", _:
                 r.alive, r.paused, r.buffered = True, False, []
                 r.node = Node(rid, self.plan, self.params, t, keys=self.keys,
+                              identity=self.identities.get(rid),
                               seq_start=r.seq_high + 1_000_000,
                               restored=r.persisted or Restored())
                 r.timer_at = None
@@ -336,7 +357,9 @@ class VirtualSwarm:
             snap = r.node.snapshot()
             held = (snap.function, snap.epoch) if snap.function and \
                 snap.role == Role.ACTIVE else None
-            r.persisted = Restored(known=dict(snap.known), held=held)
+            r.persisted = Restored(known=dict(snap.known), held=held,
+                                   peer_seq=dict(snap.peer_seq),
+                                   certificate=snap.certificate if held else ())
             r.seq_high = snap.seq
         r.alive = False
         r.timer_gen += 1
@@ -362,6 +385,7 @@ def run_virtual(
     loss: float = 0.0,
     seed: int = 0,
     keys: Sequence[bytes] = (),
+    auth: str = "none",
     interest: bool = True,
     channel: Channel | None = None,
     on_event: Callable[[dict[str, Any]], None] | None = None,
@@ -369,4 +393,4 @@ def run_virtual(
     """Convenience wrapper: one run, default channel with the given loss."""
     ch = channel or Channel(loss=loss)
     return VirtualSwarm(plan, params, duration=duration, faults=faults, channel=ch, seed=seed,
-                        keys=keys, interest=interest, on_event=on_event).run()
+                        keys=keys, auth=auth, interest=interest, on_event=on_event).run()
