@@ -30,6 +30,7 @@ from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+from swarmd.core import replay
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
 from swarmd.core.votes import VoteCounter
@@ -369,8 +370,9 @@ class Node:
         "Sequence numbers")."""
         if frame.seq < self._seq_start:
             return self._drop("replay")
-        if frame.seq > self._seq:
-            self._seq = min(frame.seq, wire.SEQ_MAX - 1)
+        if self._seq < frame.seq <= self._seq + replay.JUMP:
+            # Further ahead, every receiver drops it as `seq_jump`: nothing to follow.
+            self._seq = frame.seq
         return self._drop("own")
 
     def tick(self, now: float) -> list[Action]:
