@@ -52,8 +52,8 @@ def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequenc
                 if f not in held:
                     frame(me, wire.Heartbeat(plan.slot(f), 0xFFFF, 1, 0), snap.seq + 1)
         case "seq":
-            f = snap.function
-            slot = plan.slot(f) if f is not None else 0
+            mine = snap.function
+            slot = plan.slot(mine) if mine is not None else 0
             frame(me, wire.Heartbeat(slot, snap.epoch if slot else 0, int(snap.role), 0),
                   wire.SEQ_MAX - 1)
             some = plan.functions[0]
@@ -69,7 +69,7 @@ def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequenc
             for f in plan.functions:
                 holder, epoch = snap.known[f]
                 for g in plan.watched_by(f):
-                    witness = snap.known[g].robot
+                    witness = snap.known[g][0]
                     if witness not in (me, holder, 0):
                         frame(witness, wire.Warn(holder, plan.slot(f), epoch))
         case _:

@@ -256,14 +256,14 @@ class Checker:
             self._close_watcher(r)
         elif name == "warn":
             key = (r, rec["function"])
-            subject = int(rec["subject"])
+            suspect = int(rec["subject"])
             # About a holder already replaced: a watcher that learns of the takeover
             # late (a certificate still on its way to it, per-robot mode); that
             # takeover answers the warning.
             last = [tk for tk in self.takeovers if tk["function"] == key[1]][-1:]
-            late = bool(last) and last[0]["replaced"] == subject
+            late = bool(last) and last[0]["replaced"] == suspect
             if key not in self.episodes and not late:
-                self.episodes[key] = (t, subject)
+                self.episodes[key] = (t, suspect)
         elif name in ("refute", "alert"):
             f = rec.get("function")
             if f is not None:

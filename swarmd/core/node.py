@@ -25,12 +25,11 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 from swarmd.core import events as ev
-from swarmd.core.auth import Identity
-from swarmd.core import wire
+from swarmd.core import replay, wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.auth import Identity
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core import replay
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
 from swarmd.core.votes import VoteCounter

@@ -16,8 +16,8 @@ resumes at its persisted reservation, at most `swarmd.state.SEQ_RESERVE` = 10^6 
 of what it sent); a frame further ahead is dropped as
 `seq_jump` and moves nothing. One forged frame at seq 2^48-1 therefore cannot mute a
 robot; a forger can only push a sender's window by `JUMP` beyond the time that passed
-(2^28 forged frames to exhaust 48 bits), and the robot it names, which hears that frame too, moves its own counter above it
-(`Node`, "own").
+(2^28 forged frames to exhaust 48 bits), and the robot it names, which hears that frame
+too, moves its own counter above it (`Node`, "own").
 """
 
 from __future__ import annotations
