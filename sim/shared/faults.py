@@ -239,10 +239,11 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
 
 
 def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
-                 duration: float | None = None) -> list[str]:
+                 duration: float | None = None, virtual: bool = True) -> list[str]:
     """Problems with a fault list against a swarm: unknown robots, motor without
     physics (`physics` is True for --virtual too: sim.virtual.simulator turns a motor fault into
-    `unhealthy`), and (given the run's `duration`) a fault that would start after the end."""
+    `unhealthy`), forge outside the virtual simulator (`virtual` False), and (given the
+    run's `duration`) a fault that would start after the end."""
     problems = []
     for f in faults:
         unknown = [r for r in f.robots if r not in robot_ids]
@@ -252,6 +253,9 @@ def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
         if f.kind == "motor" and not physics:
             problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics; "
                             "--virtual models one as the robot reporting itself unhealthy)")
+        if f.kind == "forge" and not virtual:
+            problems.append(f"{f.spec()}: forge faults run in the virtual simulator only "
+                            "(add --virtual)")
         if duration is not None and f.at >= duration:
             problems.append(f"{f.spec()}: starts at {_num(f.at)} s, not before the end of the "
                             f"run (--duration {_num(duration)})")
