@@ -146,7 +146,8 @@ def cpu_at_100(seconds: float, verifies_per_s: float) -> None:
     print(f"  with a crash at {half:.0f} s: {verifier.calls} signed frames in {seconds:.0f} s "
           f"(the simulator verifies a broadcast once; a daemon verifies each one it hears: "
           f"at most {verifier.calls} verifies, "
-          f"{verifier.calls / verifies_per_s * 1000:.1f} ms of CPU), {len(took)} takeover(s), violations: {len(res.violations)}")
+          f"{verifier.calls / verifies_per_s * 1000:.1f} ms of CPU), {len(took)} "
+          f"takeover(s), violations: {len(res.violations)}")
     print(f"  process CPU {cpu:.2f} s for {robot_seconds:.0f} robot-seconds: "
           f"{100 * cpu / robot_seconds:.3f}% of one core per robot (simulator included)")
 
