@@ -276,3 +276,67 @@ def test_per_robot_frame_sizes_and_verification(paper: Paper) -> None:
     # A certificate means nothing to a robot without robot keys.
     with pytest.raises(wire.CodecError):
         wire.decode(relay, (key,))
+
+
+# ---------------------------------------------------------------- chaos, per-robot
+def test_per_robot_random_chaos_breaks_no_invariant() -> None:
+    """A sample of bench/bench_chaos.py's random swarms and schedules, per-robot mode."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "bench" / "bench_chaos.py"
+    spec = importlib.util.spec_from_file_location("bench_chaos", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules["bench_chaos"] = bench
+    spec.loader.exec_module(bench)
+    from swarmd.core.params import udp
+    for seed in range(0, 300, 5):
+        case = bench.draw_case(seed, max_robots=12)
+        res = run_virtual(case.plan, udp(), duration=case.duration, faults=case.faults,
+                          loss=case.loss, seed=case.seed, auth="per-robot")
+        assert res.violations == [], (seed, [v.as_dict() for v in res.violations])
+
+
+def test_replay_filter_bounds_jumps_by_elapsed_time() -> None:
+    from swarmd.core.replay import JUMP, RATE, ReplayFilter
+
+    f = ReplayFilter()
+    assert f.check(2, 1000, 0.0) is None
+    assert f.check(2, wire.SEQ_MAX, 0.1) == "seq_jump"
+    assert f.check(2, 1001, 0.2) is None  # not muted
+    assert f.check(2, 1001 + JUMP, 0.2) is None  # a restart from the reservation
+    later = 1001 + JUMP + JUMP + int(RATE * 10.0)
+    assert f.check(2, later, 10.2) is None  # a restart after 10 s of wall clock
+    f.restore(3, 500)
+    assert f.check(3, 480, 0.0) == "replay" and f.check(3, 500, 0.0) == "replay"
+    assert f.check(3, 10**12, 0.0) is None  # the first jump after a restore is free
+
+
+def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
+    """The new holder persists its certificate; after a restart it can still prove its
+    hold to the old holder back from a partition."""
+    plan, params = paper
+    res_ids = fake_identities(plan.robots)
+    node = Node(6, plan, params, 0.0, identity=res_ids[6])
+    node.tick(0.0)
+    slot = plan.slot("f2")
+    leave = _signed(res_ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
+    node.receive(leave, 1.0)
+    node.tick(1.0 + params.claim_hold + 0.01)
+    snap = node.snapshot()
+    assert (snap.function, snap.epoch) == ("f2", 1) and snap.certificate == (leave,)
+    again = Node(6, plan, params, 5.0, identity=res_ids[6], restored=Restored(
+        known=dict(snap.known), held=("f2", 1), peer_seq=dict(snap.peer_seq),
+        certificate=snap.certificate))
+    again.tick(5.0)
+    again.tick(5.0 + params.rejoin_hold)
+    assert again.snapshot().function == "f2"
+    assert again.snapshot().certificate == (leave,)
+    # The old holder's stale heartbeat gets the certificate and a fresh claim back.
+    stale = wire.encode(wire.Frame(plan.swarm_id, 2, 800, wire.Heartbeat(slot, 0, 1, 0)))
+    out = [wire.decode(a.frame, (), res_ids[1].verifier).msg
+           for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
+    assert any(isinstance(m, wire.Cert) for m in out)
+    assert any(isinstance(m, wire.Claim) and m.epoch == 1 for m in out)
