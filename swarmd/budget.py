@@ -32,9 +32,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from swarmd.core.auth import SIGNATURE_LEN
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.auth import SIGNATURE_LEN
 from swarmd.core.wire import HEADER_LEN, TAG_LEN, slot_size
 from swarmd.transport import media
 
