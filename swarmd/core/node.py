@@ -1034,6 +1034,9 @@ class Node:
         backers = self._backers(f, c.failed, c.epoch - 1, claimant)
         if not backers or (backers != [c.failed] and len(backers) < self._params.quorum):
             return False
+        floor = self._known[f].epoch
+        if len(certified) >= _CLAIMS_REMEMBERED:  # older takeovers matter no more
+            certified.intersection_update({x for x in certified if x[1] >= floor})
         certified.add((claimant, c.epoch))
         return True
 
