@@ -268,7 +268,8 @@ def check(options: SimOptions) -> _Checked:
         raise SimError(*[str(p) for p in exc.problems]) from None
     plan, params = cfg.to_plan(), cfg.params()
     problems = check_faults(list(options.parsed_faults), set(plan.robots),
-                            physics=options.physics, duration=options.duration)
+                            physics=options.physics, duration=options.duration,
+                            virtual=options.virtual)
     if problems:
         raise SimError(*[f"--fault: {p}" for p in problems])
     unknown = sorted(set(options.refuse_arm) - set(plan.robots))
@@ -329,6 +330,16 @@ def run_sim(options: SimOptions) -> SimResult:
     return SimResult(summary=summary, events=events, t0=t0, pictures=pictures)
 
 
+def _auth(checked: _Checked) -> str:
+    """The swarm's authentication mode for the virtual simulator: `per-robot` when the
+    swarm file asks for it (the simulator makes throwaway identities), else `shared`
+    with a swarm key, else `none`."""
+    mode = getattr(checked.cfg, "auth", None)
+    if mode in ("none", "shared", "per-robot"):
+        return str(mode)
+    return "shared" if checked.cfg.key() else "none"
+
+
 def _run_virtual(checked: _Checked, faults: list[Fault], options: SimOptions,
                  ) -> tuple[Summary, list[dict[str, Any]], None]:
     from sim.virtual.simulator import run_virtual
@@ -337,7 +348,7 @@ def _run_virtual(checked: _Checked, faults: list[Fault], options: SimOptions,
     start = time.perf_counter()
     result = run_virtual(checked.plan, checked.params, duration=options.duration,
                          faults=faults, loss=options.loss, seed=options.seed,
-                         keys=(key,) if key else ())
+                         keys=(key,) if key else (), auth=_auth(checked))
     wall = time.perf_counter() - start
     summary = summarize(result.events, faults, checked.plan, checked.params,
                         loss=options.loss, duration=options.duration, mode="virtual",

@@ -20,6 +20,11 @@ timing parameters, not from measurement:
   per second (docs/radios.md, Digi 90001539): 3 x robots transmissions, worst case.
   A DigiMesh broadcast goes out MT + 1 = 4 times (MT default 3); with every robot in
   one hop and NH=1 nobody relays it (more hops add relays: not counted here).
+- per-robot mode (DESIGN section 2, "Who may say what"): heartbeats stay as they are
+  (the swarm key's 8-byte tag, or none), so the steady state does not change; WARN,
+  CLAIM and LEAVE carry a 64-byte Ed25519 signature instead of the tag (80, 80 and 79 B
+  below 128 functions), and a claim goes out with its certificate: one CERT frame (92 B)
+  per witness backing it, with every claim (re)sent.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from swarmd.core.auth import SIGNATURE_LEN
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.wire import HEADER_LEN, TAG_LEN, slot_size
@@ -100,6 +106,12 @@ class Budget:
     max_payload: int
     heartbeat_fits: bool
     warnings: tuple[str, ...]
+    per_robot: bool = False
+    """WARN, CLAIM and LEAVE signed with each robot's own key (certificates on claims)."""
+    warn_bytes: int = 0
+    """Bytes of a WARN (a CLAIM is the same size)."""
+    cert_bytes: int = 0
+    """Bytes of one CERT frame (per-robot mode; 0 otherwise)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -119,6 +131,9 @@ class Budget:
             f"  heartbeat {self.heartbeat_bytes} B, payload limit {self.max_payload} B: "
             + ("fits" if self.heartbeat_fits else "DOES NOT FIT"),
         ]
+        if self.per_robot:
+            out.append(f"  per-robot signatures: warning/claim {self.warn_bytes} B, "
+                       f"certificate frame {self.cert_bytes} B")
         out += [f"  WARNING: {w}" for w in self.warnings]
         return out
 
@@ -128,8 +143,15 @@ def heartbeat_size(signed: bool, slot_bytes: int = 1) -> int:
     return HEADER_LEN + HEARTBEAT_BODY + slot_bytes + (TAG_LEN if signed else 0)
 
 
-def warn_size(signed: bool, slot_bytes: int = 1) -> int:
-    return HEADER_LEN + WARN_BODY + slot_bytes + (TAG_LEN if signed else 0)
+def warn_size(signed: bool, slot_bytes: int = 1, *, per_robot: bool = False) -> int:
+    """Bytes of a WARN or CLAIM; per-robot mode signs them with Ed25519."""
+    auth = SIGNATURE_LEN if per_robot else TAG_LEN if signed else 0
+    return HEADER_LEN + WARN_BODY + slot_bytes + auth
+
+
+def cert_size(slot_bytes: int = 1) -> int:
+    """Bytes of a CERT frame: a header, the slot, and the signed WARN it relays."""
+    return HEADER_LEN + slot_bytes + warn_size(False, slot_bytes, per_robot=True)
 
 
 def budget_for(
@@ -141,6 +163,7 @@ def budget_for(
     medium: str,
     signed: bool,
     slot_bytes: int = 1,
+    per_robot: bool = False,
 ) -> Budget:
     """The budget from counts alone (what `channel_budget` derives from a plan);
     `slot_bytes` is the widest slot field the swarm sends (`wire.slot_size`)."""
@@ -148,11 +171,13 @@ def budget_for(
     overhead = frame_overhead(medium)
     copies = broadcast_copies(medium, robots)
     hb = heartbeat_size(signed, slot_bytes)
-    warn = warn_size(signed, slot_bytes)
+    warn = warn_size(signed, slot_bytes, per_robot=per_robot)
+    cert = cert_size(slot_bytes) if per_robot else 0
+    backers = max_watchers + 1 if per_robot else 0  # the witnesses and rule 9's own ears
     hb_rate = active / params.heartbeat_interval + standby / params.standby_heartbeat_interval
     warn_rate = max_watchers / params.warn_interval
     claim_rate = 1 / params.claim_hold  # at most one CLAIM per hold, counted as a rate
-    peak_rate = hb_rate + warn_rate + claim_rate
+    peak_rate = hb_rate + warn_rate + claim_rate * (1 + backers)
     bytes_per_s = hb_rate * (hb + overhead) * copies
     airtime_share: float | None = None
     peak_share: float | None = None
@@ -160,12 +185,20 @@ def budget_for(
         airtime_share = hb_rate * airtime(medium, hb) * copies
         peak_share = (
             hb_rate * airtime(medium, hb) + (warn_rate + claim_rate) * airtime(medium, warn)
+            + (claim_rate * backers * airtime(medium, cert) if per_robot else 0.0)
         ) * copies
     max_payload = MAX_PAYLOAD[medium]
-    fits = max(hb, warn) <= max_payload
+    fits = hb <= max_payload
     warnings: list[str] = []
     if not fits:
         warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
+    if max(warn, cert) > max_payload:
+        warnings.append(
+            f"a {warn} B warning or claim" + (f" and a {cert} B certificate frame"
+                                              if cert else "")
+            + f" exceed the {max_payload} B payload limit: "
+            + ("use 802.15.4 (100 B) for per-robot signatures; frames are not split"
+               if per_robot else "they cannot be sent"))
     if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
         needed = robots / ZIGBEE_BROADCASTS_PER_S
         warnings.append(
@@ -188,16 +221,18 @@ def budget_for(
         frames_per_s=hb_rate, bytes_per_s=bytes_per_s, airtime_share=airtime_share,
         peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
         max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
+        per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
     )
 
 
-def channel_budget(plan: SwarmPlan, params: Params, *, medium: str, signed: bool) -> Budget:
+def channel_budget(plan: SwarmPlan, params: Params, *, medium: str, signed: bool,
+                   per_robot: bool = False) -> Budget:
     """Budget of `plan` on `medium` (zigbee, 802.15.4, digimesh, serial, udp)."""
     active = sum(1 for r in plan.robots.values() if r.function is not None)
     standby = len(plan.robots) - active
     max_watchers = max((len(plan.watched_by(f)) for f in plan.functions), default=0)
     return budget_for(active, standby, max_watchers, params, medium=medium, signed=signed,
-                      slot_bytes=slot_size(len(plan.functions)))
+                      slot_bytes=slot_size(len(plan.functions)), per_robot=per_robot)
 
 
 def largest_swarm(
@@ -208,6 +243,7 @@ def largest_swarm(
     ceiling: float = AIRTIME_CEILING,
     standby_share: float = 1 / 3,
     limit: int = 10_000,
+    per_robot: bool = False,
 ) -> int:
     """Largest robot count whose steady-state heartbeats stay below `ceiling` airtime.
 
@@ -216,7 +252,8 @@ def largest_swarm(
     best = 0
     for n in range(1, limit + 1):
         standby = round(n * standby_share)
-        b = budget_for(n - standby, standby, 2, params, medium=medium, signed=signed)
+        b = budget_for(n - standby, standby, 2, params, medium=medium, signed=signed,
+                       per_robot=per_robot)
         if b.airtime_share is None or b.airtime_share >= ceiling:
             break
         best = n

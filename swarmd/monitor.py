@@ -39,6 +39,7 @@ from swarmd.config.errors import Problem
 from swarmd.config.robot import TransportConfig, UdpTransportConfig, load_referenced_swarm
 from swarmd.config.source import read_source, validate
 from swarmd.core import wire
+from swarmd.core.auth import Verifier
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
@@ -74,10 +75,13 @@ def _name(enum: type[Role] | type[Health], value: int) -> str:
 class MonitorState:
     """Everything heard on the channel, folded per robot. Pure: time is an argument."""
 
-    def __init__(self, plan: SwarmPlan, params: Params, keys: Sequence[bytes] = ()) -> None:
+    def __init__(self, plan: SwarmPlan, params: Params, keys: Sequence[bytes] = (),
+                 verifier: Verifier | None = None) -> None:
         self.plan = plan
         self.params = params
         self.keys = tuple(keys)
+        self.verifier = verifier
+        """Per-robot mode: the robots' public keys, to read signed WARN/CLAIM/LEAVE."""
         self.robots: dict[int, Heard] = {}
         self.drops: dict[str, int] = {}
         self.frames = 0
@@ -92,7 +96,7 @@ class MonitorState:
     def feed(self, data: bytes, now: float) -> None:
         """Fold one frame in. Never raises on peer input (counted drop instead)."""
         try:
-            frame = wire.decode(data, self.keys)
+            frame = wire.decode(data, self.keys, self.verifier)
         except wire.CodecError as exc:
             self._drop(exc.reason)
             return

@@ -9,6 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sim.shared.faults import (
+    ATTACKS,
     KINDS,
     Fault,
     FaultSpecError,
@@ -50,7 +51,7 @@ def test_parse_fault_every_kind(spec: str, fault: Fault) -> None:
 
 def test_parse_fault_covers_every_kind_of_the_cli() -> None:
     assert set(KINDS) == {"crash", "restart", "pause", "partition", "liar", "leave",
-                          "unhealthy", "motor", "collide"}
+                          "unhealthy", "motor", "collide", "forge"}
 
 
 @pytest.mark.parametrize("spec", [
@@ -173,7 +174,9 @@ def _faults(draw: st.DrawFn) -> Fault:
         return Fault(kind, at, tuple(named), length, groups)
     dur = draw(_times.filter(lambda d: d > 0)) if kind == "pause" else None
     n = draw(st.integers(2 if kind == "collide" else 1, 4))
-    return Fault(kind, at, tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True))), dur)
+    attack = draw(st.sampled_from(ATTACKS)) if kind == "forge" else ""
+    return Fault(kind, at, tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True))), dur,
+                 attack=attack)
 
 
 @given(_faults())

@@ -126,3 +126,17 @@ def test_schedule(schedule: Schedule) -> None:
     plan, params = swarm(schedule.swarm)
     res = run_virtual(plan, params, duration=schedule.duration(), faults=schedule.faults())
     assert res.violations == [], [v.as_dict() for v in res.violations]
+
+
+SAMPLE = 6
+"""Every SAMPLE-th schedule runs again in each signed mode (all of them pass there too:
+`-p` a plugin that sets the simulator's `auth` default runs the whole set)."""
+
+
+@pytest.mark.parametrize("auth", ["shared", "per-robot"])
+@pytest.mark.parametrize("schedule", _params()[::SAMPLE])
+def test_schedule_signed(schedule: Schedule, auth: str) -> None:
+    plan, params = swarm(schedule.swarm)
+    res = run_virtual(plan, params, duration=schedule.duration(), faults=schedule.faults(),
+                      auth=auth)
+    assert res.violations == [], [v.as_dict() for v in res.violations]

@@ -14,6 +14,14 @@
     leave:R@T            robot R leaves gracefully at T (LEAVE, then stops)
     unhealthy:R@T        robot R reports itself faulty at T (DESIGN rule 7)
     motor:R@T            a rotor of robot R fails at T (physics only)
+    forge:R@T:ATTACK     an insider holding robot R's key (per-robot mode) or the
+                         swarm key (shared) sends forged frames from T (virtual
+                         simulator): `epoch` one HEARTBEAT as R for every slot it does
+                         not hold at epoch 65535; `seq` a HEARTBEAT and a WARN as R at
+                         seq 2^48-1; `claim` CLAIMs for every slot it does not hold at
+                         ever new epochs, every warn interval; `warn` WARNs in the names
+                         of every other witness about every slot's holder, every warn
+                         interval
 
 Every kind but partition and collide targets one robot or several at once
 (`crash:1,2@T`: both at the same instant); `Fault.split()` gives one fault a robot,
@@ -34,7 +42,9 @@ from typing import Any
 from swarmd.core import events
 
 KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor",
-         "collide")
+         "collide", "forge")
+ATTACKS = ("epoch", "seq", "claim", "warn")
+"""What a `forge` fault sends (module docstring)."""
 _DURATION_KINDS = {"pause", "partition"}
 
 
@@ -51,6 +61,8 @@ class Fault:
     duration: float | None = None
     groups: tuple[tuple[int, ...], ...] = ()
     """Partition groups; empty for other kinds."""
+    attack: str = ""
+    """For `forge`: one of `ATTACKS`."""
     origin: str | None = field(default=None, compare=False)
     """For one part of a fault on several robots (`split`): the SPEC the user gave."""
 
@@ -83,6 +95,8 @@ class Fault:
             groups = "|".join(",".join(map(str, g)) for g in self.groups)
             return f"partition:{groups}@{_num(self.at)}+{_num(self.duration or 0.0)}"
         tail = f"+{_num(self.duration)}" if self.duration is not None else ""
+        if self.attack:
+            tail += f":{self.attack}"
         who = ",".join(map(str, self.robots))
         return f"{self.kind}:{who}@{_num(self.at)}{tail}"
 
@@ -130,6 +144,7 @@ _FORMS = {
     "unhealthy": "unhealthy:R@T or unhealthy:R1,R2@T",
     "motor": "motor:R@T or motor:R1,R2@T",
     "collide": "collide:R1,R2@T",
+    "forge": "forge:R@T:ATTACK (ATTACK: " + ", ".join(ATTACKS) + ")",
 }
 
 
@@ -159,6 +174,14 @@ def parse_fault(spec: str) -> Fault:
     who, at_sign, when = rest.partition("@")
     if not at_sign:
         raise bad("no '@T' (the time the fault starts)")
+    attack = ""
+    if kind == "forge":
+        when, colon2, attack = when.partition(":")
+        attack = attack.strip()
+        if not colon2 or attack not in ATTACKS:
+            raise bad(f"unknown or missing attack {attack!r}")
+    elif ":" in when:
+        raise bad(f"a {kind} takes no ':' after its time")
     at_text, plus, dur_text = when.partition("+")
     at = _seconds(at_text, "time T", bad)
     dur = _seconds(dur_text, "duration D", bad) if plus else None
@@ -177,7 +200,7 @@ def parse_fault(spec: str) -> Fault:
             raise bad(f"robot {twice[0]} is named twice")
         if kind == "collide" and len(robots) < 2:
             raise bad(f"a collision needs two or more robots, got {who.strip()!r}")
-        return Fault(kind, at, robots, dur)
+        return Fault(kind, at, robots, dur, attack=attack)
     groups = tuple(tuple(_robot(r, bad) for r in g.split(",")) for g in who.split("|"))
     if len(groups) < 2:
         raise bad("a partition needs two or more groups separated by '|'")
@@ -231,10 +254,11 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
 
 
 def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
-                 duration: float | None = None) -> list[str]:
+                 duration: float | None = None, virtual: bool = True) -> list[str]:
     """Problems with a fault list against a swarm: unknown robots, motor without
     physics (`physics` is True for --virtual too: sim.virtual.simulator turns a motor fault into
-    `unhealthy`), and (given the run's `duration`) a fault that would start after the end."""
+    `unhealthy`), forge outside the virtual simulator (`virtual` False), and (given the
+    run's `duration`) a fault that would start after the end."""
     problems = []
     for f in faults:
         unknown = [r for r in f.robots if r not in robot_ids]
@@ -244,6 +268,9 @@ def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
         if f.kind == "motor" and not physics:
             problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics; "
                             "--virtual models one as the robot reporting itself unhealthy)")
+        if f.kind == "forge" and not virtual:
+            problems.append(f"{f.spec()}: forge faults run in the virtual simulator only "
+                            "(add --virtual)")
         if duration is not None and f.at >= duration:
             problems.append(f"{f.spec()}: starts at {_num(f.at)} s, not before the end of the "
                             f"run (--duration {_num(duration)})")

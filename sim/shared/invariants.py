@@ -35,7 +35,13 @@ Invariants (each violation names the time, robot and what went wrong):
    the protocol working (the real-time summary warns about such a slow start);
 4. warnings: every `warn` episode ends in a takeover of the slot, a refutation, or an
    alert (the paper's verified property, generalised);
-5. no node raises on any input (virtual simulator: exceptions are reported here).
+5. no node raises on any input (virtual simulator: exceptions are reported here);
+6. epochs come from takeovers: a robot fenced at an epoch that no takeover of its slot
+   produced (`fenced_without_takeover`) was fenced by a forged or invented epoch, and
+   its slot is orphaned (every robot now believes a holder that executes nothing);
+7. nobody is muted (`muted`, virtual simulator: `VirtualSwarm` judges it from the
+   nodes, see `sim.virtual.simulator`): a live, healthy robot whose current frames some
+   robot that should hear them has not accepted for ten heartbeat periods.
 """
 
 from __future__ import annotations
@@ -150,6 +156,8 @@ class Checker:
     """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
     started: set[int] = field(default_factory=set)
     """Robots whose node has logged `started` (since their last crash or restart)."""
+    epochs: set[tuple[str, int]] = field(default_factory=set)
+    """(function, epoch) pairs some takeover produced (invariant 6)."""
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
@@ -230,8 +238,16 @@ class Checker:
     def event(self, rec: dict[str, Any]) -> None:
         t, r, name = float(rec["t"]), int(rec["robot"]), rec["event"]
         self.holding.feed(rec)
+        if name == "fenced":
+            f, epoch = rec["function"], int(rec["epoch"])
+            if epoch and (f, epoch) not in self.epochs:
+                self.violations.append(Violation(
+                    t, "fenced_without_takeover", r,
+                    f"robot {r} fenced on {f} at epoch {epoch}, which no takeover produced: "
+                    f"a forged epoch; {f} is orphaned"))
         if name == "takeover":
             f = rec["function"]
+            self.epochs.add((f, int(rec["epoch"])))
             for key in [k for k in self.episodes if k[1] == f]:
                 del self.episodes[key]  # the warning ended in a takeover
             self.held_since[(f, r)] = t

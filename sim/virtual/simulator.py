@@ -21,19 +21,25 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sim.shared.fakeid import fake_identities
 from sim.shared.faults import Fault, fault_record
+from sim.shared.forge import REPEATING, forged_frames
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.auth import Identity
 from swarmd.core.events import Event
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
 
-_TICK, _DELIVER, _FAULT, _LIAR = 0, 1, 2, 3
-_OP_TICK, _OP_RECEIVE, _OP_HEALTH, _OP_STOP, _OP_SEND = range(5)
+_TICK, _DELIVER, _FAULT, _LIAR, _FORGE, _DELIVER_RAW = 0, 1, 2, 3, 4, 5
+AUTH_MODES = ("none", "shared", "per-robot")
+"""`none`: unsigned; `shared`: one swarm key (HMAC); `per-robot`: each robot its own
+key for WARN, CLAIM and LEAVE, the swarm key on heartbeats (DESIGN section 2)."""
+_OP_TICK, _OP_RECEIVE, _OP_HEALTH, _OP_STOP, _OP_SEND, _OP_RAW = range(6)
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,6 +98,8 @@ class VirtualSwarm:
         channel: Channel | None = None,
         seed: int = 0,
         keys: Sequence[bytes] = (),
+        auth: str = "none",
+        identities: dict[int, Identity] | None = None,
         interest: bool = True,
         start_spread: float = 0.05,
         on_event: Callable[[dict[str, Any]], None] | None = None,
@@ -103,7 +111,19 @@ class VirtualSwarm:
         self.faults = sorted((part for f in faults for part in f.split()), key=lambda f: f.at)
         self.channel = channel or Channel()
         self.rng = random.Random(seed)
-        self.keys = tuple(keys)
+        if auth not in AUTH_MODES:
+            raise ValueError(f"auth must be one of {', '.join(AUTH_MODES)}, not {auth!r}")
+        if auth != "none" and not keys:
+            keys = (bytes(range(32)),)  # a throwaway swarm key for this run
+        self.keys = tuple(keys) if auth != "none" or keys else ()
+        self.auth = "shared" if auth == "none" and self.keys else auth
+        # Per-robot mode: throwaway identities (`sim.shared.fakeid`) unless given.
+        self.identities: dict[int, Identity] = {}
+        if self.auth == "per-robot":
+            self.identities = identities if identities is not None else \
+                fake_identities(plan.robots, seed)
+        self.verifier = self.identities[min(self.identities)].verifier \
+            if self.identities else None
         self.on_event = on_event
         self.now = 0.0
         self._heap: list[tuple[float, int, int, Any, Any]] = []
@@ -112,9 +132,11 @@ class VirtualSwarm:
         self.frames_sent = 0
         self.deliveries = 0
         self.partition: dict[int, int] | None = None  # robot -> group while partitioned
+        self._changed: dict[int, float] = {}
         self.checker = Checker(plan, params, loss=self.channel.loss)
         self.robots: dict[int, _Robot] = {}
-        self._receivers = self._interest() if interest else None
+        self._relevant_to = self._interest()
+        self._receivers = self._relevant_to if interest else None
         self._all = tuple(sorted(plan.robots))
         for rid in self._all:
             start = self.rng.uniform(0.0, start_spread)
@@ -185,8 +207,16 @@ class VirtualSwarm:
                     self._fault(self.faults[a], b)
             elif kind == _LIAR:
                 self._lie(a)
+            elif kind == _FORGE:
+                self._forge(a, b)
+            elif kind == _DELIVER_RAW:
+                r = self.robots[a]
+                if r.alive and r.node is not None and not r.paused:
+                    self.deliveries += 1
+                    self._call(a, _OP_RAW, b)
         self.now = self.duration
-        violations = self.checker.finish(self.events, self.duration)
+        violations = self.checker.finish(self.events, self.duration) + self._muted()
+        violations.sort(key=lambda v: v.t)
         final = {}
         drops = {}
         for rid, r in self.robots.items():
@@ -205,6 +235,44 @@ class VirtualSwarm:
             final=final,
         )
 
+    def _muted(self) -> list[Violation]:
+        """Invariant 7 (`sim.shared.invariants`): a live, healthy, heartbeating robot
+        whose current heartbeats some robot that should hear them (same partition side,
+        the frame relevant to it) has not accepted for ten heartbeat periods, although
+        it did accept that robot's frames before: its frames are dropped (a forged
+        sequence number, say)."""
+        out: list[Violation] = []
+        snaps = {rid: r.node.snapshot() for rid, r in self.robots.items()
+                 if r.alive and not r.paused and r.node is not None}
+        part = self.partition
+        for x, sx in snaps.items():
+            if sx.health != Health.OK:
+                continue
+            active = sx.role == Role.ACTIVE and sx.function is not None
+            period = self.params.heartbeat_interval if active else \
+                self.params.standby_heartbeat_interval
+            window = 10 * period
+            slot = self.plan.slot(sx.function) if active and sx.function is not None else 0
+            audience = self._relevant_to.get(slot, ()) if slot else \
+                self._standby_targets.get(x, ())
+            for r in audience:
+                sr = snaps.get(r)
+                if sr is None or r == x or (part is not None and part.get(r, 0) != part.get(x, 0)):
+                    continue
+                last = sr.heard.get(x)
+                if last is not None and self.duration - last > window \
+                        and self.duration - self.checker_last_change(x) > window:
+                    out.append(Violation(self.duration, "muted", x,
+                                         f"robot {r} has accepted no frame of live robot {x} "
+                                         f"since {last:.2f} s"))
+                    break
+        return out
+
+    def checker_last_change(self, rid: int) -> float:
+        """When robot `rid` last started, took over or was fenced (its heartbeat's
+        audience changes then)."""
+        return self._changed.get(rid, 0.0)
+
     def _call(self, rid: int, op: int, arg: Any) -> None:
         r = self.robots[rid]
         node = r.node
@@ -219,6 +287,8 @@ class VirtualSwarm:
                 actions = node.robot_health(arg, now)
             elif op == _OP_STOP:
                 actions = node.stop(now, handover=True)
+            elif op == _OP_RAW:
+                actions = node.receive(arg, now)
             else:
                 actions = node.send_message(arg, now)
         except Exception as exc:  # the invariant "no node raises on any input"
@@ -252,13 +322,15 @@ class VirtualSwarm:
 
     def _record(self, rec: dict[str, Any]) -> None:
         self.events.append(rec)
+        if rec["event"] in ("started", "takeover", "fenced", "leave", "stopped", "fault"):
+            self._changed[int(rec["robot"])] = float(rec["t"])
         self.checker.event(rec)
         if self.on_event is not None:
             self.on_event(rec)
 
     def _broadcast(self, sender: int, data: bytes) -> None:
         self.frames_sent += 1
-        frame = wire.decode(data, self.keys)  # our own nodes' frames: always valid
+        frame = wire.decode(data, self.keys, self.verifier)  # our own nodes': valid
         ch = self.channel
         rng = self.rng
         part = self.partition
@@ -278,6 +350,7 @@ class VirtualSwarm:
     def _boot(self, rid: int) -> None:
         r = self.robots[rid]
         r.node = Node(rid, self.plan, self.params, self.now, keys=self.keys,
+                      identity=self.identities.get(rid),
                       seq_start=self.rng.randrange(1 << 20))
         self._arm(rid)
 
@@ -306,6 +379,7 @@ class VirtualSwarm:
             case "restart", _:
                 r.alive, r.paused, r.buffered = True, False, []
                 r.node = Node(rid, self.plan, self.params, t, keys=self.keys,
+                              identity=self.identities.get(rid),
                               seq_start=r.seq_high + 1_000_000,
                               restored=r.persisted or Restored())
                 r.timer_at = None
@@ -329,6 +403,8 @@ class VirtualSwarm:
                     self._call(rid, _OP_HEALTH, Health.FAULTY)
             case "liar", _:
                 self._push(t, _LIAR, rid, None)
+            case "forge", _:
+                self._push(t, _FORGE, rid, (fault.attack, 0))
 
     def _kill(self, r: _Robot) -> None:
         """A crash: the node's persisted state is kept (DESIGN rule 2), the rest is gone."""
@@ -336,11 +412,39 @@ class VirtualSwarm:
             snap = r.node.snapshot()
             held = (snap.function, snap.epoch) if snap.function and \
                 snap.role == Role.ACTIVE else None
-            r.persisted = Restored(known=dict(snap.known), held=held)
+            r.persisted = Restored(known=dict(snap.known), held=held,
+                                   peer_seq=dict(snap.peer_seq),
+                                   certificate=snap.certificate if held else ())
             r.seq_high = snap.seq
         r.alive = False
         r.timer_gen += 1
         r.timer_at = None
+
+    def _forge(self, rid: int, what: tuple[str, int]) -> None:
+        """`forge:R@T:ATTACK`: R's forged frames (`sim.shared.forge`), delivered to every
+        robot, R's own node and the ones it names included, as raw bytes (they go
+        through `Node.receive`: decoding and verifying are what is attacked)."""
+        attack, round_ = what
+        r = self.robots[rid]
+        if not r.alive or r.paused or r.node is None:
+            return
+        identity = self.identities.get(rid)
+        frames = forged_frames(attack, self.plan, r.node.snapshot(), keys=self.keys,
+                               signer=identity.signer if identity is not None else None,
+                               round_=round_, sniffed={
+                                   x: rr.node.snapshot().seq for x, rr in self.robots.items()
+                                   if rr.node is not None})
+        ch, rng, part = self.channel, self.rng, self.partition
+        for data in frames:
+            self.frames_sent += 1
+            for target in self._all:
+                if part is not None and part.get(target, 0) != part.get(rid, 0):
+                    continue
+                if ch.loss and rng.random() < ch.loss:
+                    continue
+                self._push(self.now + ch.delay, _DELIVER_RAW, target, data)
+        if attack in REPEATING:
+            self._push(self.now + self.params.warn_interval, _FORGE, rid, (attack, round_ + 1))
 
     def _lie(self, rid: int) -> None:
         """`liar:R@T`: every warn interval while R is alive, the WARN frames
@@ -362,6 +466,7 @@ def run_virtual(
     loss: float = 0.0,
     seed: int = 0,
     keys: Sequence[bytes] = (),
+    auth: str = "none",
     interest: bool = True,
     channel: Channel | None = None,
     on_event: Callable[[dict[str, Any]], None] | None = None,
@@ -369,4 +474,4 @@ def run_virtual(
     """Convenience wrapper: one run, default channel with the given loss."""
     ch = channel or Channel(loss=loss)
     return VirtualSwarm(plan, params, duration=duration, faults=faults, channel=ch, seed=seed,
-                        keys=keys, interest=interest, on_event=on_event).run()
+                        keys=keys, auth=auth, interest=interest, on_event=on_event).run()

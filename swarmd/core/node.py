@@ -25,7 +25,7 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 from swarmd.core import events as ev
-from swarmd.core import wire
+from swarmd.core import replay, wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
 from swarmd.core.limits import check_restored
@@ -53,6 +53,12 @@ class Restored:
     """function -> (holder robot id, epoch) as last known."""
     held: tuple[str, int] | None = None
     """(function, epoch) this robot was executing when it stopped, if any."""
+    peer_seq: Mapping[int, int] = field(default_factory=dict)
+    """robot -> highest sequence number accepted from it (`Snapshot.peer_seq`): frames
+    at or below it, captured before the restart, stay old (replays) after it."""
+    certificate: tuple[bytes, ...] = ()
+    """The signed frames that certify `held` (`Snapshot.certificate`), per-robot mode.
+    Verified again on restore; a frame that does not verify is left out."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +83,16 @@ class Snapshot:
     frames_out: int = 0
     heard: Mapping[int, float] = field(default_factory=dict)
     """robot -> time of the last frame accepted from it."""
+    peer_seq: Mapping[int, int] = field(default_factory=dict)
+    """robot -> highest sequence number accepted from it. Persist it with `known` and
+    hand it back as `Restored.peer_seq`: a restarted robot then drops replays of frames
+    sent before its restart (a dead robot's captured heartbeats cannot delay its
+    takeover)."""
+    certificate: tuple[bytes, ...] = ()
+    """Per-robot mode: the signed WARN or LEAVE frames (raw bytes) that certify this
+    robot's hold of `function`, if it took it over. Persist it with `held` and hand it
+    back as `Restored.certificate`, so that after a restart it can still prove its hold
+    to a robot that missed the takeover (an old holder back from a partition)."""
 
 
 @dataclass(slots=True)
@@ -109,9 +125,18 @@ class _SlotBeat(NamedTuple):
     at: float
 
 
+_EVIDENCE_REMEMBERED = 16
+"""(suspect, epoch) episodes of signed evidence kept per slot (per-robot mode); a flood
+of warnings about invented epochs pushes out the oldest, it cannot grow the node."""
+
+
 _CLAIMS_REMEMBERED = 16
 """Claims remembered per slot (rule 10); a flood of invented (claimant, epoch) pairs
 pushes out the oldest, it cannot grow the node."""
+
+
+_NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
+"""The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
 
 
 class NodeError(RuntimeError):
@@ -142,7 +167,10 @@ class Node:
         self._params = params
         self._keys = tuple(keys)
         self._identity = identity
+        self._signer = identity.signer if identity is not None else None
+        self._verifier = identity.verifier if identity is not None else None
         self._seq = seq_start
+        self._seq_start = seq_start
         self._health = Health.OK
         self._drops: Counter[str] = Counter()
         self._frames_in = 0
@@ -179,7 +207,25 @@ class Node:
         # bounded time (rule 10); forgotten when the slot's next holder heartbeats.
         self._claims_seen: dict[str, dict[tuple[int, int], float]] = {}
         self._replay = ReplayFilter()
+        if restored is not None:
+            for peer, top in restored.peer_seq.items():
+                if peer != robot_id and peer in plan.robots:
+                    self._replay.restore(peer, top)
+        # Per-robot mode (DESIGN section 2, "Who may say what"): f -> {(suspect, epoch):
+        # {witness: signed WARN or LEAVE bytes}}, the evidence a takeover needs; f ->
+        # {(claimant, epoch)} whose signed CLAIM that evidence backs; f -> the frames
+        # that certify this robot's own hold of f, relayed to whoever missed them.
+        self._evidence: dict[str, dict[tuple[int, int], dict[int, bytes]]] = {}
+        self._certified: dict[str, set[tuple[int, int]]] = {}
+        self._pending_claims: dict[str, dict[tuple[int, int], tuple[int, float]]] = {}
+        self._my_cert: dict[str, tuple[int, tuple[bytes, ...]]] = {}
+        self._relayed_at: dict[str, float] = {}
+        self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
+        # f -> ((holder, epoch), {witness: its highest seq}) when f's holder was last
+        # heard alive: warnings about it sent before then are void (`_record_evidence`).
+        self._alive: dict[str, tuple[tuple[int, int], dict[int, int]]] = {}
         self._start_time = now
+        self._stalled_at = -1e18
         self._next_heartbeat = now
         self._last_heartbeat = -1e18
         # The deadline the driver was last given (`_drain`): a call far past it is
@@ -190,6 +236,9 @@ class Node:
         self._pending: list[Action] = []
 
         own = plan.robots[robot_id].function
+        if restored is not None and restored.held is not None and restored.certificate \
+                and self._verifier is not None:
+            self._restore_cert(restored.held[0], restored.certificate)
         if restored is not None and restored.held is not None:
             # Rule 2 across a reboot: listen before resuming, a takeover may have
             # happened while this robot was down.
@@ -221,6 +270,11 @@ class Node:
         return self._keys
 
     @property
+    def per_robot(self) -> bool:
+        """Signed per robot: WARN, CLAIM and LEAVE carry their sender's own signature."""
+        return self._identity is not None
+
+    @property
     def drops(self) -> Mapping[str, int]:
         """Cumulative dropped frames by reason, live (a missing reason reads 0); cheap
         enough to read once a frame, unlike `snapshot()`."""
@@ -241,7 +295,7 @@ class Node:
         if self._stopped:
             return self._drain()
         try:
-            frame = wire.decode(data, self._keys)
+            frame = wire.decode(data, self._keys, self._verifier)
         except wire.CodecError as exc:
             return self._drop(exc.reason)
         return self._accept(frame, now)
@@ -251,6 +305,8 @@ class Node:
         that deliver one broadcast to many nodes and decode it once; the runtime uses
         `receive`."""
         msg = frame.msg
+        if isinstance(msg, wire.Cert) and self._verifier is None:
+            return self._drop("auth")
         about = msg.suspect if isinstance(msg, wire.Warn) else \
             msg.failed if isinstance(msg, wire.Claim) else 0
         if self._irrelevant(frame.swarm_id, frame.sender, msg.function, about,
@@ -280,24 +336,45 @@ class Node:
         sender = frame.sender
         if frame.swarm_id != self._plan.swarm_id:
             return self._drop("swarm")
-        if sender == self._robot_id:
-            return self._drop("own")  # multicast loopback echoes our own frames
         if sender not in self._plan.robots:
             return self._drop("unknown_sender")
-        if not self._replay.accept(sender, frame.seq):
-            return self._drop("replay")
+        if isinstance(frame.msg, wire.Cert):
+            # Not through the replay filter: the wrapper is unauthenticated (what it
+            # relays is signed and judged on its own), so it must move no counter.
+            self._on_cert(frame.msg, now)
+            return self._drain()
+        if sender == self._robot_id:
+            return self._own_frame(frame)
+        reason = self._replay.check(sender, frame.seq, now)
+        if reason is not None:
+            return self._drop(reason)
         self._frames_in += 1
         self._heard_at[sender] = now
         match frame.msg:
             case wire.Heartbeat() as hb:
                 self._on_heartbeat(sender, hb, now)
             case wire.Warn() as w:
-                self._on_warn(sender, w, now)
+                self._on_warn(sender, w, now, frame.raw, frame.seq)
             case wire.Claim() as c:
                 self._on_claim(sender, c, now)
             case wire.Leave() as lv:
-                self._on_leave(sender, lv, now)
+                self._on_leave(sender, lv, now, frame.raw)
         return self._drain()
+
+    def _own_frame(self, frame: wire.Frame) -> list[Action]:
+        """A verified frame sent as this robot. Multicast loopback echoes our own frames
+        (`own`; the runtime tells a second daemon with our id by frames it did not send).
+        One from before this node started is a replay, not a duplicate robot
+        (`replay`). One above our counter was sent by another daemon with our id or a
+        forger holding our key: our counter moves above it, so receivers that took it
+        do not drop our next frames as replays (a jump cannot mute us; DESIGN section 2,
+        "Sequence numbers")."""
+        if frame.seq < self._seq_start:
+            return self._drop("replay")
+        if self._seq < frame.seq <= self._seq + replay.JUMP:
+            # Further ahead, every receiver drops it as `seq_jump`: nothing to follow.
+            self._seq = frame.seq
+        return self._drop("own")
 
     def tick(self, now: float) -> list[Action]:
         """Fire every deadline that is due at `now`."""
@@ -317,7 +394,7 @@ class Node:
                 self._take_over(now)
             elif now >= self._claim.resend:
                 self._claim.resend = now + p.warn_interval
-                self._send_claim()
+                self._send_claim(with_cert=True)
         for g, watch in self._watches.items():
             if now >= watch.deadline:
                 self._watch_fired(g, watch, now)
@@ -341,7 +418,8 @@ class Node:
             if self._role == Role.ACTIVE and self._function is not None:
                 f = self._function
                 self._emit(ev.Leave(function=f, reason="fault"))
-                self._send(wire.Leave(self._plan.slot(f), self._epoch, wire.LeaveReason.FAULT))
+                self._send(wire.Leave(self._plan.slot(f), self._epoch, wire.LeaveReason.FAULT),
+                           evidence=True)
                 self._release()
             elif self._claim is not None:
                 self._claim = None
@@ -365,7 +443,7 @@ class Node:
             if handover:
                 self._emit(ev.Leave(function=self._function, reason="shutdown"))
                 self._send(wire.Leave(self._plan.slot(self._function), self._epoch,
-                                      wire.LeaveReason.SHUTDOWN))
+                                      wire.LeaveReason.SHUTDOWN), evidence=True)
             self._pending.append(Release(self._function))
         self._emit(ev.Stopped())
         self._stopped = True
@@ -436,6 +514,9 @@ class Node:
             frames_in=self._frames_in,
             frames_out=self._frames_out,
             heard=dict(self._heard_at),
+            peer_seq={r: st[0] for r, st in self._replay.state.items()},
+            certificate=self._my_cert[self._function][1]
+            if self._function is not None and self._function in self._my_cert else (),
         )
 
     # ------------------------------------------------------------------ message rules
@@ -450,14 +531,30 @@ class Node:
             return
         holder, epoch = self._known[f]
         newer = hb.epoch > epoch or (hb.epoch == epoch and (sender == holder or sender < holder))
+        if newer and self._identity is not None and (sender, hb.epoch) != (holder, epoch) \
+                and (sender, hb.epoch) not in self._certified.get(f, ()):
+            # Per-robot mode: a heartbeat is not signed by its sender, so it never moves
+            # an epoch or a holder by itself; only the certified new holder's does.
+            self._drops["uncertified"] += 1
+            if f == self._function and self._role == Role.ACTIVE:
+                self._relay_cert(f, now)
+            if self._rejoin is not None and self._rejoin.function == f:
+                # Not believed, but enough to stay a standby rather than resume: the
+                # cautious side of rule 2 across a reboot (the slot's watchers and
+                # standbys take it over if nobody really holds it).
+                self._rejoin_superseded(f, hb.epoch)
+            return
         if not newer:
             # A stale holder (e.g. back from a pause): if it is our slot, answer at once
             # so it hears the newer epoch and fences itself (rule 2) within a frame.
             if f == self._function and self._role == Role.ACTIVE:
+                self._relay_cert(f, now)
                 self._heartbeat_now(now)
             return
         self._known[f] = Holder(sender, hb.epoch)
         self._slot_heard[f] = _SlotBeat(sender, hb.epoch, now)
+        if self._identity is not None:
+            self._mark_alive(f, sender, hb.epoch)
         self._claims_seen.pop(f, None)
         # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
         if f == self._function and self._role == Role.ACTIVE and sender != self._robot_id:
@@ -483,15 +580,33 @@ class Node:
         if self._rejoin is not None and self._rejoin.function == f and sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
 
-    def _on_warn(self, sender: int, w: wire.Warn, now: float) -> None:
+    def _on_warn(self, sender: int, w: wire.Warn, now: float, raw: bytes = b"",
+                 seq: int = 0) -> None:
         f = self._plan.function_at(w.function)
         if f is None:
             self._drops["bad_function"] += 1
             return
+        if self._identity is not None:
+            self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
+            if f == self._function and self._role == Role.ACTIVE \
+                    and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
+                self._relay_cert(f, now)  # a watcher that missed our takeover
         if w.suspect == self._robot_id:
             # Rule 4: a warning about ourselves is answered with a heartbeat at once.
-            if self._role == Role.ACTIVE and f == self._function and self._heartbeat_now(now):
-                self._emit(ev.Refute(subject=self._robot_id, function=f))
+            if self._role == Role.ACTIVE and f == self._function:
+                if self._identity is not None and w.epoch == self._epoch \
+                        and now - self._stalled_at > self._params.t_max:
+                    # Heard live, not out of a buffer after our own stall: we refute
+                    # it, so this warning (captured and played back to us later)
+                    # backs no takeover of our slot here (`_record_evidence`).
+                    mark = self._alive.get(f)
+                    if mark is None or mark[0] != (self._robot_id, self._epoch):
+                        mark = ((self._robot_id, self._epoch), {})
+                        self._alive[f] = mark
+                    mark[1][sender] = max(mark[1].get(sender, -1), seq)
+                    self._evidence.get(f, {}).pop((self._robot_id, self._epoch), None)
+                if self._heartbeat_now(now):
+                    self._emit(ev.Refute(subject=self._robot_id, function=f))
             return
         holder, epoch = self._known[f]
         if self._rejoin is not None and self._rejoin.function == f:
@@ -520,6 +635,11 @@ class Node:
             # Rule 9: correlated failures took watchers of f with the suspect; this
             # standby's own ears stand in for them, as one witness.
             mine = self._robot_id in votes.witnesses
+            if not mine and self._identity is not None:
+                # Its own "warning" is a signed one, so the certificate can carry it.
+                self._record_evidence(f, self._robot_id, w.suspect, w.epoch,
+                                      self._sign_only(wire.Warn(w.suspect, w.function,
+                                                                w.epoch)))
             count = votes.add(self._robot_id, w.suspect, w.epoch, now)
             if not mine:
                 self._emit(ev.Vote(subject=w.suspect, function=f, from_=self._robot_id,
@@ -578,6 +698,19 @@ class Node:
         if f is None:
             self._drops["bad_function"] += 1
             return
+        if self._identity is not None:
+            if (sender, c.epoch) == tuple(self._known[f]):
+                return  # the holder re-announcing its certificate (`_relay_cert`)
+            if not self._certify(f, sender, c):
+                # Per-robot mode: a claim without a certificate this robot verified
+                # silences nobody and makes nobody back off (one robot alone cannot
+                # start a takeover); kept a while in case its certificate comes later.
+                pending = self._pending_claims.setdefault(f, {})
+                if len(pending) >= _CLAIMS_REMEMBERED:
+                    del pending[next(iter(pending))]
+                pending[(sender, c.epoch)] = (c.failed, now)
+                self._drops["uncertified"] += 1
+                return
         if not self._claim_believed(f, sender, c, now):
             self._drops["stale_claim"] += 1
             return
@@ -603,11 +736,14 @@ class Node:
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, c.epoch)
 
-    def _on_leave(self, sender: int, lv: wire.Leave, now: float) -> None:
+    def _on_leave(self, sender: int, lv: wire.Leave, now: float, raw: bytes = b"") -> None:
         f = self._plan.function_at(lv.function)
         if f is None:
             self._drops["bad_function"] += 1
             return
+        if self._identity is not None:
+            # A signed LEAVE from the holder itself is evidence enough for its own slot.
+            self._record_evidence(f, sender, sender, lv.epoch, raw, now)
         holder, epoch = self._known[f]
         if (sender, lv.epoch) != (holder, epoch):
             return  # not the current holder: stale
@@ -641,9 +777,12 @@ class Node:
         self._emit(ev.Claim(subject=failed, function=f, epoch=new_epoch))
         self._send_claim()
 
-    def _send_claim(self) -> None:
+    def _send_claim(self, *, with_cert: bool = True) -> None:
         assert self._claim is not None
         c = self._claim
+        if with_cert and self._identity is not None:
+            for raw in self._cert_frames(c.function, c.failed, c.old_epoch):
+                self._send_cert(c.function, raw)
         self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
 
     def _take_over(self, now: float) -> None:
@@ -652,6 +791,10 @@ class Node:
         self._to(Trigger.CLAIM_HELD)
         self._function, self._epoch = c.function, c.epoch
         self._known[c.function] = Holder(self._robot_id, c.epoch)
+        if self._identity is not None:
+            self._my_cert[c.function] = (c.failed,
+                                         self._cert_frames(c.function, c.failed, c.old_epoch))
+            self._certified.setdefault(c.function, set()).add((self._robot_id, c.epoch))
         self._emit(ev.Takeover(function=c.function, epoch=c.epoch, replaced=c.failed))
         self._pending.append(Assign(c.function, c.epoch))
         self._watch_neighbours(now)
@@ -793,17 +936,175 @@ class Node:
             if self._claim is not None:
                 self._claim.until = max(self._claim.until, now + self._params.claim_hold)
             self._next_heartbeat = now
+            self._stalled_at = now
             self._armed = None  # noticed once; `_drain` arms the next deadline
 
     def _clear_votes(self) -> None:
         for v in self._votes.values():
             v.clear()
 
-    def _send(self, msg: wire.Message) -> None:
+    def _send(self, msg: wire.Message, *, evidence: bool = False) -> None:
         self._seq = min(self._seq + 1, wire.SEQ_MAX)
         frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
-        self._pending.append(Broadcast(wire.encode(frame, self._keys[0] if self._keys else None)))
+        data = wire.encode(frame, self._keys[0] if self._keys else None, self._signer)
+        if evidence and self._identity is not None and isinstance(msg, wire.Leave):
+            f = self._plan.function_at(msg.function)
+            if f is not None:
+                self._record_evidence(f, self._robot_id, self._robot_id, msg.epoch, data)
+        self._pending.append(Broadcast(data))
         self._frames_out += 1
+
+    # ------------------------------------------------------------------ evidence
+    # Per-robot mode (DESIGN section 2, "Takeovers backed by evidence"): an epoch
+    # rises only for a claim that a quorum of distinct witnesses' signed warnings (or
+    # the holder's own signed LEAVE) backs, and this robot verified every one of them.
+
+    def _sign_only(self, msg: wire.Message) -> bytes:
+        """A frame signed by this robot, for a certificate, not broadcast by itself."""
+        assert self._signer is not None
+        self._seq = min(self._seq + 1, wire.SEQ_MAX)
+        frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
+        return wire.encode(frame, None, self._signer)
+
+    def _send_cert(self, f: str, raw: bytes) -> None:
+        # A CERT is not counted in `frames_out` seq terms differently: it has a seq of
+        # its own, but receivers do not replay-filter it (it is unauthenticated).
+        self._send(wire.Cert(self._plan.slot(f), _NO_FRAME, raw))
+
+    def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
+                         raw: bytes, now: float | None = None) -> None:
+        if not raw or epoch < self._known[f].epoch:
+            return
+        alive = self._alive.get(f)
+        if alive is not None and alive[0] == (suspect, epoch) \
+                and int.from_bytes(raw[5:11], "big") <= alive[1].get(witness, -1):
+            # Sent before the suspect was last heard alive: a suspicion it refuted
+            # (rule 4), perhaps captured and played back; it backs no takeover.
+            self._drops["stale_evidence"] += 1
+            return
+        episodes = self._evidence.setdefault(f, {})
+        got = episodes.get((suspect, epoch))
+        if got is None:
+            if len(episodes) >= _EVIDENCE_REMEMBERED:
+                del episodes[next(iter(episodes))]
+            got = episodes[(suspect, epoch)] = {}
+        got[witness] = raw  # the latest: the least likely void where it is relayed
+        pending = self._pending_claims.get(f)
+        if pending:
+            for (claimant, new_epoch), (failed, heard) in list(pending.items()):
+                claim = wire.Claim(failed, self._plan.slot(f), new_epoch)
+                if (failed, new_epoch - 1) == (suspect, epoch) \
+                        and self._certify(f, claimant, claim):
+                    # Its certificate came after it (a channel that reorders): the
+                    # claim counts now, if it is still a fresh one.
+                    del pending[(claimant, new_epoch)]
+                    if now is not None and now - heard <= self._params.claim_hold:
+                        self._on_claim(claimant, claim, now)
+
+    def _backers(self, f: str, suspect: int, epoch: int, claimant: int) -> list[int]:
+        """The witnesses whose signed evidence backs `claimant` taking f over from
+        `suspect` at `epoch`: the suspect's own LEAVE alone, or the warnings of distinct
+        witnesses (the holders of the slots that watch f, rule 3, and the claimant
+        itself as rule 9's own ears, once), never the suspect's."""
+        got = self._evidence.get(f, {}).get((suspect, epoch))
+        if not got:
+            return []
+        if suspect in got:
+            return [suspect]
+        return [w for w in got if w != suspect and (w == claimant or w in self._may_watch(f))]
+
+    def _may_watch(self, f: str, *, claimants: bool = False) -> frozenset[int]:
+        """Every robot that may hold a slot watching f (its holder or a substitute):
+        judged by the plan, not by `known`, so a robot that cannot hear who holds a
+        watching slot now (DESIGN section 2, "What a robot hears") still verifies the
+        certificate. Witnesses stay distinct robots, so one robot is one witness."""
+        key = (f, claimants)
+        got = self._may_watch_cache.get(key)
+        if got is None:
+            got = frozenset(r for g in self._plan.watched_by(f) for r in self._plan.covered_by(g))
+            if claimants:  # rule 9: a claimant's own ears count as one witness
+                got |= frozenset(self._plan.covered_by(f))
+            self._may_watch_cache[key] = got
+        return got
+
+    def _certify(self, f: str, claimant: int, c: wire.Claim) -> bool:
+        certified = self._certified.setdefault(f, set())
+        if (claimant, c.epoch) in certified:
+            return True
+        if claimant not in self._plan.covered_by(f):
+            return False
+        backers = self._backers(f, c.failed, c.epoch - 1, claimant)
+        if not backers or (backers != [c.failed] and len(backers) < self._params.quorum):
+            return False
+        floor = self._known[f].epoch
+        if len(certified) >= _CLAIMS_REMEMBERED:  # older takeovers matter no more
+            certified.intersection_update({x for x in certified if x[1] >= floor})
+        certified.add((claimant, c.epoch))
+        return True
+
+    def _cert_frames(self, f: str, suspect: int, epoch: int) -> tuple[bytes, ...]:
+        got = self._evidence.get(f, {}).get((suspect, epoch), {})
+        backers = self._backers(f, suspect, epoch, self._robot_id)
+        # Every backer, not just a quorum: a receiver may hold some of them void (a
+        # warning its suspect refuted in its hearing, `_record_evidence`).
+        return tuple(got[w] for w in backers)
+
+    def _relay_cert(self, f: str, now: float) -> None:
+        """Someone still believes an older holder of our slot: relay the certificate of
+        our hold and re-announce the claim it backs, at most once per T_max."""
+        mine = self._my_cert.get(f)
+        if mine is None or now - self._relayed_at.get(f, -1e18) < self._params.t_max:
+            return
+        self._relayed_at[f] = now
+        failed, frames = mine
+        for raw in frames:
+            self._send_cert(f, raw)
+        self._send(wire.Claim(failed, self._plan.slot(f), self._epoch))
+
+    def _restore_cert(self, f: str, frames: tuple[bytes, ...]) -> None:
+        failed = None
+        good: list[bytes] = []
+        for raw in frames:
+            try:
+                got = wire.decode(bytes(raw), (), self._verifier)
+            except wire.CodecError:
+                continue
+            if isinstance(got.msg, wire.Warn):
+                who = got.msg.suspect
+            elif isinstance(got.msg, wire.Leave):
+                who = got.sender
+            else:
+                continue
+            if failed is None or who == failed:
+                failed = who
+                good.append(bytes(raw))
+        if failed is not None and f in self._known:
+            self._my_cert[f] = (failed, tuple(good))
+
+    def _mark_alive(self, f: str, holder: int, epoch: int) -> None:
+        """f's holder is alive at `epoch` now (its heartbeat, or our own): the evidence
+        against it so far is void, and so is any warning its witnesses sent before."""
+        episodes = self._evidence.get(f)
+        if episodes:
+            episodes.pop((holder, epoch), None)
+        tops: dict[int, int] = {}
+        for w in self._may_watch(f, claimants=True):
+            top = self._replay.top(w) if w != self._robot_id else self._seq
+            if top is not None:
+                tops[w] = top
+        self._alive[f] = ((holder, epoch), tops)
+
+    def _on_cert(self, cert: wire.Cert, now: float) -> None:
+        f = self._plan.function_at(cert.function)
+        if f is None:
+            self._drops["bad_function"] += 1
+            return
+        inner = cert.inner
+        msg = inner.msg
+        if isinstance(msg, wire.Warn):
+            self._record_evidence(f, inner.sender, msg.suspect, msg.epoch, cert.raw, now)
+        elif isinstance(msg, wire.Leave):
+            self._record_evidence(f, inner.sender, inner.sender, msg.epoch, cert.raw, now)
 
     def _emit(self, event: ev.Event) -> None:
         self._pending.append(event)

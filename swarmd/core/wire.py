@@ -36,9 +36,11 @@ import hashlib
 import hmac
 import struct
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import NamedTuple
+
+from swarmd.core.auth import SIGNATURE_LEN, Signer, Verifier
 
 VERSION = 1
 TAG_LEN = 8
@@ -57,6 +59,7 @@ class MsgType(IntEnum):
     WARN = 2
     CLAIM = 3
     LEAVE = 4
+    CERT = 5
 
 
 class LeaveReason(IntEnum):
@@ -110,17 +113,35 @@ class Leave:
     reason: int
 
 
-Message = Heartbeat | Warn | Claim | Leave
+@dataclass(frozen=True, slots=True)
+class Cert:
+    """One piece of a takeover's certificate (per-robot mode): another robot's signed
+    WARN or LEAVE frame about `function`, relayed verbatim by a claimant or holder.
+    `inner` is that frame decoded and verified with its own sender's key; `raw` its
+    bytes, to relay again."""
+
+    function: int
+    inner: Frame
+    raw: bytes
+
+
+Message = Heartbeat | Warn | Claim | Leave | Cert
+
+STRONG = frozenset({MsgType.WARN, MsgType.CLAIM, MsgType.LEAVE})
+"""The frames that change state: in per-robot mode they carry their sender's own
+signature (`SIGNATURE_LEN` bytes) instead of the swarm's HMAC tag."""
 
 SLOT_MAX = 0xFFFF
 _HB_TAIL = struct.Struct(">HB")
 _PEEK = struct.Struct(">BHH")
 _U16 = struct.Struct(">H")
-_SLOT_AT = {MsgType.HEARTBEAT: 0, MsgType.WARN: 2, MsgType.CLAIM: 2, MsgType.LEAVE: 0}
+_SLOT_AT = {MsgType.HEARTBEAT: 0, MsgType.WARN: 2, MsgType.CLAIM: 2, MsgType.LEAVE: 0,
+            MsgType.CERT: 0}
 """Offset of the slot field in each body (after the 16-bit robot id in WARN and CLAIM)."""
-_TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None, None, None)
-"""Message type by the low 3 bits of byte 0 (0, 5, 6 and 7 are no type)."""
+_TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None, None)
+"""Message type by the low 3 bits of byte 0 (0, 6 and 7 are no type)."""
 _FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 4, MsgType.CLAIM: 4, MsgType.LEAVE: 3}
+_INNER_MIN = HEADER_LEN + 4 + SIGNATURE_LEN
 """Body bytes besides the slot field."""
 
 
@@ -164,6 +185,9 @@ class Frame:
     sender: int
     seq: int
     msg: Message
+    raw: bytes = field(default=b"", compare=False, repr=False)
+    """The bytes it was decoded from, for a frame signed with its sender's own key
+    (a takeover's certificate relays them); empty otherwise."""
 
 
 def _type_of(msg: Message) -> MsgType:
@@ -176,6 +200,8 @@ def _type_of(msg: Message) -> MsgType:
             return MsgType.CLAIM
         case Leave():
             return MsgType.LEAVE
+        case Cert():
+            return MsgType.CERT
     raise TypeError(f"not a message: {msg!r}")  # pragma: no cover - exhaustive above
 
 
@@ -188,6 +214,8 @@ def _body(msg: Message) -> bytes:
             return _U16.pack(suspect) + encode_slot(function) + _U16.pack(epoch)
         case Leave(function, epoch, reason):
             return encode_slot(function) + struct.pack(">HB", epoch, reason)
+        case Cert(function, _, raw):
+            return encode_slot(function) + raw
     raise TypeError(f"not a message: {msg!r}")  # pragma: no cover
 
 
@@ -195,26 +223,40 @@ def tag(key: bytes, data: bytes) -> bytes:
     return hmac.new(key, data, hashlib.sha256).digest()[:TAG_LEN]
 
 
-def encode(frame: Frame, key: bytes | None = None) -> bytes:
-    """Serialise a frame; sign it when `key` is given. Raises on out-of-range fields
-    (that is misuse by our own code, never peer input)."""
+def encode(frame: Frame, key: bytes | None = None, signer: Signer | None = None) -> bytes:
+    """Serialise a frame; with `signer` (per-robot mode) a WARN, CLAIM or LEAVE carries
+    its sender's own signature, any other frame the HMAC tag of `key` if given; a CERT
+    never carries a tag of its own (what it relays is signed). Raises on out-of-range
+    fields (that is misuse by our own code, never peer input)."""
     if not 0 <= frame.seq <= SEQ_MAX:
         raise ValueError(f"seq {frame.seq} does not fit 48 bits")
     mtype = _type_of(frame.msg)
-    first = (VERSION << 4) | int(mtype) | (_SIGNED if key else 0)
+    if mtype == MsgType.CERT:
+        key = None
+    strong = signer is not None and mtype in STRONG
+    first = (VERSION << 4) | int(mtype) | (_SIGNED if key or strong else 0)
     try:
         head = HEADER.pack(first, frame.swarm_id, frame.sender, frame.seq.to_bytes(6, "big"))
         body = _body(frame.msg)
     except (struct.error, ValueError) as exc:
         raise ValueError(f"field out of range in {frame!r}: {exc}") from exc
     data = head + body
+    if strong:
+        assert signer is not None
+        return data + signer.sign(data)
     return data + tag(key, data) if key else data
 
 
-def decode(data: bytes, keys: Sequence[bytes] = ()) -> Frame:
+def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = None,
+           *, inner: bool = False) -> Frame:
     """Parse and verify a frame. With `keys`, an unsigned frame or one whose tag matches
     no key is rejected; several keys serve key rotation (accept old and new for a
-    window). Without keys, a signed frame is rejected: it cannot be verified."""
+    window). Without keys, a tagged frame is rejected: it cannot be verified.
+
+    With `verifier` (per-robot mode) a WARN, CLAIM or LEAVE must carry its sender's own
+    valid signature (the swarm key does not vouch for them), and a CERT is accepted only
+    if the WARN or LEAVE it relays does, about the same slot. Without a verifier a CERT
+    is rejected."""
     if len(data) < HEADER_LEN + 1:
         raise CodecError("malformed", f"{len(data)} bytes is shorter than any frame")
     first, swarm_id, sender, seq_bytes = HEADER.unpack_from(data)
@@ -231,10 +273,21 @@ def decode(data: bytes, keys: Sequence[bytes] = ()) -> Frame:
     if got_slot is None:
         raise CodecError("malformed", f"{mtype.name} with a truncated or overlong slot field")
     slot, slot_len = got_slot
-    expected = HEADER_LEN + _FIXED_BODY[mtype] + slot_len + (TAG_LEN if signed else 0)
+    if mtype == MsgType.CERT:
+        return _decode_cert(data, swarm_id, sender, seq_bytes, slot, slot_len, signed,
+                            verifier, inner)
+    strong = verifier is not None and mtype in STRONG
+    auth_len = SIGNATURE_LEN if strong else TAG_LEN
+    expected = HEADER_LEN + _FIXED_BODY[mtype] + slot_len + (auth_len if signed else 0)
     if len(data) != expected:
         raise CodecError("malformed", f"{mtype.name} of {len(data)} bytes, expected {expected}")
-    if keys:
+    if strong:
+        assert verifier is not None
+        if not signed:
+            raise CodecError("auth", f"{mtype.name} without its sender's signature")
+        if not verifier.verify(sender, data[:-SIGNATURE_LEN], data[-SIGNATURE_LEN:]):
+            raise CodecError("auth", f"bad signature of robot {sender}")
+    elif keys:
         if not signed:
             raise CodecError("auth", "unsigned frame on a swarm with a key")
         signed_part, got = data[:-TAG_LEN], data[-TAG_LEN:]
@@ -257,7 +310,27 @@ def decode(data: bytes, keys: Sequence[bytes] = ()) -> Frame:
         case MsgType.LEAVE:
             epoch, reason = _HB_TAIL.unpack_from(data, after)
             msg = Leave(function=slot, epoch=epoch, reason=reason)
-    return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg)
+    return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
+                 data if strong else b"")
+
+
+def _decode_cert(data: bytes, swarm_id: int, sender: int, seq_bytes: bytes, slot: int,
+                 slot_len: int, signed: bool, verifier: Verifier | None,
+                 inner: bool) -> Frame:
+    if verifier is None:
+        raise CodecError("auth", "certificate frame but no robot keys configured")
+    if inner:
+        raise CodecError("malformed", "a certificate inside a certificate")
+    if signed:
+        raise CodecError("malformed", "a certificate carries no tag of its own")
+    raw = data[HEADER_LEN + slot_len:]
+    if len(raw) < _INNER_MIN:
+        raise CodecError("malformed", f"certificate of {len(data)} bytes is too short")
+    got = decode(raw, (), verifier, inner=True)  # raises CodecError("auth") if forged
+    if not isinstance(got.msg, (Warn, Leave)) or got.msg.function != slot \
+            or got.swarm_id != swarm_id:
+        raise CodecError("malformed", "a certificate relays a WARN or LEAVE of its slot")
+    return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), Cert(slot, got, raw))
 
 
 class Peek(NamedTuple):

@@ -1,0 +1,77 @@
+"""What the `forge:R@T:ATTACK` fault sends: frames an insider holding robot R's key
+forges (per-robot mode: R's own signing key and the swarm key; shared-key mode: the
+swarm key). One definition, pure, so any simulator can deliver them.
+
+- `epoch`: a HEARTBEAT as R for every slot R does not hold, at epoch 65535 (the probe
+  that fenced a live holder and orphaned its slot on an unsigned swarm).
+- `seq`: a HEARTBEAT and a WARN as R at sequence number 2^48-1 (the probe that made
+  every robot drop R's later frames as replays).
+- `claim`: a CLAIM as R for every slot R does not hold, at a new epoch each time (the
+  wait state's silence, renewed forever).
+- `warn`: WARNs in the names of every witness of every slot but R, about the slot's
+  holder (a quorum of invented witnesses).
+
+Forged frames in other robots' names carry R's signature (that is all R can make) and
+a sequence number a little above the last one R heard from that robot. R's own node
+hears them too (the insider is another radio with R's key).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from swarmd.core import wire
+from swarmd.core.auth import Signer
+from swarmd.core.node import Snapshot
+from swarmd.core.plan import SwarmPlan
+
+REPEATING = frozenset({"claim", "warn"})
+"""Attacks sent again every warn interval; `epoch` and `seq` are one burst."""
+
+
+def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequence[bytes],
+                  signer: Signer | None, round_: int,
+                  sniffed: Mapping[int, int] | None = None) -> list[bytes]:
+    """The frames insider `snap.robot_id` sends at round `round_` (0, 1, ...);
+    `sniffed`: the last seq of each robot on the channel (an insider's own radio hears
+    every frame), else what R's node accepted."""
+    seqs = sniffed if sniffed is not None else snap.peer_seq
+    me = snap.robot_id
+    key = keys[0] if keys else None
+    out: list[bytes] = []
+
+    def frame(sender: int, msg: wire.Message, seq: int | None = None) -> None:
+        if seq is None:  # a little ahead of the last one heard, so it is not a replay
+            seq = min(seqs.get(sender, snap.seq) + 8 + len(out), wire.SEQ_MAX)
+        out.append(wire.encode(wire.Frame(plan.swarm_id, sender, seq, msg), key, signer))
+
+    held = {f for f, (holder, _) in snap.known.items() if holder == me}
+    match attack:
+        case "epoch":
+            for f in plan.functions:
+                if f not in held:
+                    frame(me, wire.Heartbeat(plan.slot(f), 0xFFFF, 1, 0), snap.seq + 1)
+        case "seq":
+            mine = snap.function
+            slot = plan.slot(mine) if mine is not None else 0
+            frame(me, wire.Heartbeat(slot, snap.epoch if slot else 0, int(snap.role), 0),
+                  wire.SEQ_MAX - 1)
+            some = plan.functions[0]
+            holder, epoch = snap.known[some]
+            frame(me, wire.Warn(holder, plan.slot(some), max(0, epoch - 1)), wire.SEQ_MAX)
+        case "claim":
+            for f in plan.functions:
+                if f not in held:
+                    holder, epoch = snap.known[f]
+                    frame(me, wire.Claim(holder, plan.slot(f), min(0xFFFF, epoch + 1 + round_)),
+                          snap.seq + 1 + round_ * len(plan.functions) + len(out))
+        case "warn":
+            for f in plan.functions:
+                holder, epoch = snap.known[f]
+                for g in plan.watched_by(f):
+                    witness = snap.known[g][0]
+                    if witness not in (me, holder, 0):
+                        frame(witness, wire.Warn(holder, plan.slot(f), epoch))
+        case _:
+            raise ValueError(f"unknown attack {attack!r}")
+    return out

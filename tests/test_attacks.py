@@ -1,0 +1,342 @@
+"""One insider attacks the swarm, on virtual time (DESIGN section 2, "Who may say what").
+
+Each attack is a `forge:R@T:ATTACK` fault (sim.shared.forge) or frames built here,
+sent with the insider's own key in per-robot mode and with the swarm key in shared-key
+mode. Per-robot mode: no live holder fenced, no healthy robot replaced, no robot muted,
+a dead robot taken over within the normal bound plus one T_max, every attack counted
+as drops. Shared-key and unsigned modes: what DESIGN says still gets through does.
+
+Paper swarm: robots 1-4 hold f1-f4 in a ring (f2 watched by the holders of f1 and f3),
+standby 5 covers f1/f4, standby 6 covers f2/f3.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from sim.shared.fakeid import FakeVerifier, fake_identities
+from sim.shared.faults import parse_fault
+from sim.virtual.simulator import VirtualResult, run_virtual
+from swarmd.core import wire
+from swarmd.core.actions import Broadcast
+from swarmd.core.auth import SIGNATURE_LEN, Identity
+from swarmd.core.node import Node, Restored
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+
+Paper = tuple[SwarmPlan, Params]
+
+
+def run(plan: SwarmPlan, params: Params, auth: str, *faults: str,
+        duration: float = 10.0) -> VirtualResult:
+    return run_virtual(plan, params, duration=duration, auth=auth,
+                       faults=[parse_fault(f) for f in faults])
+
+
+def drops(res: VirtualResult, reason: str) -> int:
+    return sum(d.get(reason, 0) for d in res.drops.values())
+
+
+def takeovers(res: VirtualResult) -> list[tuple[int, str, int]]:
+    return [(e["robot"], e["function"], e["replaced"]) for e in res.events
+            if e["event"] == "takeover"]
+
+
+def named(res: VirtualResult, name: str) -> list[dict[str, Any]]:
+    return [e for e in res.events if e["event"] == name]
+
+
+HOLDERS = {"f1": [1], "f2": [2], "f3": [3], "f4": [4]}
+
+
+# ---------------------------------------------------------------- a forged max epoch
+def test_per_robot_a_forged_max_epoch_heartbeat_fences_nobody(paper: Paper) -> None:
+    plan, params = paper
+    res = run(plan, params, "per-robot", "forge:1@4:epoch")
+    assert res.violations == []
+    assert named(res, "fenced") == [] and takeovers(res) == []
+    assert res.holders() == HOLDERS
+    assert drops(res, "uncertified") >= 5  # every robot that hears f2 counted it
+
+
+@pytest.mark.parametrize("auth", ["none", "shared"])
+def test_without_per_robot_keys_a_forged_epoch_fences_a_live_holder(paper: Paper,
+                                                                   auth: str) -> None:
+    """What DESIGN says an insider with the swarm key (or anyone, unsigned) can do; the
+    checker says so."""
+    plan, params = paper
+    res = run(plan, params, auth, "forge:1@4:epoch")
+    kinds = {v.kind for v in res.violations}
+    assert "fenced_without_takeover" in kinds
+    assert "f2" not in res.holders()  # orphaned: everyone believes robot 1 holds it
+
+
+# ---------------------------------------------------------------- a max seq
+@pytest.mark.parametrize("auth", ["none", "shared", "per-robot"])
+def test_a_max_seq_mutes_nobody(paper: Paper, auth: str) -> None:
+    plan, params = paper
+    res = run(plan, params, auth, "forge:2@4:seq")
+    assert res.violations == []  # `muted` included
+    assert takeovers(res) == [] and res.holders() == HOLDERS
+    assert drops(res, "seq_jump") >= 4
+
+
+def test_a_jump_within_the_bound_is_followed_by_the_robot_it_names(paper: Paper) -> None:
+    """A forged frame as robot 2 a little ahead: receivers take it, robot 2 hears it
+    and moves its own counter above it, so its next frames are not replays."""
+    plan, params = paper
+    node = Node(2, plan, params, 0.0, seq_start=5000)
+    node.tick(0.0)
+    forged = wire.encode(wire.Frame(plan.swarm_id, 2, 9000, wire.Heartbeat(2, 0, 1, 0)))
+    node.receive(forged, 0.05)
+    assert node.snapshot().seq == 9000 and node.drops["own"] == 1
+    out = [a for a in node.tick(0.2) if isinstance(a, Broadcast)]
+    assert out and wire.decode(out[0].frame).seq > 9000
+
+
+# ---------------------------------------------------------------- CLAIM spam
+def _normal_takeover(plan: SwarmPlan, params: Params, auth: str) -> float:
+    res = run(plan, params, auth, "crash:2@3")
+    (t,) = [e["t"] for e in named(res, "takeover")]
+    return float(t)
+
+
+@pytest.mark.parametrize("insider", [1, 3, 5, 6])
+def test_per_robot_claim_spam_does_not_delay_a_takeover(paper: Paper, insider: int) -> None:
+    plan, params = paper
+    normal = _normal_takeover(plan, params, "per-robot")
+    res = run(plan, params, "per-robot", "crash:2@3", f"forge:{insider}@3.2:claim")
+    assert res.violations == []
+    got = [(e["robot"], e["function"], e["t"]) for e in named(res, "takeover")]
+    assert [(r, f) for r, f, _ in got] == [(6, "f2")]
+    assert got[0][2] <= normal + params.t_max
+    assert drops(res, "uncertified") > 0
+
+
+@pytest.mark.parametrize("auth", ["none", "shared"])
+def test_without_per_robot_keys_claim_spam_keeps_a_dead_robot_unreplaced(paper: Paper,
+                                                                       auth: str) -> None:
+    """Documented (DESIGN, shared-key mode): each forged claim at a new epoch silences
+    the slot's watchers again (rule 10 bounds one claim, not a stream of them)."""
+    plan, params = paper
+    res = run(plan, params, auth, "crash:2@3", "forge:1@3.2:claim")
+    assert takeovers(res) == []
+    assert "no_takeover" in {v.kind for v in res.violations}
+
+
+# ---------------------------------------------------------------- WARNs in others' names
+@pytest.mark.parametrize("insider", [1, 3, 5])
+def test_per_robot_warnings_in_other_names_count_for_nothing(paper: Paper, insider: int) -> None:
+    plan, params = paper
+    res = run(plan, params, "per-robot", f"forge:{insider}@3:warn")
+    assert res.violations == [] and takeovers(res) == []
+    assert named(res, "vote") == []  # not one forged witness counted
+    assert drops(res, "auth") > 0
+
+
+def test_shared_warnings_in_other_names_reach_the_quorum(paper: Paper) -> None:
+    """Documented: with the swarm key, invented witnesses reach the quorum; what stops
+    the takeover is the standby's own ears (rule 4), the suspect heard alive."""
+    plan, params = paper
+    res = run(plan, params, "shared", "forge:1@3:warn")
+    assert max(e["count"] for e in named(res, "vote")) >= params.quorum
+    assert takeovers(res) == [] and res.violations == []
+
+
+# ---------------------------------------------------------------- replays across a restart
+def _signed(identity: Identity, plan: SwarmPlan, sender: int, seq: int,
+            msg: wire.Message) -> bytes:
+    return wire.encode(wire.Frame(plan.swarm_id, sender, seq, msg), None, identity.signer)
+
+
+def cert(plan: SwarmPlan, seq: int, slot: int, raw: bytes) -> bytes:
+    """A CERT frame from robot 6 relaying `raw` (only its bytes go on the wire)."""
+    blank = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
+    return wire.encode(wire.Frame(plan.swarm_id, 6, seq, wire.Cert(slot, blank, raw)))
+
+
+def test_a_restarted_standby_drops_replayed_heartbeats_of_a_dead_robot(paper: Paper) -> None:
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    standby = Node(6, plan, params, 0.0, identity=ids[6])
+    standby.tick(0.0)
+    captured = [wire.encode(wire.Frame(plan.swarm_id, 2, 100 + i, wire.Heartbeat(2, 0, 1, 0)))
+                for i in range(10)]
+    for i, data in enumerate(captured):
+        standby.receive(data, 0.1 * i)
+    snap = standby.snapshot()
+    assert snap.peer_seq[2] == 109
+    # Robot 2 dies; the standby restarts with what it persisted.
+    again = Node(6, plan, params, 5.0, identity=ids[6],
+                 restored=Restored(known=dict(snap.known), peer_seq=dict(snap.peer_seq)))
+    again.tick(5.0)
+    for i, data in enumerate(captured):
+        again.receive(data, 5.0 + 0.01 * i)
+    assert again.drops["replay"] == len(captured)
+    assert 2 not in again.snapshot().heard  # the dead robot does not look alive
+    # Without the persisted seqs, the same replays would be taken (the hole closed).
+    naive = Node(6, plan, params, 5.0, identity=ids[6])
+    naive.tick(5.0)
+    naive.receive(captured[0], 5.0)
+    assert naive.drops["replay"] == 0 and 2 in naive.snapshot().heard
+
+
+def test_an_old_own_frame_replayed_after_a_restart_is_no_duplicate_robot(paper: Paper) -> None:
+    plan, params = paper
+    node = Node(1, plan, params, 0.0, seq_start=2_000_000)
+    old = wire.encode(wire.Frame(plan.swarm_id, 1, 1_500_000, wire.Heartbeat(1, 0, 1, 0)))
+    node.receive(old, 0.1)
+    assert node.drops["replay"] == 1 and node.drops["own"] == 0
+
+
+def test_per_robot_a_takeover_needs_a_certificate_of_signed_witnesses(paper: Paper) -> None:
+    """Robot 6 (standby of f2) hears a CLAIM and the new holder's heartbeat: it moves
+    f2's epoch only once a quorum of witnesses' own signed warnings backs the claim."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    seq = iter(range(10_000, 20_000))
+    observer = Node(1, plan, params, 0.0, identity=ids[1])
+    observer.tick(0.0)
+    slot = plan.slot("f2")
+    claim = _signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1))
+    beat = wire.encode(wire.Frame(plan.swarm_id, 6, next(seq), wire.Heartbeat(slot, 1, 1, 0)))
+    observer.receive(claim, 1.0)
+    observer.receive(beat, 1.01)
+    assert observer.snapshot().known["f2"] == (2, 0)
+    assert observer.drops["uncertified"] == 2
+    # One witness (robot 3, holder of f3, watches f2) is not a quorum ...
+    w3 = _signed(ids[3], plan, 3, next(seq), wire.Warn(2, slot, 0))
+    observer.receive(cert(plan, next(seq), slot, w3), 1.1)
+    observer.receive(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1)), 1.11)
+    observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, next(seq),
+                                            wire.Heartbeat(slot, 1, 1, 0))), 1.12)
+    assert observer.snapshot().known["f2"] == (2, 0)
+    # ... and a "warning" signed by robot 6 in robot 4's name is no witness at all.
+    fake = _signed(ids[6], plan, 4, next(seq), wire.Warn(2, slot, 0))
+    assert not FakeVerifier({}).verify(4, fake[:-SIGNATURE_LEN], fake[-SIGNATURE_LEN:])
+    before = observer.drops["auth"]
+    observer.receive(cert(plan, next(seq), slot, fake), 1.2)
+    assert observer.drops["auth"] == before + 1
+    # The claimant's own signed warning is rule 9's second witness: now certified.
+    w6 = _signed(ids[6], plan, 6, next(seq), wire.Warn(2, slot, 0))
+    observer.receive(cert(plan, next(seq), slot, w6), 1.3)
+    observer.receive(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1)), 1.31)
+    observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, next(seq),
+                                            wire.Heartbeat(slot, 1, 1, 0))), 1.32)
+    assert observer.snapshot().known["f2"] == (6, 1)
+
+
+def test_per_robot_a_leave_signed_by_the_holder_is_its_own_certificate(paper: Paper) -> None:
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    observer = Node(1, plan, params, 0.0, identity=ids[1])
+    observer.tick(0.0)
+    slot = plan.slot("f2")
+    observer.receive(_signed(ids[2], plan, 2, 500, wire.Leave(slot, 0, 0)), 1.0)
+    observer.receive(_signed(ids[6], plan, 6, 900, wire.Claim(2, slot, 1)), 1.01)
+    observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, 901,
+                                            wire.Heartbeat(slot, 1, 1, 0))), 1.2)
+    assert observer.snapshot().known["f2"] == (6, 1)
+    assert observer.drops.get("uncertified", 0) == 0
+
+
+# ---------------------------------------------------------------- the wire, per-robot
+def test_per_robot_frame_sizes_and_verification(paper: Paper) -> None:
+    plan, _ = paper
+    ids = fake_identities(plan.robots)
+    verifier = ids[1].verifier
+    key = bytes(32)
+
+    def enc(sender: int, msg: wire.Message, signer_of: int | None = None) -> bytes:
+        signer = ids[signer_of or sender].signer
+        return wire.encode(wire.Frame(plan.swarm_id, sender, 7, msg), key, signer)
+
+    beat = enc(2, wire.Heartbeat(2, 0, 1, 0))
+    warn = enc(3, wire.Warn(2, 2, 0))
+    claim = enc(6, wire.Claim(2, 2, 1))
+    leave = enc(2, wire.Leave(2, 0, 0))
+    relay = enc(6, wire.Cert(2, wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0)), warn))
+    assert [len(x) for x in (beat, warn, claim, leave, relay)] == [23, 80, 80, 79, 92]
+    got = wire.decode(relay, (key,), verifier)
+    assert isinstance(got.msg, wire.Cert) and got.msg.inner.sender == 3
+    assert wire.decode(warn, (key,), verifier).raw == warn
+    # A WARN in robot 3's name signed with robot 6's key, bare or relayed: refused.
+    forged = enc(3, wire.Warn(2, 2, 0), signer_of=6)
+    for data in (forged, enc(6, wire.Cert(2, wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0)),
+                                         forged))):
+        with pytest.raises(wire.CodecError) as exc:
+            wire.decode(data, (key,), verifier)
+        assert exc.value.reason == "auth"
+    # The swarm key alone does not vouch for a WARN in per-robot mode.
+    hmac_only = wire.encode(wire.Frame(plan.swarm_id, 3, 8, wire.Warn(2, 2, 0)), key)
+    with pytest.raises(wire.CodecError):
+        wire.decode(hmac_only, (key,), verifier)
+    # A certificate means nothing to a robot without robot keys.
+    with pytest.raises(wire.CodecError):
+        wire.decode(relay, (key,))
+
+
+# ---------------------------------------------------------------- chaos, per-robot
+def test_per_robot_random_chaos_breaks_no_invariant() -> None:
+    """A sample of bench/bench_chaos.py's random swarms and schedules, per-robot mode."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "bench" / "bench_chaos.py"
+    spec = importlib.util.spec_from_file_location("bench_chaos", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules["bench_chaos"] = bench
+    spec.loader.exec_module(bench)
+    from swarmd.core.params import udp
+    for seed in range(0, 300, 5):
+        case = bench.draw_case(seed, max_robots=12)
+        res = run_virtual(case.plan, udp(), duration=case.duration, faults=case.faults,
+                          loss=case.loss, seed=case.seed, auth="per-robot")
+        assert res.violations == [], (seed, [v.as_dict() for v in res.violations])
+
+
+def test_replay_filter_bounds_jumps_by_elapsed_time() -> None:
+    from swarmd.core.replay import JUMP, RATE, ReplayFilter
+
+    f = ReplayFilter()
+    assert f.check(2, 1000, 0.0) is None
+    assert f.check(2, wire.SEQ_MAX, 0.1) == "seq_jump"
+    assert f.check(2, 1001, 0.2) is None  # not muted
+    assert f.check(2, 1001 + JUMP, 0.2) is None  # a restart from the reservation
+    later = 1001 + JUMP + JUMP + int(RATE * 10.0)
+    assert f.check(2, later, 10.2) is None  # a restart after 10 s of wall clock
+    f.restore(3, 500)
+    assert f.check(3, 480, 0.0) == "replay" and f.check(3, 500, 0.0) == "replay"
+    assert f.check(3, 10**12, 0.0) is None  # the first jump after a restore is free
+
+
+def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
+    """The new holder persists its certificate; after a restart it can still prove its
+    hold to the old holder back from a partition."""
+    plan, params = paper
+    res_ids = fake_identities(plan.robots)
+    node = Node(6, plan, params, 0.0, identity=res_ids[6])
+    node.tick(0.0)
+    slot = plan.slot("f2")
+    leave = _signed(res_ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
+    node.receive(leave, 1.0)
+    node.tick(1.0 + params.claim_hold + 0.01)
+    snap = node.snapshot()
+    assert (snap.function, snap.epoch) == ("f2", 1) and snap.certificate == (leave,)
+    again = Node(6, plan, params, 5.0, identity=res_ids[6], restored=Restored(
+        known=dict(snap.known), held=("f2", 1), peer_seq=dict(snap.peer_seq),
+        certificate=snap.certificate))
+    again.tick(5.0)
+    again.tick(5.0 + params.rejoin_hold)
+    assert again.snapshot().function == "f2"
+    assert again.snapshot().certificate == (leave,)
+    # The old holder's stale heartbeat gets the certificate and a fresh claim back.
+    stale = wire.encode(wire.Frame(plan.swarm_id, 2, 800, wire.Heartbeat(slot, 0, 1, 0)))
+    out = [wire.decode(a.frame, (), res_ids[1].verifier).msg
+           for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
+    assert any(isinstance(m, wire.Cert) for m in out)
+    assert any(isinstance(m, wire.Claim) and m.epoch == 1 for m in out)
