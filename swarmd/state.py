@@ -17,7 +17,9 @@ File format (JSON, one object)::
     {"version": 1, "robot": 2, "swarm": 1543,
      "known": {"f1": [1, 0], "f2": [6, 1]},   # function -> [holder, epoch]
      "held": ["f2", 1] | null,                # what this robot executed
-     "seq_reserved": 123456789}
+     "seq_reserved": 123456789,
+     "peer_seq": {"1": 4711, ...},            # robot -> highest seq accepted from it
+     "certificate": ["<hex>", ...]}           # signed frames proving `held` (per-robot)
 
 Writes are atomic: a temporary file in the same directory, fsync, os.replace, fsync of the
 directory. A reader therefore sees the old file or the new one, never half of one. A
@@ -80,10 +82,16 @@ class PersistedState:
     known: Mapping[str, tuple[int, int]] = field(default_factory=dict)
     held: tuple[str, int] | None = None
     seq_reserved: int = 0
+    peer_seq: Mapping[int, int] = field(default_factory=dict)
+    """Peers' highest accepted seq: frames captured before a restart stay replays."""
+    certificate: tuple[bytes, ...] = ()
+    """The signed frames that certify `held` (per-robot mode); the core verifies them
+    again on restore."""
 
     def restored(self) -> Restored:
         """The core's view of it (`Node(..., restored=...)`)."""
-        return Restored(known=dict(self.known), held=self.held)
+        return Restored(known=dict(self.known), held=self.held,
+                        peer_seq=dict(self.peer_seq), certificate=self.certificate)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -93,6 +101,8 @@ class PersistedState:
             "known": {f: [h, e] for f, (h, e) in sorted(self.known.items())},
             "held": list(self.held) if self.held is not None else None,
             "seq_reserved": self.seq_reserved,
+            "peer_seq": {str(r): q for r, q in sorted(self.peer_seq.items())},
+            "certificate": [c.hex() for c in self.certificate],
         }
 
 
@@ -138,6 +148,25 @@ def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -
     if seq > SEQ_MAX - SEQ_RESERVE:
         # Every frame would be sent with a seq receivers already saw (a mute robot).
         raise ValueError(f"seq_reserved {seq} leaves no room below the 48-bit maximum")
+    peer_raw = data.get("peer_seq", {})
+    if not isinstance(peer_raw, dict):
+        raise ValueError("'peer_seq' is not an object")
+    peer_seq: dict[int, int] = {}
+    for r, q in peer_raw.items():
+        if not isinstance(r, str) or not r.isdigit() or len(r) > 5:
+            raise ValueError(f"peer_seq key {r!r} is not a robot id")
+        value = _int(q, f"peer_seq[{r}]")
+        if value > SEQ_MAX:
+            raise ValueError(f"peer_seq[{r}] {value} does not fit 48 bits")
+        peer_seq[int(r)] = value
+    cert_raw = data.get("certificate", [])
+    if not isinstance(cert_raw, list) or len(cert_raw) > 64:
+        raise ValueError("'certificate' is not a list of at most 64 frames")
+    certificate: list[bytes] = []
+    for c in cert_raw:
+        if not isinstance(c, str) or len(c) > 512:
+            raise ValueError("a certificate frame is not a hex string")
+        certificate.append(bytes.fromhex(c))
     problems = restored_problems(known, held)
     if plan is not None:
         # A holder the swarm does not have: a foreign or corrupt file. (A function the
@@ -146,7 +175,10 @@ def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -
                      for f, (h, _) in known.items() if h != 0 and h not in plan.robots]
     if problems:
         raise ValueError("; ".join(problems))
-    return PersistedState(robot=robot, swarm=swarm, known=known, held=held, seq_reserved=seq)
+    if plan is not None:  # a robot since removed from the swarm file: forget it
+        peer_seq = {r: q for r, q in peer_seq.items() if r in plan.robots}
+    return PersistedState(robot=robot, swarm=swarm, known=known, held=held, seq_reserved=seq,
+                          peer_seq=peer_seq, certificate=tuple(certificate))
 
 
 def load(path: Path, *, robot: int, swarm: int,
@@ -271,7 +303,8 @@ class StateFile:
         self.seq_reserved = seq_start + SEQ_RESERVE
         base = persisted or PersistedState(robot=self.robot, swarm=self.swarm)
         self._save(PersistedState(robot=self.robot, swarm=self.swarm, known=base.known,
-                                  held=base.held, seq_reserved=self.seq_reserved))
+                                  held=base.held, seq_reserved=self.seq_reserved,
+                                  peer_seq=base.peer_seq, certificate=base.certificate))
         return self.seq_reserved - SEQ_RESERVE // 2
 
     def write_snapshot(self, snap: Snapshot) -> int:
@@ -281,7 +314,9 @@ class StateFile:
         if snap.seq + SEQ_RESERVE // 2 >= self.seq_reserved:
             self.seq_reserved = min(SEQ_MAX, snap.seq + SEQ_RESERVE)
         self._save(PersistedState(robot=self.robot, swarm=self.swarm, known=snap.known,
-                                  held=held, seq_reserved=self.seq_reserved))
+                                  held=held, seq_reserved=self.seq_reserved,
+                                  peer_seq=snap.peer_seq,
+                                  certificate=snap.certificate if held else ()))
         return self.seq_reserved - SEQ_RESERVE // 2
 
     def _save(self, state: PersistedState) -> None:

@@ -179,3 +179,34 @@ def test_state_seq_reservation_never_passes_the_wire_maximum(tmp_path: Path) -> 
     sf.write_initial(None, 0)
     sf.write_snapshot(snap(Role.STANDBY, None, 0, SEQ_MAX - 10))
     assert sf.seq_reserved == SEQ_MAX
+
+
+def test_peer_sequences_and_certificate_survive_a_restart(tmp_path: Path) -> None:
+    # What a robot knows of its peers' sequences, and the signed frames that certify
+    # what it held, come back after a restart (a replayed old frame stays old).
+    from swarmd.state import PersistedState, load, save
+
+    path = tmp_path / "s.json"
+    state = PersistedState(robot=2, swarm=9, known={"f2": (2, 3)}, held=("f2", 3),
+                           seq_reserved=1000, peer_seq={1: 4711, 3: 99},
+                           certificate=(b"\x01\x02", b"\xff"))
+    save(path, state)
+    back = load(path, robot=2, swarm=9)
+    assert back is not None
+    assert dict(back.peer_seq) == {1: 4711, 3: 99}
+    assert back.certificate == (b"\x01\x02", b"\xff")
+    restored = back.restored()
+    assert dict(restored.peer_seq) == {1: 4711, 3: 99}
+    assert restored.certificate == (b"\x01\x02", b"\xff")
+
+
+def test_out_of_range_peer_sequences_make_the_file_unusable(tmp_path: Path) -> None:
+    import json
+
+    from swarmd.state import StateError, load
+
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps({"robot": 2, "swarm": 9, "known": {}, "held": None,
+                                "seq_reserved": 0, "peer_seq": {"1": 2 ** 49}}))
+    with pytest.raises(StateError):
+        load(path, robot=2, swarm=9)
