@@ -331,13 +331,12 @@ def run_sim(options: SimOptions) -> SimResult:
 
 
 def _auth(checked: _Checked) -> str:
-    """The swarm's authentication mode for the virtual simulator: `per-robot` when the
-    swarm file asks for it (the simulator makes throwaway identities), else `shared`
-    with a swarm key, else `none`."""
-    mode = getattr(checked.cfg, "auth", None)
-    if mode in ("none", "shared", "per-robot"):
-        return str(mode)
-    return "shared" if checked.cfg.key() else "none"
+    """The swarm's authentication mode for the virtual simulator: the file's (`none`,
+    `shared`, `per-robot`: the simulator makes throwaway identities for the last)."""
+    cfg = checked.cfg
+    # Signed by default: a swarm file that says nothing is simulated per robot, as the
+    # real-time swarm signs every run with throwaway keys.
+    return str(cfg.auth_mode) if cfg.auth_explicit else "per-robot"
 
 
 def _run_virtual(checked: _Checked, faults: list[Fault], options: SimOptions,

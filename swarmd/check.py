@@ -173,7 +173,8 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
     data = []
     notes: list[str] = []
     for medium in MEDIA:
-        b = channel_budget(plan, params, medium=medium, signed=signed)
+        b = channel_budget(plan, params, medium=medium, signed=signed,
+                           per_robot=cfg.auth_mode == "per-robot")
         rows.append((
             medium,
             f"{b.frames_per_s:.1f}",

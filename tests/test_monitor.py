@@ -189,7 +189,7 @@ def test_monitor_cli_once_json_hears_the_loopback_channel() -> None:
         stop.set()
         thread.join(timeout=2)
     assert result.exit_code == 0, result.output
-    doc = json.loads(result.output)
+    doc = json.loads(result.stdout)
     robots = {r["robot"]: r for r in doc["robots"]}
     assert set(robots) == {1, 2}
     assert robots[2]["function"] == "f2" and robots[2]["role"] == "ACTIVE"

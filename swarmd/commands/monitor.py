@@ -69,7 +69,10 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
 
         from swarmd.config import ConfigError, ConfigUnreadable, load_swarm
+        from swarmd.config.auth import public_keys
         from swarmd.daemon import make_transport
+        from swarmd.identity import Keyring
+        from swarmd.keys import KeyFileError
         from swarmd.monitor import MonitorState, listen, load_base_station
         from swarmd.transport.base import Transport, TransportError
         from swarmd.transport.udp import UdpTransport
@@ -98,7 +101,16 @@ def register(app: typer.Typer) -> None:
         except TransportError as exc:
             err.print(str(exc))
             raise typer.Exit(1) from None
-        state = MonitorState(swarm_cfg.to_plan(), swarm_cfg.params(), keys)
+        # Per-robot auth: every robot's public keys, so the base station verifies the
+        # signed WARN, CLAIM and LEAVE frames it listens to (it signs nothing itself).
+        keyring: Keyring | None = None
+        if swarm_cfg.auth_mode == "per-robot":
+            try:
+                keyring = Keyring(public_keys(swarm_cfg), swarm_cfg.revoked)
+            except KeyFileError as exc:  # heartbeats still show; signed frames are dropped
+                err.print(f"warning: {exc}: signed WARN/CLAIM/LEAVE frames cannot be "
+                          "verified and are not shown")
+        state = MonitorState(swarm_cfg.to_plan(), swarm_cfg.params(), keys, verifier=keyring)
         listen_for = duration if duration is not None else (2.0 if once else None)
 
         async def run_once() -> float:
