@@ -1,4 +1,4 @@
-"""One robot's daemon: config in, a running `Runtime` until told to stop (issue 3 point 4).
+"""One robot's daemon: config in, a running `Runtime` until told to stop.
 
 `run_daemon` is what `swarmd start` runs and what the multi-process simulator runs in
 each robot process (injecting its own link, a receive filter for loss and partitions,

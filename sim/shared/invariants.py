@@ -1,4 +1,4 @@
-"""Invariants of a swarm run, checked from the event log (issue 2, point 5).
+"""Invariants of a swarm run, checked from the event log.
 
 The checker reads the same JSON Lines records users get (DESIGN section 3) plus the
 injected faults, so the virtual simulator and the multi-process `swarmd sim` are judged

@@ -5,7 +5,7 @@
     robot = load_robot("configs/robot-example.yaml")   # RobotConfig, robot.swarm loaded
 
 Errors raise `ConfigError`, whose `.problems` each name the file, the field and what
-is wrong. Only this package imports pydantic (STYLE.md point 5).
+is wrong. Only this package imports pydantic (DESIGN section 2).
 """
 
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, format_loc

@@ -86,7 +86,7 @@ class SerialTransportConfig(_Model):
 
 
 class XBeeTransportConfig(_Model):
-    """XBee in API mode through digi-xbee (see notes/xbee.md)."""
+    """XBee in API mode through digi-xbee (docs/radios.md)."""
 
     kind: Literal["xbee"]
     port: str
