@@ -13,7 +13,7 @@ wall-clock instant and event times (seconds since t0) are comparable across proc
 Faults happen to real processes at their times (DESIGN section 3):
 crash = SIGKILL of the robot's process group; pause = SIGSTOP, then SIGCONT after D;
 restart = a new process on the same state dir (so persisted epochs fence it, rule 2);
-leave / unhealthy / liar / motor = a control message to the robot process; loss and
+leave / unhealthy / liar / motor / forge = a control message to the robot process; loss and
 partition = the per-process receive filter (`sim/realtime/netfilter.py`), set at spawn. Every
 injected fault is logged as `fault{kind}` with robot = its target (0 for a partition).
 
@@ -322,6 +322,9 @@ class Orchestrator:
                 if proc is not None and proc.alive:
                     proc.left = proc.left or kind == "leave"
                     self._send(proc, {"cmd": kind})
+            case "forge":  # the robot process holds R's key: it forges (robot_proc.Forger)
+                if proc is not None and proc.alive:
+                    self._send(proc, {"cmd": "forge", "attack": fault.attack})
             case _:
                 self.problems.append(f"fault kind {fault.kind} is not supported in real time")
 

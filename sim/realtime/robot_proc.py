@@ -11,8 +11,11 @@ module's `child_main` in a forkserver child. What the simulator adds around the 
   `mavlink-ardupilot`: sim.physics.autopilot.SimMavlinkLink); a new robot plugs in here;
 - the `liar` fault: forged WARN frames about its neighbours, sent through the daemon's
   own runtime so they are signed and sequenced like its real frames (`Liar`);
+- the `forge` fault: raw frames an insider holding this robot's key forges
+  (`sim.shared.forge.forged_frames`), signed with the daemon's own key material and
+  sent straight on its transport, past its node (`Forger`);
 - two pipes to the orchestrator: events out (one JSON object a message, t relative to
-  the run's t0), control in (`go`, `leave`, `unhealthy`, `liar`, `motor`). EOF on the
+  the run's t0), control in (`go`, `leave`, `unhealthy`, `liar`, `motor`, `forge`). EOF on the
   control pipe means the orchestrator is gone: the daemon stops.
 - a lateness probe (`LatenessProbe`): how late this process's event loop wakes up, sent
   to the orchestrator every second, so that a summary can say "the robots were late"
@@ -46,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
+from sim.shared.forge import REPEATING, forged_frames
 from sim.shared.liar import liar_warnings
 from swarmd.config import load_robot
 from swarmd.core.plan import SwarmPlan
@@ -165,6 +169,56 @@ class Liar:
             self._task.cancel()
 
 
+# -- the forger -----------------------------------------------------------------------------
+
+
+class Forger:
+    """`forge:R@T:ATTACK`: once `start(attack)` is called, the frames
+    `sim.shared.forge.forged_frames` names, as the virtual simulator sends them: one
+    burst, or (`REPEATING` attacks) a new round every warn interval.
+
+    Unlike the liar's WARNs they do not go through the node (which would sign and
+    sequence them honestly): they are encoded with what an insider holding robot R's
+    key has (the daemon's Ed25519 signer in per-robot mode, the swarm key in shared
+    mode, nothing when unsigned) and written raw on the daemon's transport, so every
+    other robot's decoding and verifying is what is attacked (DESIGN "Who may say
+    what"). The insider's radio is another radio: R's own daemon hears the frames as
+    any robot does, and may report another sender with its id."""
+
+    def __init__(self, plan: SwarmPlan, interval: float) -> None:
+        self.plan = plan
+        self.interval = interval
+        self.daemon: Daemon | None = None
+        self.sent = 0
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self, attack: str) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run(attack))
+
+    async def _run(self, attack: str) -> None:
+        round_ = 0
+        while True:
+            daemon = self.daemon
+            rt = daemon.runtime if daemon is not None else None
+            if daemon is not None and rt is not None:
+                frames = forged_frames(attack, self.plan, rt.node.snapshot(),
+                                       keys=daemon.cfg.keys(), signer=daemon.signer,
+                                       round_=round_)
+                for data in frames:
+                    with contextlib.suppress(Exception):  # a full socket: the frame is lost
+                        rt.transport.send(data)
+                        self.sent += 1
+                round_ += 1
+                if attack not in REPEATING:
+                    return
+            await asyncio.sleep(self.interval)
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+
 # -- lateness -------------------------------------------------------------------------------
 
 
@@ -251,6 +305,7 @@ class _Robot:
         params = self.cfg.swarm.params()
         self.link = LINK_FACTORIES[spec.link](spec, self.cfg)
         self.liar = Liar(plan, params.warn_interval)
+        self.forger = Forger(plan, params.warn_interval)
         self.t0 = spec.t0
         self.filter = ReceiveFilter(
             spec.robot_id,
@@ -299,6 +354,8 @@ class _Robot:
                 set_health(Health.FAULTY)
         elif cmd == "liar":
             self.liar.start()
+        elif cmd == "forge":
+            self.forger.start(str(msg.get("attack", "")))
         elif cmd == "motor":
             fail = getattr(self.link, "fail_motor", None)
             if fail is not None:
@@ -326,6 +383,7 @@ class _Robot:
 
         def ready(daemon: Daemon) -> None:
             self.liar.runtime = daemon.runtime
+            self.forger.daemon = daemon
 
         self.probe.start()
         try:
@@ -342,6 +400,7 @@ class _Robot:
             )
         finally:
             self.liar.stop()
+            self.forger.stop()
             self.probe.stop()
 
 
@@ -364,7 +423,7 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
     try:
         robot = _Robot(spec, emit, control)
         code = asyncio.run(robot.run())
-        _report_stats(robot.filter.stats, robot.liar.forged, emit)
+        _report_stats(robot.filter.stats, robot.liar.forged + robot.forger.sent, emit)
     except Exception as exc:  # a robot that cannot start says why, in its log and pipe
         emit({"_ctl": "error", "error": f"{type(exc).__name__}: {exc}"})
         raise

@@ -15,8 +15,8 @@
     unhealthy:R@T        robot R reports itself faulty at T (DESIGN rule 7)
     motor:R@T            a rotor of robot R fails at T (physics only)
     forge:R@T:ATTACK     an insider holding robot R's key (per-robot mode) or the
-                         swarm key (shared) sends forged frames from T (virtual
-                         simulator): `epoch` one HEARTBEAT as R for every slot it does
+                         swarm key (shared) sends forged frames from T, raw on the
+                         radio (both simulators): `epoch` one HEARTBEAT as R for every slot it does
                          not hold at epoch 65535; `seq` a HEARTBEAT and a WARN as R at
                          seq 2^48-1; `claim` CLAIMs for every slot it does not hold at
                          ever new epochs, every warn interval; `warn` WARNs in the names
@@ -254,11 +254,10 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
 
 
 def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
-                 duration: float | None = None, virtual: bool = True) -> list[str]:
+                 duration: float | None = None) -> list[str]:
     """Problems with a fault list against a swarm: unknown robots, motor without
     physics (`physics` is True for --virtual too: sim.virtual.simulator turns a motor fault into
-    `unhealthy`), forge outside the virtual simulator (`virtual` False), and (given the
-    run's `duration`) a fault that would start after the end."""
+    `unhealthy`), and (given the run's `duration`) a fault that would start after the end."""
     problems = []
     for f in faults:
         unknown = [r for r in f.robots if r not in robot_ids]
@@ -268,9 +267,6 @@ def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
         if f.kind == "motor" and not physics:
             problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics; "
                             "--virtual models one as the robot reporting itself unhealthy)")
-        if f.kind == "forge" and not virtual:
-            problems.append(f"{f.spec()}: forge faults run in the virtual simulator only "
-                            "(add --virtual)")
         if duration is not None and f.at >= duration:
             problems.append(f"{f.spec()}: starts at {_num(f.at)} s, not before the end of the "
                             f"run (--duration {_num(duration)})")
