@@ -175,7 +175,9 @@ class Orchestrator:
             return None
         port = self.medium.path(self.radio_of[robot])
         if self.transport == "serial":
-            return {"kind": "serial", "port": port}
+            # The emulated medium is 802.15.4: 100 B packets, so frames up to 93 B stay
+            # whole, which per-robot signed frames (92 B CERT) need.
+            return {"kind": "serial", "port": port, "max_payload": 93}
         role = "coordinator" if self.radio_of[robot] == 1 else "router"
         return {"kind": "xbee", "port": port, "protocol": "802.15.4", "api_mode": 1,
                 "role": role}

@@ -32,6 +32,7 @@ from swarmd.config.swarm_rules import load_swarm
 from swarmd.identity import IdentityFileError, public_key_of, read_private_key
 from swarmd.keys import KeyFileError, load_key
 from swarmd.transport.addresses import interface_address, multicast_group
+from swarmd.transport.media import SERIAL_MAX_PAYLOAD
 
 
 class _Model(BaseModel):
@@ -83,6 +84,11 @@ class SerialTransportConfig(_Model):
     kind: Literal["serial"]
     port: str
     baud: int = Field(default=57600, gt=0)
+    max_payload: int = Field(default=SERIAL_MAX_PAYLOAD, ge=24, le=1024)
+    """Largest swarmd frame, bytes: the radio's RF packet less the 7 B of framing, so a
+    frame never spans two packets (docs/radios.md). The default fits every XBee; a
+    per-robot signed swarm needs 92 (its CERT frame): an 802.15.4 XBee (100 B packets)
+    or a SiK radio takes it."""
 
 
 class XBeeTransportConfig(_Model):

@@ -77,7 +77,8 @@ class SerialTransport:
     @classmethod
     def from_config(cls, cfg: Any) -> SerialTransport:
         """Build from `swarmd.config.SerialTransportConfig` (duck-typed)."""
-        return cls(port=cfg.port, baud=cfg.baud)
+        return cls(port=cfg.port, baud=cfg.baud,
+                   max_payload=getattr(cfg, "max_payload", DEFAULT_MAX_PAYLOAD))
 
     @property
     def max_payload(self) -> int:
