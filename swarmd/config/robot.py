@@ -34,6 +34,9 @@ from swarmd.keys import KeyFileError, load_key
 from swarmd.transport.addresses import interface_address, multicast_group
 from swarmd.transport.media import SERIAL_MAX_PAYLOAD
 
+PER_ROBOT_MAX_FRAME = 92
+"""Largest per-robot signed frame (CERT: a relayed signed WARN or LEAVE), bytes."""
+
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -324,6 +327,14 @@ def from_source(src: Source) -> RobotConfig:
     identity_file = src.resolve(f.identity_file) if f.identity_file is not None else None
     if swarm is not None:
         problems = _deployable(swarm, f.robot, identity_file, src, problems)
+    if (swarm is not None and swarm.auth_mode == "per-robot"
+            and isinstance(f.transport, SerialTransportConfig)
+            and f.transport.max_payload < PER_ROBOT_MAX_FRAME):
+        problems.append(src.problem(
+            ("transport", "max_payload"),
+            f"{f.transport.max_payload} B is below the {PER_ROBOT_MAX_FRAME} B a per-robot "
+            "signed frame takes (its CERT): set max_payload to your radio's packet less "
+            "7 B of framing (93 for an 802.15.4 XBee), or sign with a shared key"))
     key_files = tuple(src.resolve(k) for k in f.key_files)
     for i, k in enumerate(key_files):
         try:
