@@ -135,3 +135,15 @@ def test_a_warning_about_a_holder_that_took_its_slot_back_still_counts(
     events = [takeover(4.5, 6, "f2", 2), takeover(7.0, 2, "f2", 6), warn(8.0, 1, 2, "f2")]
     checker = judge(paper, ["crash:2@3", "crash:6@6"], events, duration=14.0)
     assert ("warning_unresolved", 1) in kinds(checker)
+
+
+def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Standby 6 restarted at 2.9 s (logged `started` again at 3.0 s); robot 2 crashes at
+    # 3.2 s. Until 5.0 s standby 6 is in its start-up grace (rule 5): a takeover at
+    # 6.0 s is in time, none at all is still a violation.
+    _, params = paper
+    restart = {"t": 3.0, "robot": 6, "event": "started", "role": "standby"}
+    took = takeover(3.0 + params.startup_grace + 1.0, 6, "f2", 2)
+    assert kinds(judge(paper, ["restart:6@2.9", "crash:2@3.2"], [restart, took])) == []
+    assert kinds(judge(paper, ["restart:6@2.9", "crash:2@3.2"], [restart])) != []

@@ -155,6 +155,8 @@ class Checker:
     false_suspicions: int = 0
     """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
     started: set[int] = field(default_factory=set)
+    started_at: dict[int, list[float]] = field(default_factory=dict)
+    """robot -> the times its node logged `started` (a restart adds one)."""
     """Robots whose node has logged `started` (since their last crash or restart)."""
     epochs: set[tuple[str, int]] = field(default_factory=set)
     """(function, epoch) pairs some takeover produced (invariant 6)."""
@@ -255,6 +257,7 @@ class Checker:
             self._takeover(t, r, f, int(rec.get("replaced", 0)))
         elif name == "started":
             self.started.add(r)
+            self.started_at.setdefault(r, []).append(t)
             if rec.get("function") is not None:
                 self.held_since[(str(rec["function"]), r)] = t
         elif name == "suspect":
@@ -385,6 +388,13 @@ class Checker:
             for x in mates:
                 if e.t < x.start <= deadline < x.start + bound:
                     deadline, moved = x.start + bound, True
+        # A covering standby that (re)started shortly before the failure still waits out
+        # its start-up grace (DESIGN rule 5) before it may count silence: give it that.
+        grace = self.params.startup_grace
+        for r in e.standbys:
+            before = [s for s in self.started_at.get(r, ()) if s <= e.t]
+            if before and before[-1] > 0.5 and e.t - before[-1] < grace:
+                deadline = max(deadline, before[-1] + grace + bound)
         if e.done is not None and e.done <= deadline:
             return None
         if duration < deadline:
