@@ -13,19 +13,21 @@ Jumps are bounded (DESIGN section 2, "Sequence numbers"): a sequence number is a
 can legitimately move it up by the time that passed (`RATE` a second, a restart
 included) plus `JUMP`, the most a restart within the same instant may skip (a daemon
 resumes at its persisted reservation, at most `swarmd.state.SEQ_RESERVE` = 10^6 ahead
-of what it sent); a frame further ahead is dropped as
+of what it sent, once per restart); a frame further ahead is dropped as
 `seq_jump` and moves nothing. One forged frame at seq 2^48-1 therefore cannot mute a
 robot; a forger can only push a sender's window by `JUMP` beyond the time that passed
-(2^28 forged frames to exhaust 48 bits), and the robot it names, which hears that frame
+(2^25 forged frames to exhaust 48 bits), and the robot it names, which hears that frame
 too, moves its own counter above it (`Node`, "own").
 """
 
 from __future__ import annotations
 
 WINDOW = 64
-JUMP = 1 << 20
-"""How far beyond the elapsed time one frame may move a sender's counter: at least the
-daemon's sequence reservation (`swarmd.state.SEQ_RESERVE`)."""
+JUMP = 1 << 23
+"""How far beyond the elapsed time one frame may move a sender's counter: eight times
+the daemon's sequence reservation (`swarmd.state.SEQ_RESERVE`, 10^6), because each
+restart that sends nothing before the next (a crash loop under systemd) moves the
+reservation once more. A forger still needs 2^25 frames to walk a counter to 2^48."""
 RATE = 100_000
 """sequence units a second: the wall-clock seeding of `wire.seq_seed` (10 us)."""
 _FULL = (1 << WINDOW) - 1
