@@ -28,6 +28,7 @@ from swarmd.core import events as ev
 from swarmd.core import replay, wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
+from swarmd.core.evidence import CLAIMS_REMEMBERED, EvidenceStore, cert_says
 from swarmd.core.limits import check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -125,16 +126,6 @@ class _SlotBeat(NamedTuple):
     at: float
 
 
-_EVIDENCE_REMEMBERED = 16
-"""(suspect, epoch) episodes of signed evidence kept per slot (per-robot mode); a flood
-of warnings about invented epochs pushes out the oldest, it cannot grow the node."""
-
-
-_CLAIMS_REMEMBERED = 16
-"""Claims remembered per slot (rule 10); a flood of invented (claimant, epoch) pairs
-pushes out the oldest, it cannot grow the node."""
-
-
 _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
 
@@ -211,19 +202,9 @@ class Node:
             for peer, top in restored.peer_seq.items():
                 if peer != robot_id and peer in plan.robots:
                     self._replay.restore(peer, top)
-        # Per-robot mode (DESIGN section 2, "Who may say what"): f -> {(suspect, epoch):
-        # {witness: signed WARN or LEAVE bytes}}, the evidence a takeover needs; f ->
-        # {(claimant, epoch)} whose signed CLAIM that evidence backs; f -> the frames
-        # that certify this robot's own hold of f, relayed to whoever missed them.
-        self._evidence: dict[str, dict[tuple[int, int], dict[int, bytes]]] = {}
-        self._certified: dict[str, set[tuple[int, int]]] = {}
-        self._pending_claims: dict[str, dict[tuple[int, int], tuple[int, float]]] = {}
-        self._my_cert: dict[str, tuple[int, tuple[bytes, ...]]] = {}
-        self._relayed_at: dict[str, float] = {}
-        self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
-        # f -> ((holder, epoch), {witness: its highest seq}) when f's holder was last
-        # heard alive: warnings about it sent before then are void (`_record_evidence`).
-        self._alive: dict[str, tuple[tuple[int, int], dict[int, int]]] = {}
+        # Per-robot mode (DESIGN section 2, "Who may say what"): signed evidence and
+        # the certificates it makes, `evidence.py`.
+        self._ev = EvidenceStore(robot_id, plan, params)
         self._start_time = now
         self._stalled_at = -1e18
         self._next_heartbeat = now
@@ -238,7 +219,7 @@ class Node:
         own = plan.robots[robot_id].function
         if restored is not None and restored.held is not None and restored.certificate \
                 and self._verifier is not None:
-            self._restore_cert(restored.held[0], restored.certificate)
+            self._ev.restore(restored.held[0], restored.certificate, self._verifier)
         if restored is not None and restored.held is not None:
             # Rule 2 across a reboot: listen before resuming, a takeover may have
             # happened while this robot was down.
@@ -515,8 +496,7 @@ class Node:
             frames_out=self._frames_out,
             heard=dict(self._heard_at),
             peer_seq={r: st[0] for r, st in self._replay.state.items()},
-            certificate=self._my_cert[self._function][1]
-            if self._function is not None and self._function in self._my_cert else (),
+            certificate=self._ev.certificate(self._function),
         )
 
     # ------------------------------------------------------------------ message rules
@@ -532,7 +512,7 @@ class Node:
         holder, epoch = self._known[f]
         newer = hb.epoch > epoch or (hb.epoch == epoch and (sender == holder or sender < holder))
         if newer and self._identity is not None and (sender, hb.epoch) != (holder, epoch) \
-                and (sender, hb.epoch) not in self._certified.get(f, ()):
+                and not self._ev.is_certified(f, sender, hb.epoch):
             # Per-robot mode: a heartbeat is not signed by its sender, so it never moves
             # an epoch or a holder by itself; only the certified new holder's does.
             self._drops["uncertified"] += 1
@@ -554,7 +534,7 @@ class Node:
         self._known[f] = Holder(sender, hb.epoch)
         self._slot_heard[f] = _SlotBeat(sender, hb.epoch, now)
         if self._identity is not None:
-            self._mark_alive(f, sender, hb.epoch)
+            self._ev.mark_alive(f, sender, hb.epoch, self._replay.top, self._seq)
         self._claims_seen.pop(f, None)
         # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
         if f == self._function and self._role == Role.ACTIVE and sender != self._robot_id:
@@ -599,12 +579,7 @@ class Node:
                     # Heard live, not out of a buffer after our own stall: we refute
                     # it, so this warning (captured and played back to us later)
                     # backs no takeover of our slot here (`_record_evidence`).
-                    mark = self._alive.get(f)
-                    if mark is None or mark[0] != (self._robot_id, self._epoch):
-                        mark = ((self._robot_id, self._epoch), {})
-                        self._alive[f] = mark
-                    mark[1][sender] = max(mark[1].get(sender, -1), seq)
-                    self._evidence.get(f, {}).pop((self._robot_id, self._epoch), None)
+                    self._ev.refuted(f, self._epoch, sender, seq)
                 if self._heartbeat_now(now):
                     self._emit(ev.Refute(subject=self._robot_id, function=f))
             return
@@ -687,7 +662,7 @@ class Node:
         seen = self._claims_seen.setdefault(f, {})
         first = seen.get((sender, c.epoch))
         if first is None:
-            if len(seen) >= _CLAIMS_REMEMBERED:
+            if len(seen) >= CLAIMS_REMEMBERED:
                 del seen[min(seen, key=seen.__getitem__)]
             seen[(sender, c.epoch)] = now
             return True
@@ -701,14 +676,11 @@ class Node:
         if self._identity is not None:
             if (sender, c.epoch) == tuple(self._known[f]):
                 return  # the holder re-announcing its certificate (`_relay_cert`)
-            if not self._certify(f, sender, c):
+            if not self._ev.certify(f, sender, c, self._known[f].epoch):
                 # Per-robot mode: a claim without a certificate this robot verified
                 # silences nobody and makes nobody back off (one robot alone cannot
                 # start a takeover); kept a while in case its certificate comes later.
-                pending = self._pending_claims.setdefault(f, {})
-                if len(pending) >= _CLAIMS_REMEMBERED:
-                    del pending[next(iter(pending))]
-                pending[(sender, c.epoch)] = (c.failed, now)
+                self._ev.hold_pending(f, sender, c, now)
                 self._drops["uncertified"] += 1
                 return
         if not self._claim_believed(f, sender, c, now):
@@ -781,7 +753,7 @@ class Node:
         assert self._claim is not None
         c = self._claim
         if with_cert and self._identity is not None:
-            for raw in self._cert_frames(c.function, c.failed, c.old_epoch):
+            for raw in self._ev.cert_frames(c.function, c.failed, c.old_epoch):
                 self._send_cert(c.function, raw)
         self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
 
@@ -792,9 +764,7 @@ class Node:
         self._function, self._epoch = c.function, c.epoch
         self._known[c.function] = Holder(self._robot_id, c.epoch)
         if self._identity is not None:
-            self._my_cert[c.function] = (c.failed,
-                                         self._cert_frames(c.function, c.failed, c.old_epoch))
-            self._certified.setdefault(c.function, set()).add((self._robot_id, c.epoch))
+            self._ev.took_over(c.function, c.failed, c.old_epoch, c.epoch)
         self._emit(ev.Takeover(function=c.function, epoch=c.epoch, replaced=c.failed))
         self._pending.append(Assign(c.function, c.epoch))
         self._watch_neighbours(now)
@@ -955,9 +925,7 @@ class Node:
         self._frames_out += 1
 
     # ------------------------------------------------------------------ evidence
-    # Per-robot mode (DESIGN section 2, "Takeovers backed by evidence"): an epoch
-    # rises only for a claim that a quorum of distinct witnesses' signed warnings (or
-    # the holder's own signed LEAVE) backs, and this robot verified every one of them.
+    # Per-robot mode: the certificates themselves are `evidence.py`'s.
 
     def _sign_only(self, msg: wire.Message) -> bytes:
         """A frame signed by this robot, for a certificate, not broadcast by itself."""
@@ -973,138 +941,33 @@ class Node:
 
     def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
                          raw: bytes, now: float | None = None) -> None:
-        if not raw or epoch < self._known[f].epoch:
-            return
-        alive = self._alive.get(f)
-        if alive is not None and alive[0] == (suspect, epoch) \
-                and int.from_bytes(raw[5:11], "big") <= alive[1].get(witness, -1):
-            # Sent before the suspect was last heard alive: a suspicion it refuted
-            # (rule 4), perhaps captured and played back; it backs no takeover.
+        ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
+        if ready is None:
             self._drops["stale_evidence"] += 1
             return
-        episodes = self._evidence.setdefault(f, {})
-        got = episodes.get((suspect, epoch))
-        if got is None:
-            if len(episodes) >= _EVIDENCE_REMEMBERED:
-                del episodes[next(iter(episodes))]
-            got = episodes[(suspect, epoch)] = {}
-        got[witness] = raw  # the latest: the least likely void where it is relayed
-        pending = self._pending_claims.get(f)
-        if pending:
-            for (claimant, new_epoch), (failed, heard) in list(pending.items()):
-                claim = wire.Claim(failed, self._plan.slot(f), new_epoch)
-                if (failed, new_epoch - 1) == (suspect, epoch) \
-                        and self._certify(f, claimant, claim):
-                    # Its certificate came after it (a channel that reorders): the
-                    # claim counts now, if it is still a fresh one.
-                    del pending[(claimant, new_epoch)]
-                    if now is not None and now - heard <= self._params.claim_hold:
-                        self._on_claim(claimant, claim, now)
-
-    def _backers(self, f: str, suspect: int, epoch: int, claimant: int) -> list[int]:
-        """The witnesses whose signed evidence backs `claimant` taking f over from
-        `suspect` at `epoch`: the suspect's own LEAVE alone, or the warnings of distinct
-        witnesses (the holders of the slots that watch f, rule 3, and the claimant
-        itself as rule 9's own ears, once), never the suspect's."""
-        got = self._evidence.get(f, {}).get((suspect, epoch))
-        if not got:
-            return []
-        if suspect in got:
-            return [suspect]
-        return [w for w in got if w != suspect and (w == claimant or w in self._may_watch(f))]
-
-    def _may_watch(self, f: str, *, claimants: bool = False) -> frozenset[int]:
-        """Every robot that may hold a slot watching f (its holder or a substitute):
-        judged by the plan, not by `known`, so a robot that cannot hear who holds a
-        watching slot now (DESIGN section 2, "What a robot hears") still verifies the
-        certificate. Witnesses stay distinct robots, so one robot is one witness."""
-        key = (f, claimants)
-        got = self._may_watch_cache.get(key)
-        if got is None:
-            got = frozenset(r for g in self._plan.watched_by(f) for r in self._plan.covered_by(g))
-            if claimants:  # rule 9: a claimant's own ears count as one witness
-                got |= frozenset(self._plan.covered_by(f))
-            self._may_watch_cache[key] = got
-        return got
-
-    def _certify(self, f: str, claimant: int, c: wire.Claim) -> bool:
-        certified = self._certified.setdefault(f, set())
-        if (claimant, c.epoch) in certified:
-            return True
-        if claimant not in self._plan.covered_by(f):
-            return False
-        backers = self._backers(f, c.failed, c.epoch - 1, claimant)
-        if not backers or (backers != [c.failed] and len(backers) < self._params.quorum):
-            return False
-        floor = self._known[f].epoch
-        if len(certified) >= _CLAIMS_REMEMBERED:  # older takeovers matter no more
-            certified.intersection_update({x for x in certified if x[1] >= floor})
-        certified.add((claimant, c.epoch))
-        return True
-
-    def _cert_frames(self, f: str, suspect: int, epoch: int) -> tuple[bytes, ...]:
-        got = self._evidence.get(f, {}).get((suspect, epoch), {})
-        backers = self._backers(f, suspect, epoch, self._robot_id)
-        # Every backer, not just a quorum: a receiver may hold some of them void (a
-        # warning its suspect refuted in its hearing, `_record_evidence`).
-        return tuple(got[w] for w in backers)
+        for claimant, claim in ready:
+            assert now is not None  # `record` readies a claim only with a `now`
+            self._on_claim(claimant, claim, now)
 
     def _relay_cert(self, f: str, now: float) -> None:
         """Someone still believes an older holder of our slot: relay the certificate of
         our hold and re-announce the claim it backs, at most once per T_max."""
-        mine = self._my_cert.get(f)
-        if mine is None or now - self._relayed_at.get(f, -1e18) < self._params.t_max:
+        mine = self._ev.relay(f, now)
+        if mine is None:
             return
-        self._relayed_at[f] = now
         failed, frames = mine
         for raw in frames:
             self._send_cert(f, raw)
         self._send(wire.Claim(failed, self._plan.slot(f), self._epoch))
-
-    def _restore_cert(self, f: str, frames: tuple[bytes, ...]) -> None:
-        failed = None
-        good: list[bytes] = []
-        for raw in frames:
-            try:
-                got = wire.decode(bytes(raw), (), self._verifier)
-            except wire.CodecError:
-                continue
-            if isinstance(got.msg, wire.Warn):
-                who = got.msg.suspect
-            elif isinstance(got.msg, wire.Leave):
-                who = got.sender
-            else:
-                continue
-            if failed is None or who == failed:
-                failed = who
-                good.append(bytes(raw))
-        if failed is not None and f in self._known:
-            self._my_cert[f] = (failed, tuple(good))
-
-    def _mark_alive(self, f: str, holder: int, epoch: int) -> None:
-        """f's holder is alive at `epoch` now (its heartbeat, or our own): the evidence
-        against it so far is void, and so is any warning its witnesses sent before."""
-        episodes = self._evidence.get(f)
-        if episodes:
-            episodes.pop((holder, epoch), None)
-        tops: dict[int, int] = {}
-        for w in self._may_watch(f, claimants=True):
-            top = self._replay.top(w) if w != self._robot_id else self._seq
-            if top is not None:
-                tops[w] = top
-        self._alive[f] = ((holder, epoch), tops)
 
     def _on_cert(self, cert: wire.Cert, now: float) -> None:
         f = self._plan.function_at(cert.function)
         if f is None:
             self._drops["bad_function"] += 1
             return
-        inner = cert.inner
-        msg = inner.msg
-        if isinstance(msg, wire.Warn):
-            self._record_evidence(f, inner.sender, msg.suspect, msg.epoch, cert.raw, now)
-        elif isinstance(msg, wire.Leave):
-            self._record_evidence(f, inner.sender, inner.sender, msg.epoch, cert.raw, now)
+        said = cert_says(cert)
+        if said is not None:
+            self._record_evidence(f, *said, cert.raw, now)
 
     def _emit(self, event: ev.Event) -> None:
         self._pending.append(event)
