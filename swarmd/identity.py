@@ -42,7 +42,7 @@ from cryptography.hazmat.primitives.serialization import (
 
 from swarmd.core.auth import PUBLIC_KEY_LEN, SIGNATURE_LEN, Identity
 from swarmd.files import FileRefused, file_kind, read_regular_file, write_atomic
-from swarmd.keys import KeyFileError
+from swarmd.keys import KeyFileError, read_private_file
 
 __all__ = [
     "PRIVATE_KEY_LEN",
@@ -208,34 +208,11 @@ def read_private_key(path: Path | str) -> bytes:
 
     Raises `IdentityFileError` naming the file, the problem and the fix."""
     path = Path(path)
-    try:
-        # O_NONBLOCK: a FIFO opens at once and is refused below instead of hanging;
-        # the mode is checked on the descriptor read (no race with a swapped path).
-        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
-    except FileNotFoundError:
-        raise IdentityFileError(
-            f"private key {path} does not exist (make it: swarmd keygen --robot ID "
-            f"{path.parent})") from None
-    except PermissionError:
-        raise IdentityFileError(
-            f"private key {path} is not readable by this user (uid {os.getuid()}); it "
-            f"must be owned by the user the daemon runs as: chown swarmd {path}") from None
-    except OSError as exc:
-        raise IdentityFileError(f"private key {path}: {exc.strerror}") from None
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise IdentityFileError(f"private key {path} is {file_kind(st.st_mode)}, not a "
-                                    "regular file")
-        loose = stat.S_IMODE(st.st_mode) & 0o077
-        if loose:
-            raise IdentityFileError(
-                f"private key {path} has mode {stat.S_IMODE(st.st_mode):04o}: other users "
-                "can access it, and whoever reads it can sign frames as this robot; fix "
-                f"it with: chmod 600 {path}")
-        data = os.read(fd, _MAX_FILE + 1)
-    finally:
-        os.close(fd)
+    data = read_private_file(
+        path, what="private key", error=IdentityFileError,
+        missing=f"make it: swarmd keygen --robot ID {path.parent}",
+        loose_mode=lambda _: "other users can access it, and whoever reads it can sign "
+                             "frames as this robot")
     if len(data) == PRIVATE_KEY_LEN:
         return data
     text = data.strip()

@@ -25,7 +25,7 @@ import binascii
 import os
 import secrets
 import stat
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from swarmd.core.wire import KEY_LEN
@@ -67,12 +67,12 @@ def generate_key(path: Path | str, *, force: bool = False, hex_format: bool = Fa
     return key
 
 
-def load_key(path: Path | str) -> bytes:
-    """Read a key file, refusing one that is not private to its owner.
-
-    Raises `KeyFileError` with a message naming the file, the problem and the fix.
-    """
-    path = Path(path)
+def read_private_file(path: Path, *, what: str, missing: str, loose_mode: Callable[[int], str],
+                      error: type[KeyFileError] = KeyFileError) -> bytes:
+    """The bytes of a key file that must be private to its owner (the shared swarm key,
+    a robot's private key). Raises `error` naming the file, the problem and the fix:
+    `what` names the file ("key file"), `missing` says how to make one, `loose_mode(mode)`
+    says what a mode readable by others risks."""
     try:
         # Check the permissions of the file actually opened (fstat), not of a path
         # that could be swapped between the check and the read.
@@ -80,39 +80,42 @@ def load_key(path: Path | str) -> bytes:
         # instead of blocking until some writer appears.
         fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
     except FileNotFoundError:
-        raise KeyFileError(
-            f"key file {path} does not exist (make one: swarmd keygen {path})"
-        ) from None
+        raise error(f"{what} {path} does not exist ({missing})") from None
     except PermissionError:
-        raise KeyFileError(
-            f"key file {path} is not readable by this user (uid {os.getuid()}); it must be "
+        raise error(
+            f"{what} {path} is not readable by this user (uid {os.getuid()}); it must be "
             f"owned by the user the daemon runs as: chown swarmd {path}"
         ) from None
     except OSError as exc:
-        raise KeyFileError(f"key file {path}: {exc.strerror}") from None
+        raise error(f"{what} {path}: {exc.strerror}") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise KeyFileError(f"key file {path} is {file_kind(st.st_mode)}, not a regular "
-                               "file")
-        loose = stat.S_IMODE(st.st_mode) & 0o077
-        if loose:
-            who = []
-            if loose & 0o070:
-                who.append("its group")
-            if loose & 0o007:
-                who.append("other users")
-            raise KeyFileError(
-                f"key file {path} has mode {stat.S_IMODE(st.st_mode):04o}: "
-                f"{' and '.join(who)} can access it, and anyone who can read the swarm "
-                f"key can forge frames and take over functions; fix it with: "
-                f"chmod 600 {path}"
-            )
-        data = os.read(fd, _MAX_FILE + 1)
+            raise error(f"{what} {path} is {file_kind(st.st_mode)}, not a regular file")
+        if stat.S_IMODE(st.st_mode) & 0o077:
+            raise error(f"{what} {path} has mode {stat.S_IMODE(st.st_mode):04o}: "
+                        f"{loose_mode(st.st_mode)}; fix it with: chmod 600 {path}")
+        return os.read(fd, _MAX_FILE + 1)
     finally:
         os.close(fd)
-    return parse_key(data, str(path))
 
+
+def _swarm_key_risk(mode: int) -> str:
+    loose = stat.S_IMODE(mode) & 0o077
+    who = [name for bits, name in ((0o070, "its group"), (0o007, "other users")) if loose & bits]
+    return (f"{' and '.join(who)} can access it, and anyone who can read the swarm key can "
+            "forge frames and take over functions")
+
+
+def load_key(path: Path | str) -> bytes:
+    """Read a key file, refusing one that is not private to its owner.
+
+    Raises `KeyFileError` with a message naming the file, the problem and the fix.
+    """
+    path = Path(path)
+    data = read_private_file(path, what="key file", missing=f"make one: swarmd keygen {path}",
+                             loose_mode=_swarm_key_risk)
+    return parse_key(data, str(path))
 
 def parse_key(data: bytes, origin: str = "key") -> bytes:
     """A key from file content: 32 raw bytes, or 64 hex digits with optional whitespace."""
