@@ -28,7 +28,7 @@ from typing import Any
 
 from sim.shared.eventlog import write_events
 from sim.shared.faults import Fault, FaultSpecError, check_faults, parse_fault
-from sim.shared.summary import Summary, summarize
+from sim.shared.summary import Summary, counted_drops, summarize
 
 TRANSPORTS = ("udp", "xbee", "serial")
 """Channels of the real-time mode (sim.realtime.orchestrator)."""
@@ -351,6 +351,8 @@ def _run_virtual(checked: _Checked, faults: list[Fault], options: SimOptions,
     summary = summarize(result.events, faults, checked.plan, checked.params,
                         loss=options.loss, duration=options.duration, mode="virtual",
                         extra_violations=result.violations)
+    summary.drops = {r: d for r, d in ((r, counted_drops(d)) for r, d in result.drops.items())
+                     if d}
     summary.extra["frames_sent"] = result.frames_sent
     summary.extra["robot_seconds_per_wall_second"] = round(
         result.robot_seconds / max(wall, 1e-9))

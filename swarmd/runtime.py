@@ -184,6 +184,7 @@ class Runtime:
         if not self._running:
             return
         self._step(lambda now: self.node.stop(now, handover=handover))
+        self._report_drops()  # what was refused since the last report is not lost
         self._running = False
         self._queue.clear()
         if self._timer is not None:

@@ -183,6 +183,35 @@ def test_a_restarted_standby_drops_replayed_heartbeats_of_a_dead_robot(paper: Pa
     assert naive.drops["replay"] == 0 and 2 in naive.snapshot().heard
 
 
+REPLAY = ("crash:6@1.5", "crash:2@2.5", "restart:6@3")
+"""Standby 6 is down when robot 2 (f2) dies and comes back after it."""
+
+
+@pytest.mark.parametrize("auth", ["shared", "per-robot"])
+def test_replayed_frames_delay_a_takeover_by_one_t_max_at_most(paper: Paper, auth: str) -> None:
+    """`forge:1@3:replay`: robot 1's radio recorded the channel for 3 s (robot 2's
+    heartbeats among it) and plays it all back every warn interval to the restarted
+    standby and everyone else."""
+    plan, params = paper
+    (normal,) = [e["t"] for e in named(run(plan, params, auth, *REPLAY), "takeover")]
+    res = run(plan, params, auth, *REPLAY, "forge:1@3:replay")
+    assert res.violations == []
+    got = [(e["robot"], e["function"], e["t"]) for e in named(res, "takeover")]
+    assert [(r, f) for r, f, _ in got] == [(6, "f2")]
+    assert got[0][2] <= normal + params.t_max
+    # Every robot that heard the playback dropped it, the restarted standby included.
+    assert {r for r, d in res.drops.items() if d.get("replay", 0) > 0} == {1, 3, 4, 5, 6}
+
+
+def test_a_robots_drops_are_summed_over_its_restarts(paper: Paper) -> None:
+    plan, params = paper
+    # One burst at 1 s, heard by robot 6 only before its crash at 2 s.
+    res = run(plan, params, "per-robot", "forge:3@1:seq", "crash:6@2", "restart:6@3",
+              duration=5.0)
+    alive = run(plan, params, "per-robot", "forge:3@1:seq", duration=5.0)
+    assert res.drops[6]["seq_jump"] == alive.drops[6]["seq_jump"] > 0
+
+
 def test_an_old_own_frame_replayed_after_a_restart_is_no_duplicate_robot(paper: Paper) -> None:
     plan, params = paper
     node = Node(1, plan, params, 0.0, seq_start=2_000_000)

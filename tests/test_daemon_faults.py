@@ -269,6 +269,26 @@ async def test_exec_link_worker_survives_a_command_that_cannot_be_built() -> Non
 
 
 # ------------------------------------------------------------------ hostile frames
+async def test_a_stopping_daemon_reports_the_drops_since_its_last_report(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    port = free_udp_port()
+    a = await launch(robot_cfg(tmp_path, 1, port))
+    rt = runtime_of(a)
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    out.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    out.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+    try:
+        await wait_until(lambda: rt.counters["ticks"] > 1, 5.0, "first ticks")
+        out.sendto(b"\x00" * 3, (GROUP, port))  # well inside the 10 s report interval
+        await wait_until(lambda: rt.node.drops.get("malformed", 0) == 1, 5.0, "the drop")
+        assert not _messages(caplog, "dropped frames")
+    finally:
+        out.close()
+        assert await a.finish() == 0
+    (msg,) = _messages(caplog, "dropped frames")
+    assert msg.__dict__["drops"] == {"malformed": 1}
+
+
 async def test_dropped_frames_are_reported_by_reason(
         tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     port = free_udp_port()

@@ -146,6 +146,20 @@ def test_process_problems_make_the_run_not_ok_and_are_printed_one_a_line(
     assert "WARNING: robots were late" in text
 
 
+def test_counted_drops_are_in_the_json_and_totalled_in_the_text(
+    paper: tuple[SwarmPlan, Params],
+) -> None:
+    plan, params = paper
+    drops = {3: {"auth": 7, "replay": 2}, 5: {"auth": 4}}
+    summary = summarize_realtime(_result(drops=drops), [], plan, params, loss=0.0)
+    assert json.loads(summary.to_json())["drops"] == {"3": {"auth": 7, "replay": 2},
+                                                       "5": {"auth": 4}}
+    console = Console(record=True, width=200)
+    render_summary(summary, console)
+    assert "dropped frames: auth 11, replay 2" in console.export_text()
+    assert summary.ok  # refused frames are the defence working, not a failure
+
+
 def test_an_interrupted_run_is_summarised_up_to_where_it_ended(
     paper: tuple[SwarmPlan, Params],
 ) -> None:

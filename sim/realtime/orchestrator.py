@@ -248,6 +248,8 @@ class Orchestrator:
         elif ctl == "error":
             proc.error = str(rec.get("error"))
             self._ready_check()
+        elif ctl == "drops":
+            proc.drops = {str(k): int(v) for k, v in rec.get("d", {}).items()}
         elif ctl == "stats":
             self.stats[proc.robot_id] = {k: int(v) for k, v in rec.items() if k != "_ctl"}
         elif ctl == "late":
@@ -416,12 +418,21 @@ class Orchestrator:
         return RealtimeResult(
             events=self.events, robots=self.robots, duration=self.duration, t0=self.t0,
             startup_s=startup, run_dir=self.run_dir if self.report_dir else None,
-            problems=self.problems, stats=self.stats,
+            problems=self.problems, stats=self.stats, drops=self._drops(),
             deaths=deaths,
             late=sorted(self.late, key=lambda x: x[1]), wakes=self.wakes,
             interrupted=self.interrupted, ended_at=ended_at,
             log_errors=[e for e in log_errors if e],
         )
+
+    def _drops(self) -> dict[int, dict[str, int]]:
+        """robot -> counted drops summed over its processes (a restart is a new one)."""
+        out: dict[int, dict[str, int]] = {}
+        for proc in self._all():
+            mine = out.setdefault(proc.robot_id, {})
+            for reason, n in proc.drops.items():
+                mine[reason] = mine.get(reason, 0) + n
+        return {r: dict(sorted(d.items())) for r, d in out.items() if d}
 
     def _all(self) -> list[RobotProcess]:
         return [*self.retired, *self.procs.values()]

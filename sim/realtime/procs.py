@@ -9,7 +9,7 @@ import multiprocessing
 import os
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any
@@ -34,6 +34,8 @@ class RobotProcess:
     """Told to leave: its own exit is the expected end."""
     died_at: float | None = None
     """Run time its event pipe closed although nobody killed it."""
+    drops: dict[str, int] = field(default_factory=dict)
+    """Its daemon's counted drops, by reason, as of its last report (`DropReporter`)."""
 
 
 def forkserver_context(physics: bool) -> Any:

@@ -25,6 +25,8 @@ class RealtimeResult:
     daemon: a run with problems is not a trustworthy test of the protocol."""
     stats: dict[int, dict[str, int]] = field(default_factory=dict)
     """Receive-filter counters of robots that exited gracefully (leave)."""
+    drops: dict[int, dict[str, int]] = field(default_factory=dict)
+    """robot -> its daemons' counted drops by reason, as last reported (once a second)."""
     deaths: dict[int, float] = field(default_factory=dict)
     """robot -> run time (s) its process ended on its own (not by a fault or a leave)."""
     late: list[tuple[int, float, float]] = field(default_factory=list)

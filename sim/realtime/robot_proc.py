@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import contextlib
 import ctypes
 import json
@@ -49,8 +50,9 @@ from pathlib import Path
 from typing import Any
 
 from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
-from sim.shared.forge import REPEATING, forged_frames
+from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.liar import liar_warnings
+from sim.shared.summary import counted_drops
 from swarmd.config import load_robot
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health
@@ -183,7 +185,9 @@ class Forger:
     mode, nothing when unsigned) and written raw on the daemon's transport, so every
     other robot's decoding and verifying is what is attacked (DESIGN "Who may say
     what"). The insider's radio is another radio: R's own daemon hears the frames as
-    any robot does, and may report another sender with its id."""
+    any robot does, and may report another sender with its id. For `replay` it plays
+    back what that radio recorded before the attack: the frames R's daemon received
+    (`hear`), the last `CAPTURE` of them."""
 
     def __init__(self, plan: SwarmPlan, interval: float) -> None:
         self.plan = plan
@@ -191,6 +195,12 @@ class Forger:
         self.daemon: Daemon | None = None
         self.sent = 0
         self._task: asyncio.Task[None] | None = None
+        self._tape: collections.deque[bytes] = collections.deque(maxlen=CAPTURE)
+
+    def hear(self, data: bytes) -> None:
+        """A frame on the channel, recorded until an attack starts."""
+        if self._task is None:
+            self._tape.append(bytes(data))
 
     def start(self, attack: str) -> None:
         if self._task is None:
@@ -204,7 +214,7 @@ class Forger:
             if daemon is not None and rt is not None:
                 frames = forged_frames(attack, self.plan, rt.node.snapshot(),
                                        keys=daemon.cfg.keys(), signer=daemon.signer,
-                                       round_=round_)
+                                       round_=round_, recorded=tuple(self._tape))
                 for data in frames:
                     with contextlib.suppress(Exception):  # a full socket: the frame is lost
                         rt.transport.send(data)
@@ -217,6 +227,50 @@ class Forger:
     def stop(self) -> None:
         if self._task is not None:
             self._task.cancel()
+
+
+# -- drops ----------------------------------------------------------------------------------
+
+DROPS_PERIOD = 1.0
+"""s between two drop reports of a robot process (only when the counts changed)."""
+
+
+class DropReporter:
+    """Every `DROPS_PERIOD`, the daemon's counted drops (`sim.shared.summary.counted_drops`
+    of the core's, plus the runtime's queue overflow) as `{"_ctl": "drops", "d": {...}}`
+    when they changed, and once more when the daemon stops: the run's summary shows
+    what every robot refused, by reason, as of its last report (a SIGKILLed robot's
+    last second is lost)."""
+
+    def __init__(self, emit: Callable[[Mapping[str, Any]], None]) -> None:
+        self.emit = emit
+        self.daemon: Daemon | None = None
+        self._last: dict[str, int] = {}
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+        self.report()
+
+    def report(self) -> None:
+        rt = self.daemon.runtime if self.daemon is not None else None
+        if rt is None:
+            return
+        drops = counted_drops({**rt.node.drops,
+                               "queue_overflow": rt.counters["queue_overflow"]})
+        if drops != self._last:
+            self._last = drops
+            self.emit({"_ctl": "drops", "d": drops})
+
+    async def _run(self) -> None:
+        while True:
+            await asyncio.sleep(DROPS_PERIOD)
+            self.report()
 
 
 # -- lateness -------------------------------------------------------------------------------
@@ -317,6 +371,7 @@ class _Robot:
         self.stop_event: asyncio.Event | None = None
         self.go: asyncio.Event | None = None
         self.probe = LatenessProbe(emit, self._run_time)
+        self.drops = DropReporter(emit)
 
     def _run_time(self) -> float:
         return time.time() - (self.t0 or 0.0)
@@ -384,13 +439,21 @@ class _Robot:
         def ready(daemon: Daemon) -> None:
             self.liar.runtime = daemon.runtime
             self.forger.daemon = daemon
+            self.drops.daemon = daemon
+
+        def hear(data: bytes, now: float) -> bool:
+            if not self.filter(data, now):
+                return False
+            self.forger.hear(data)  # the insider's radio records what this robot hears
+            return True
 
         self.probe.start()
+        self.drops.start()
         try:
             return await run_daemon(
                 self.cfg,
                 link=self.link,
-                receive_filter=self.filter,
+                receive_filter=hear,
                 event_sink=sink,
                 stop_event=self.stop_event,
                 on_ready=ready,
@@ -402,6 +465,7 @@ class _Robot:
             self.liar.stop()
             self.forger.stop()
             self.probe.stop()
+            self.drops.stop()
 
 
 def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None:

@@ -31,6 +31,7 @@ def summarize_realtime(
                         loss=loss, duration=round(end, 2), mode="real time",
                         deaths=result.deaths)
     summary.problems = list(result.problems)
+    summary.drops = dict(result.drops)
     figures = lateness_figures(result.late, result.wakes, faults)
     warning = lateness_warning(figures, params, summary.violations, summary.false_suspicions)
     if warning is not None:

@@ -21,7 +21,8 @@
                          seq 2^48-1; `claim` CLAIMs for every slot it does not hold at
                          ever new epochs, every warn interval; `warn` WARNs in the names
                          of every other witness about every slot's holder, every warn
-                         interval
+                         interval; `replay` the frames R's radio heard before T, played
+                         back every warn interval
 
 Every kind but partition and collide targets one robot or several at once
 (`crash:1,2@T`: both at the same instant); `Fault.split()` gives one fault a robot,
@@ -43,7 +44,7 @@ from swarmd.core import events
 
 KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor",
          "collide", "forge")
-ATTACKS = ("epoch", "seq", "claim", "warn")
+ATTACKS = ("epoch", "seq", "claim", "warn", "replay")
 """What a `forge` fault sends (module docstring)."""
 _DURATION_KINDS = {"pause", "partition"}
 

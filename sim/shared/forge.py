@@ -10,6 +10,9 @@ swarm key). One definition, pure, so any simulator can deliver them.
   wait state's silence, renewed forever).
 - `warn`: WARNs in the names of every witness of every slot but R, about the slot's
   holder (a quorum of invented witnesses).
+- `replay`: every frame R's radio recorded on the channel before T (the last
+  `CAPTURE`), played back verbatim (the heartbeats of a robot that died since, to a
+  standby that restarted since, say).
 
 Forged frames in other robots' names carry R's signature (that is all R can make) and
 a sequence number a little above the last one R heard from that robot. R's own node
@@ -25,16 +28,20 @@ from swarmd.core.auth import Signer
 from swarmd.core.node import Snapshot
 from swarmd.core.plan import SwarmPlan
 
-REPEATING = frozenset({"claim", "warn"})
+REPEATING = frozenset({"claim", "warn", "replay"})
 """Attacks sent again every warn interval; `epoch` and `seq` are one burst."""
+CAPTURE = 512
+"""How many of the last frames on the channel a `replay` insider keeps."""
 
 
 def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequence[bytes],
                   signer: Signer | None, round_: int,
-                  sniffed: Mapping[int, int] | None = None) -> list[bytes]:
+                  sniffed: Mapping[int, int] | None = None,
+                  recorded: Sequence[bytes] = ()) -> list[bytes]:
     """The frames insider `snap.robot_id` sends at round `round_` (0, 1, ...);
     `sniffed`: the last seq of each robot on the channel (an insider's own radio hears
-    every frame), else what R's node accepted."""
+    every frame), else what R's node accepted; `recorded`: for `replay`, the frames its
+    radio heard before the attack, oldest first."""
     seqs = sniffed if sniffed is not None else snap.peer_seq
     me = snap.robot_id
     key = keys[0] if keys else None
@@ -72,6 +79,8 @@ def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequenc
                     witness = snap.known[g][0]
                     if witness not in (me, holder, 0):
                         frame(witness, wire.Warn(holder, plan.slot(f), epoch))
+        case "replay":
+            out.extend(recorded[-CAPTURE:])
         case _:
             raise ValueError(f"unknown attack {attack!r}")
     return out

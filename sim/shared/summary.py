@@ -29,6 +29,7 @@ from sim.shared.holders import HolderFold
 from sim.shared.invariants import Violation, check_events
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+from swarmd.runtime import QUIET_DROPS
 
 _REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor", "collide")
 """Faults whose row says who took the robot's slot over. In real time `restart` kills the
@@ -80,6 +81,10 @@ class Summary:
     """Robot processes that failed or ended on their own (real time): not ok."""
     warnings: list[str] = field(default_factory=list)
     """What makes the figures less telling without making the run wrong (lateness)."""
+    drops: dict[int, dict[str, int]] = field(default_factory=dict)
+    """robot -> frames its core dropped, by reason (DESIGN section 2: every frame
+    refused is a counted drop), summed over its processes; reasons logged by the daemon
+    only (`swarmd.runtime.QUIET_DROPS` left out: its own echo, other robots' traffic)."""
 
     @property
     def ok(self) -> bool:
@@ -101,12 +106,18 @@ class Summary:
             "holders": self.holders,
             "process_problems": self.problems,
             "warnings": self.warnings,
+            "drops": {str(r): d for r, d in sorted(self.drops.items())},
             "ok": self.ok,
             **self.extra,
         }
 
     def to_json(self) -> str:
         return json.dumps(self.as_dict(), indent=2, sort_keys=False)
+
+
+def counted_drops(drops: Mapping[str, int]) -> dict[str, int]:
+    """The reasons of `Summary.drops`: non-zero, not quiet."""
+    return {k: int(n) for k, n in sorted(drops.items()) if n and k not in QUIET_DROPS}
 
 
 def _r(x: float | None) -> float | None:
@@ -301,6 +312,13 @@ def render_summary(summary: Summary, console: Console) -> None:
                   f"false takeovers: {len(summary.false_takeovers)}   "
                   f"false suspicions: {summary.false_suspicions}   "
                   f"invariant violations: {len(summary.violations)}")
+    totals: dict[str, int] = {}
+    for per_robot in summary.drops.values():
+        for reason, n in per_robot.items():
+            totals[reason] = totals.get(reason, 0) + n
+    if totals:
+        console.print("dropped frames: " + ", ".join(
+            f"{reason} {n}" for reason, n in sorted(totals.items())))
     for v in summary.violations:
         console.print(Text.assemble(("VIOLATION", "red"), f" t={v.t:.3f} {v.kind}: {v.detail}"))
     for p in summary.problems:

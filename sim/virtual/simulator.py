@@ -14,6 +14,7 @@ irrelevant frames by before verifying them): everything else the receiver would 
 
 from __future__ import annotations
 
+import collections
 import heapq
 import itertools
 import random
@@ -23,7 +24,7 @@ from typing import Any
 
 from sim.shared.fakeid import fake_identities
 from sim.shared.faults import Fault, fault_record
-from sim.shared.forge import REPEATING, forged_frames
+from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
 from swarmd.core import wire
@@ -83,6 +84,8 @@ class _Robot:
     timer_at: float | None = None
     persisted: Restored | None = None
     seq_high: int = 0
+    dropped: collections.Counter[str] = field(default_factory=collections.Counter)
+    """Drops of this robot's earlier nodes (before a crash or a leave)."""
 
 
 class VirtualSwarm:
@@ -138,6 +141,11 @@ class VirtualSwarm:
         self._relevant_to = self._interest()
         self._receivers = self._relevant_to if interest else None
         self._all = tuple(sorted(plan.robots))
+        # `forge:R@T:replay`: R's radio records the channel until T (`sim.shared.forge`).
+        self._recording: dict[int, collections.deque[bytes]] = {
+            r: collections.deque(maxlen=CAPTURE) for f in self.faults
+            if f.kind == "forge" and f.attack == "replay" for r in f.robots}
+        self._tapes: dict[int, tuple[bytes, ...]] = {}
         for rid in self._all:
             start = self.rng.uniform(0.0, start_spread)
             self.robots[rid] = _Robot(node=None)
@@ -220,10 +228,12 @@ class VirtualSwarm:
         final = {}
         drops = {}
         for rid, r in self.robots.items():
+            total = collections.Counter(r.dropped)
             if r.alive and r.node is not None:
                 snap = r.node.snapshot()
                 final[rid] = (snap.role.name.lower(), snap.function, snap.epoch)
-                drops[rid] = dict(snap.drops)
+                total.update(snap.drops)
+            drops[rid] = dict(total)
         return VirtualResult(
             events=self.events,
             violations=violations,
@@ -331,6 +341,10 @@ class VirtualSwarm:
     def _broadcast(self, sender: int, data: bytes) -> None:
         self.frames_sent += 1
         frame = wire.decode(data, self.keys, self.verifier)  # our own nodes': valid
+        for rid, tape in self._recording.items():
+            if self.partition is None or self.partition.get(rid, 0) == \
+                    self.partition.get(sender, 0):
+                tape.append(data)
         ch = self.channel
         rng = self.rng
         part = self.partition
@@ -397,6 +411,7 @@ class VirtualSwarm:
             case "leave", _:
                 if node is not None and r.alive:
                     self._call(rid, _OP_STOP, None)
+                    r.dropped.update(node.snapshot().drops)
                 r.alive = False
             case "unhealthy" | "motor", _:
                 if node is not None and r.alive:
@@ -416,6 +431,7 @@ class VirtualSwarm:
                                    peer_seq=dict(snap.peer_seq),
                                    certificate=snap.certificate if held else ())
             r.seq_high = snap.seq
+            r.dropped.update(snap.drops)
         r.alive = False
         r.timer_gen += 1
         r.timer_at = None
@@ -429,11 +445,15 @@ class VirtualSwarm:
         if not r.alive or r.paused or r.node is None:
             return
         identity = self.identities.get(rid)
+        tape = self._recording.pop(rid, None) if attack == "replay" else None
+        if tape is not None:  # recorded until the attack began (the insider's capture)
+            self._tapes[rid] = tuple(tape)
         frames = forged_frames(attack, self.plan, r.node.snapshot(), keys=self.keys,
                                signer=identity.signer if identity is not None else None,
                                round_=round_, sniffed={
                                    x: rr.node.snapshot().seq for x, rr in self.robots.items()
-                                   if rr.node is not None})
+                                   if rr.node is not None},
+                               recorded=self._tapes.get(rid, ()))
         ch, rng, part = self.channel, self.rng, self.partition
         for data in frames:
             self.frames_sent += 1
