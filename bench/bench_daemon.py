@@ -5,9 +5,11 @@ Runs the paper swarm as real `swarmd start` processes on loopback multicast (ran
 port) and measures robot 1 (udp() timing: ACTIVE, heartbeating at 10 Hz, hearing its
 neighbours' 10 Hz heartbeats and the standbys' 2 Hz ones) from /proc for `--duration`
 seconds after READY. `--alone` runs robot 1 without its swarm: it then also warns about
-its silent neighbours at 10 Hz (a busier case than idle).
+its silent neighbours at 10 Hz (a busier case than idle). `--auth` picks how the swarm
+signs: `per-robot` (the default, as configs/paper.yaml: keys made for the run), `shared`
+or `none`.
 
-    python bench/bench_daemon.py [--duration 10] [--alone]
+    python bench/bench_daemon.py [--duration 10] [--alone] [--auth per-robot|shared|none]
 """
 
 from __future__ import annotations
@@ -25,6 +27,27 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from swarmd.identity import private_key_path, write_identity  # noqa: E402
+from swarmd.keys import generate_key  # noqa: E402
+
+AUTH = {"per-robot": "auth: {mode: per-robot, keys_dir: keys}",
+        "shared": "auth: {mode: shared, key_file: swarm.key}", "none": "auth: none"}
+
+
+def swarm_file(tmp: Path, auth: str) -> Path:
+    """configs/paper.yaml in `tmp`, signed as `auth` says, with its keys made there."""
+    text = (ROOT / "configs" / "paper.yaml").read_text()
+    lines = [AUTH[auth] if line.startswith("auth:") else line for line in text.splitlines()]
+    if auth == "per-robot":
+        for robot in range(1, 7):
+            write_identity(tmp / "keys", robot)
+    elif auth == "shared":
+        generate_key(tmp / "swarm.key")
+    path = tmp / "paper.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def cpu_seconds(pid: int) -> float:
@@ -44,18 +67,23 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=10.0, help="seconds measured")
     ap.add_argument("--alone", action="store_true", help="robot 1 without its swarm")
+    ap.add_argument("--auth", choices=sorted(AUTH), default="per-robot",
+                    help="how the swarm signs (default per-robot)")
     args = ap.parse_args()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     env = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
     with tempfile.TemporaryDirectory() as tmp:
+        swarm = swarm_file(Path(tmp), args.auth)
 
         def launch(robot: int) -> subprocess.Popen[str]:
             cfg = Path(tmp) / f"robot{robot}.yaml"
-            cfg.write_text(f"robot: {robot}\nswarm: {ROOT / 'configs' / 'paper.yaml'}\n"
+            identity = (f"identity_file: {private_key_path(Path(tmp) / 'keys', robot)}\n"
+                        if args.auth == "per-robot" else "")
+            cfg.write_text(f"robot: {robot}\nswarm: {swarm}\n"
                            f"transport: {{kind: udp, port: {port}}}\n"
-                           f"state_dir: {tmp}/state\n")
+                           f"state_dir: {tmp}/state{robot}\n" + identity)
             return subprocess.Popen([sys.executable, "-m", "swarmd.cli", "start", "--config",
                                      str(cfg)], stdout=subprocess.PIPE, text=True, env=env,
                                     cwd=ROOT)
@@ -89,12 +117,14 @@ def main() -> int:
                 except subprocess.TimeoutExpired:
                     p.kill()
     cpu = 100.0 * (c1 - c0) / (t1 - t0)
-    what = "alone (warning at 10 Hz)" if args.alone else "in the paper swarm"
+    what = ("alone (warning at 10 Hz)" if args.alone else "in the paper swarm") + \
+        f", auth {args.auth}"
     print(f"daemon of robot 1 {what}, 10 Hz heartbeats, {t1 - t0:.1f} s: "
           f"CPU {cpu:.2f}% of one core (goal < 1%), RSS {rss:.1f} MB, "
           f"peak RSS {hwm:.1f} MB (goal < 60 MB)")
     print(json.dumps({"cpu_percent": round(cpu, 3), "rss_mb": round(rss, 1),
-                      "peak_rss_mb": round(hwm, 1), "seconds": round(t1 - t0, 2)}))
+                      "peak_rss_mb": round(hwm, 1), "seconds": round(t1 - t0, 2),
+                      "auth": args.auth}))
     return 0 if cpu < 1.0 and hwm < 60 else 2
 
 
