@@ -473,20 +473,3 @@ def test_swarm_file_given_as_robot_file_says_so() -> None:
     [problem] = info.value.problems
     assert "this is a swarm file" in str(problem) and "robot: <id>" in str(problem)
 
-
-def test_per_robot_swarm_takes_a_small_serial_radio(tmp_path: Path) -> None:
-    # Per-robot frames (up to 92 B) go out in fragments (transport/fragment.py), so the
-    # default 64 B serial payload serves; below 24 B a fragment has no room.
-    shutil.copy(CONFIGS / "paper.yaml", tmp_path / "paper.yaml")
-    for robot in range(1, 7):
-        write_identity(tmp_path / "keys", robot)
-    doc: Doc = {"robot": 2, "swarm": "paper.yaml", "identity_file": "keys/robot-2.key",
-                "transport": {"kind": "serial", "port": "/dev/ttyS1"}}
-    cfg = load_robot(_write(tmp_path, doc, "robot.yaml"))
-    assert cfg.swarm.auth_mode == "per-robot"
-    assert isinstance(cfg.transport, SerialTransportConfig)
-    assert cfg.transport.max_payload == 64
-    doc["transport"] = {"kind": "serial", "port": "/dev/ttyS1", "max_payload": 23}
-    with pytest.raises(ConfigError) as info:
-        load_robot(_write(tmp_path, doc, "robot.yaml"))
-    assert [p.field for p in info.value.errors] == ["transport.max_payload"]
