@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import struct
 from collections import Counter, OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 MARKER = 0xF1
 HEADER = struct.Struct(">BHHB")
@@ -114,7 +114,7 @@ class _Partial:
     started: float
     pieces: list[bytes | None]
     size: int = 0
-    have: int = field(default=0)
+    have: int = 0
 
 
 class Reassembler:
