@@ -25,6 +25,11 @@ timing parameters, not from measurement:
   CLAIM and LEAVE carry a 64-byte Ed25519 signature instead of the tag (80, 80 and 79 B
   below 128 functions), and a claim goes out with its certificate: one CERT frame (92 B)
   per witness backing it, with every claim (re)sent.
+- fragments: a frame larger than the medium's payload goes out in fragments
+  (transport/fragment.py: 6 B of header each, at most 8), every fragment a transmission
+  of its own with the radio's full per-frame overhead. On DigiMesh (73 B) a per-robot
+  WARN, CLAIM or CERT takes 2 fragments; on a default serial radio (64 B) also 2. The
+  airtime figures count every fragment; only a frame that cannot be split is a warning.
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ from swarmd.core.auth import SIGNATURE_LEN
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.wire import HEADER_LEN, TAG_LEN, slot_size
-from swarmd.transport import media
+from swarmd.transport import fragment, media
 
 AIR_RATE_BPS = 250_000
 BYTE_TIME = 8 / AIR_RATE_BPS  # 32 us
@@ -84,6 +89,25 @@ def airtime(medium: str, payload: int) -> float:
     return (payload + frame_overhead(medium)) * BYTE_TIME + IFS
 
 
+def fragments(medium: str, size: int) -> int:
+    """Transmissions a `size`-byte frame takes on `medium` (1: unsplit; 0: it cannot be
+    carried, more than `fragment.MAX_FRAGMENTS` would be needed)."""
+    try:
+        return len(fragment.sizes(size, MAX_PAYLOAD[medium]))
+    except fragment.FragmentError:
+        return 0
+
+
+def frame_airtime(medium: str, size: int) -> float:
+    """s. Channel time of one `size`-byte frame, every fragment counted (no relays); a
+    frame that cannot be carried costs nothing (it never goes out)."""
+    try:
+        parts = fragment.sizes(size, MAX_PAYLOAD[medium])
+    except fragment.FragmentError:
+        return 0.0
+    return sum(airtime(medium, p) for p in parts)
+
+
 @dataclass(frozen=True, slots=True)
 class Budget:
     """The channel budget of one swarm on one medium (steady state and peak)."""
@@ -112,6 +136,10 @@ class Budget:
     """Bytes of a WARN (a CLAIM is the same size)."""
     cert_bytes: int = 0
     """Bytes of one CERT frame (per-robot mode; 0 otherwise)."""
+    warn_fragments: int = 1
+    """Transmissions a WARN or CLAIM takes (>1: split, fragment.py; 0: cannot be sent)."""
+    cert_fragments: int = 0
+    """Transmissions a CERT frame takes (per-robot mode; 0 otherwise or if it cannot)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -132,10 +160,19 @@ class Budget:
             + ("fits" if self.heartbeat_fits else "DOES NOT FIT"),
         ]
         if self.per_robot:
-            out.append(f"  per-robot signatures: warning/claim {self.warn_bytes} B, "
-                       f"certificate frame {self.cert_bytes} B")
+            out.append(f"  per-robot signatures: warning/claim {self.warn_bytes} B"
+                       + _in_fragments(self.warn_fragments)
+                       + f", certificate frame {self.cert_bytes} B"
+                       + _in_fragments(self.cert_fragments))
+        elif self.warn_fragments > 1:
+            out.append(f"  warning/claim {self.warn_bytes} B"
+                       + _in_fragments(self.warn_fragments))
         out += [f"  WARNING: {w}" for w in self.warnings]
         return out
+
+
+def _in_fragments(n: int) -> str:
+    return f" ({n} fragments)" if n > 1 else ""
 
 
 def heartbeat_size(signed: bool, slot_bytes: int = 1) -> int:
@@ -184,21 +221,21 @@ def budget_for(
     if medium != "udp":
         airtime_share = hb_rate * airtime(medium, hb) * copies
         peak_share = (
-            hb_rate * airtime(medium, hb) + (warn_rate + claim_rate) * airtime(medium, warn)
-            + (claim_rate * backers * airtime(medium, cert) if per_robot else 0.0)
+            hb_rate * airtime(medium, hb)
+            + (warn_rate + claim_rate) * frame_airtime(medium, warn)
+            + (claim_rate * backers * frame_airtime(medium, cert) if per_robot else 0.0)
         ) * copies
     max_payload = MAX_PAYLOAD[medium]
     fits = hb <= max_payload
     warnings: list[str] = []
     if not fits:
         warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
-    if max(warn, cert) > max_payload:
+    warn_parts = fragments(medium, warn)
+    cert_parts = fragments(medium, cert) if per_robot else 0
+    if warn_parts == 0 or (per_robot and cert_parts == 0):
         warnings.append(
-            f"a {warn} B warning or claim" + (f" and a {cert} B certificate frame"
-                                              if cert else "")
-            + f" exceed the {max_payload} B payload limit: "
-            + ("use 802.15.4 (100 B) for per-robot signatures; frames are not split"
-               if per_robot else "they cannot be sent"))
+            f"a {max(warn, cert)} B frame needs more than {fragment.MAX_FRAGMENTS} "
+            f"fragments of the {max_payload} B payload limit: it cannot be sent")
     if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
         needed = robots / ZIGBEE_BROADCASTS_PER_S
         warnings.append(
@@ -222,6 +259,7 @@ def budget_for(
         peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
         max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
         per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
+        warn_fragments=warn_parts, cert_fragments=cert_parts,
     )
 
 

@@ -186,6 +186,12 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
         ))
         data.append(b.as_dict())
         notes += [f"{medium}: {w}" for w in b.warnings]
+        if b.warn_fragments > 1 or b.cert_fragments > 1:
+            split = [f"{what} ({size} B) in {n}" for what, size, n in (
+                ("warning/claim", b.warn_bytes, b.warn_fragments),
+                ("certificate", b.cert_bytes, b.cert_fragments)) if n > 1]
+            notes.append(f"{medium}: {' and '.join(split)} fragments of <= {b.max_payload} B "
+                         "(transport/fragment.py; counted in the airtime)")
     return Section(
         key="channel_budget",
         title=f"Channel budget ({'signed' if signed else 'unsigned'} frames)",

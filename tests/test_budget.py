@@ -11,6 +11,8 @@ from swarmd.budget import (
     airtime,
     budget_for,
     channel_budget,
+    fragments,
+    frame_airtime,
     frame_overhead,
     heartbeat_size,
     largest_swarm,
@@ -90,3 +92,43 @@ def test_lines_are_human_readable() -> None:
     assert "6.9 frames/s" in text and "airtime at 250 kbps" in text and "fits" in text
     with pytest.raises(ValueError):
         frame_overhead("carrier-pigeon")
+
+
+def test_per_robot_frames_on_digimesh_are_counted_in_fragments() -> None:
+    # An 80 B signed WARN on DigiMesh (73 B): 2 fragments of 6 + 40 B; a 92 B CERT: 2 of
+    # 6 + 46 B (transport/fragment.py). Each pays the full per-frame overhead.
+    assert fragments("digimesh", 80) == 2 and fragments("digimesh", 92) == 2
+    assert fragments("802.15.4", 92) == 1 and fragments("serial", 92) == 2
+    assert fragments("digimesh", 1000) == 0  # more than 8 fragments
+    assert frame_airtime("digimesh", 80) == pytest.approx(2 * airtime("digimesh", 46))
+    assert frame_airtime("digimesh", 92) == pytest.approx(2 * airtime("digimesh", 52))
+    b = channel_budget(paper_plan(), radio(), medium="digimesh", signed=True,
+                       per_robot=True)
+    assert (b.warn_bytes, b.cert_bytes) == (80, 92)
+    assert (b.warn_fragments, b.cert_fragments) == (2, 2)
+    assert not any("payload limit" in w for w in b.warnings)
+    # The peak by hand: heartbeats, WARNs of 2 watchers and the CLAIM, and a CERT per
+    # backer (2 watchers + the claimant's own ears), all sent MT + 1 = 4 times.
+    p = radio()
+    hb_rate = 4 / p.heartbeat_interval + 2 / p.standby_heartbeat_interval
+    claim_rate = 1 / p.claim_hold
+    peak = (hb_rate * airtime("digimesh", 23)
+            + (2 / p.warn_interval + claim_rate) * 2 * airtime("digimesh", 46)
+            + claim_rate * 3 * 2 * airtime("digimesh", 52)) * 4
+    assert b.peak_airtime_share == pytest.approx(peak)
+    assert "warning/claim 80 B (2 fragments), certificate frame 92 B (2 fragments)" in (
+        "\n".join(b.lines()))
+    on_154 = channel_budget(paper_plan(), radio(), medium="802.15.4", signed=True,
+                            per_robot=True)
+    assert (on_154.warn_fragments, on_154.cert_fragments) == (1, 1)
+
+
+def test_a_frame_that_cannot_be_split_is_warned(monkeypatch: pytest.MonkeyPatch) -> None:
+    # No real medium refuses a swarmd frame (8 fragments of 64 - 6 B carry 464 B); a
+    # 15 B payload (9 B per fragment) would need 9 fragments for an 80 B WARN.
+    from swarmd import budget
+
+    monkeypatch.setitem(budget.MAX_PAYLOAD, "serial", 15)
+    b = budget_for(4, 2, 2, radio(), medium="serial", signed=True, per_robot=True)
+    assert b.warn_fragments == 0 and b.cert_fragments == 0
+    assert any("92 B frame needs more than 8 fragments" in w for w in b.warnings)

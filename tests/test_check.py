@@ -172,3 +172,15 @@ def test_sim_prints_problems_as_plain_text(tmp_path: Path) -> None:
     result = runner.invoke(app, ["sim", str(path), "--virtual"])
     assert result.exit_code == 2
     assert "functions.f2" in result.stderr and "[" in result.stderr, result.stderr
+
+
+def test_check_counts_per_robot_fragments_instead_of_refusing_digimesh() -> None:
+    report = run_check(CONFIGS / "paper-radio.yaml")
+    rows = {row["medium"]: row for row in report.as_json()["channel_budget"]}
+    assert (rows["digimesh"]["warn_fragments"], rows["digimesh"]["cert_fragments"]) == (2, 2)
+    assert (rows["802.15.4"]["warn_fragments"], rows["802.15.4"]["cert_fragments"]) == (1, 1)
+    section = next(s for s in report.sections if s.key == "channel_budget")
+    notes = "\n".join(section.notes)
+    assert ("digimesh: warning/claim (80 B) in 2 and certificate (92 B) in 2 fragments of "
+            "<= 73 B") in notes
+    assert "not split" not in notes and "cannot be sent" not in notes

@@ -472,3 +472,4 @@ def test_swarm_file_given_as_robot_file_says_so() -> None:
         parse_robot(text, "paper.yaml")
     [problem] = info.value.problems
     assert "this is a swarm file" in str(problem) and "robot: <id>" in str(problem)
+

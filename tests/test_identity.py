@@ -395,17 +395,19 @@ def test_sim_signs_each_run_with_throwaway_keys(tmp_path: Path) -> None:
     assert cfg.key() not in (None, b"k" * 32)  # a throwaway key, not the real one
 
 
-def test_a_serial_radio_too_small_for_signed_frames_is_refused(tmp_path: Path) -> None:
-    # Per-robot signed frames (CERT: 92 B) would not fit a 64 B serial frame: the robot
-    # file is refused up front instead of a swarm whose warnings never go out.
+def test_a_small_serial_radio_carries_signed_frames_in_fragments(tmp_path: Path) -> None:
+    # Per-robot signed frames (CERT: 92 B) exceed a 64 B serial frame and go out in
+    # fragments (transport/fragment.py): the default radio serves; below 24 B a fragment
+    # would have no room, so that is refused.
     from swarmd.config import ConfigError, load_robot
 
     swarm, keys = signed_paper(tmp_path)
     robot = tmp_path / "robot.yaml"
-    robot.write_text(f"robot: 2\nswarm: {swarm}\nidentity_file: {identity_file(keys, 2)}\n"
-                     "transport: {kind: serial, port: /dev/ttyUSB0}\n")
+    head = f"robot: 2\nswarm: {swarm}\nidentity_file: {identity_file(keys, 2)}\n"
+    robot.write_text(head + "transport: {kind: serial, port: /dev/ttyUSB0}\n")
+    assert load_robot(robot).transport.max_payload == 64  # type: ignore[union-attr]
+    robot.write_text(head + "transport: {kind: serial, port: /dev/ttyUSB0, max_payload: 23}\n")
     with pytest.raises(ConfigError, match="max_payload"):
         load_robot(robot)
-    robot.write_text(f"robot: 2\nswarm: {swarm}\nidentity_file: {identity_file(keys, 2)}\n"
-                     "transport: {kind: serial, port: /dev/ttyUSB0, max_payload: 93}\n")
+    robot.write_text(head + "transport: {kind: serial, port: /dev/ttyUSB0, max_payload: 93}\n")
     assert load_robot(robot).transport.max_payload == 93  # type: ignore[union-attr]

@@ -68,7 +68,8 @@ async def test_noisy_split_stream_yields_exactly_the_good_frames(tmp_path: Path)
         os.close(slave)
 
 
-async def test_send_writes_framed_bytes_and_refuses_oversize(tmp_path: Path) -> None:
+async def test_send_writes_framed_bytes_and_refuses_what_cannot_be_split(
+        tmp_path: Path) -> None:
     link = tmp_path / "radio"
     master, slave = _pty(link)
     tr = SerialTransport(port=str(link), max_payload=32)
@@ -76,8 +77,9 @@ async def test_send_writes_framed_bytes_and_refuses_oversize(tmp_path: Path) -> 
     await tr.start(sink.frame, sink.event)
     try:
         tr.send(b"\x00hello\x00")
-        tr.send(b"x" * 33)
+        tr.send(b"x" * 209)  # more than 8 fragments of 32 - 6 B (fragment.py)
         assert sink.events == ["transport_up", "send_error"]
+        assert tr.counters["send_error:oversize"] == 1
         os.set_blocking(master, False)
         got = b""
         dec = framing.FrameDecoder()

@@ -56,3 +56,40 @@ async def test_paper_swarm_fails_over_across_emulated_radios(
             assert voters == {1, 3}  # f2's ring neighbours, distinct witnesses (rule 3)
         finally:
             await swarm.close()
+
+
+async def test_per_robot_swarm_fails_over_on_digimesh_in_fragments(tmp_path: Path) -> None:
+    # Per-robot signed WARN / CLAIM (80 B) and CERT (92 B) exceed DigiMesh's 73 B: they
+    # cross the emulated radios in 2 fragments each (transport/fragment.py) and the core
+    # verifies each robot's own signature on the reassembled frames.
+    from swarmd.identity import throwaway_identities
+
+    with Medium(6, protocol="digimesh", api_mode=2, directory=tmp_path) as medium:
+        transports: dict[int, XBeeTransport] = {
+            r: XBeeTransport(port=medium.path(r), protocol="digimesh", api_mode=2,
+                             pan_id=0x0607, role="coordinator" if r == 1 else "router")
+            for r in range(1, 7)
+        }
+        swarm = RadioSwarm(paper_plan(), radio().with_overrides(**FAST),
+                           dict[int, Transport](transports), keys=(b"k" * 32,),
+                           identities=throwaway_identities(range(1, 7)))
+        await swarm.start()
+        try:
+            for _ in range(100):
+                if swarm.robots[6].node.snapshot().known.get("f2", (0, 0))[0] == 2:
+                    break
+                await swarm.wait_for(lambda e: False, 0.02)
+            assert swarm.robots[6].node.snapshot().known["f2"][0] == 2
+            await swarm.kill(2)
+            takeover = await swarm.wait_for(lambda e: e["event"] == "takeover", 10)
+            assert takeover is not None, [e for e in swarm.events if e["event"] != "send_error"]
+            assert (takeover["robot"], takeover["function"], takeover["replaced"]) == (6, "f2", 2)
+            assert transports[1].counters["fragmented"] > 0  # f2's watchers warned in pieces
+            assert transports[6].counters["fragmented"] > 0  # the claim and its CERTs
+            oversize = [e for e in swarm.events if e.get("reason") == "oversize"]
+            assert oversize == []
+            drops = {k: v for t in transports.values() for k, v in t.counters.items()
+                     if k.startswith("fragment_drop:")}
+            assert drops == {}
+        finally:
+            await swarm.close()

@@ -95,8 +95,8 @@ async def test_oversize_and_in_flight_bound(tmp_path: Path) -> None:
         sink = Sink()
         await tr.start(sink.frame, sink.event)
         try:
-            tr.send(b"x" * 74)
-            assert ("send_error", {"kind": "xbee", "reason": "oversize", "size": 74,
+            tr.send(b"x" * 537)  # more than 8 fragments of 73 - 6 B (fragment.py)
+            assert ("send_error", {"kind": "xbee", "reason": "oversize", "size": 537,
                                    "limit": 73}) in sink.events
             for i in range(10):
                 tr.send(bytes([i]) * 10)

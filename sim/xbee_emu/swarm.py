@@ -17,6 +17,7 @@ from typing import Any
 
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
+from swarmd.core.auth import Identity
 from swarmd.core.events import Event, Fault
 from swarmd.core.node import Node
 from swarmd.core.params import Params
@@ -78,11 +79,14 @@ class RadioSwarm:
         transports: Mapping[int, Transport],
         *,
         keys: Sequence[bytes] = (),
+        identities: Mapping[int, Identity] | None = None,
     ) -> None:
         self.plan = plan
         self.params = params
         self.transports = dict(transports)
         self.keys = tuple(keys)
+        self.identities = dict(identities or {})
+        """Per-robot mode: each robot's own signer (DESIGN section 2, "Who may say what")."""
         self.events: list[Record] = []
         self.robots: dict[int, _Robot] = {}
         self._changed = asyncio.Event()
@@ -102,7 +106,7 @@ class RadioSwarm:
         seq = wire.seq_seed(time.time())
         for rid, transport in self.transports.items():
             node = Node(rid, self.plan, self.params, self.loop.time(), keys=self.keys,
-                        seq_start=seq)
+                        identity=self.identities.get(rid), seq_start=seq)
             robot = _Robot(self, rid, node, transport)
             self.robots[rid] = robot
             await transport.start(robot.on_frame, robot.on_event)

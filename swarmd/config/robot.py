@@ -32,10 +32,8 @@ from swarmd.config.swarm_rules import load_swarm
 from swarmd.identity import IdentityFileError, public_key_of, read_private_key
 from swarmd.keys import KeyFileError, load_key
 from swarmd.transport.addresses import interface_address, multicast_group
+from swarmd.transport.fragment import MIN_LIMIT
 from swarmd.transport.media import SERIAL_MAX_PAYLOAD
-
-PER_ROBOT_MAX_FRAME = 92
-"""Largest per-robot signed frame (CERT: a relayed signed WARN or LEAVE), bytes."""
 
 
 class _Model(BaseModel):
@@ -87,11 +85,11 @@ class SerialTransportConfig(_Model):
     kind: Literal["serial"]
     port: str
     baud: int = Field(default=57600, gt=0)
-    max_payload: int = Field(default=SERIAL_MAX_PAYLOAD, ge=24, le=1024)
-    """Largest swarmd frame, bytes: the radio's RF packet less the 7 B of framing, so a
-    frame never spans two packets (docs/radios.md). The default fits every XBee; a
-    per-robot signed swarm needs 92 (its CERT frame): an 802.15.4 XBee (100 B packets)
-    or a SiK radio takes it."""
+    max_payload: int = Field(default=SERIAL_MAX_PAYLOAD, ge=MIN_LIMIT, le=1024)
+    """Largest datagram, bytes: the radio's RF packet less the 7 B of framing, so a
+    datagram never spans two packets (docs/radios.md). The default fits every XBee; a
+    larger frame (a per-robot signed one: up to 92 B) goes out in fragments
+    (transport/fragment.py), at least 24 B each."""
 
 
 class XBeeTransportConfig(_Model):
@@ -327,14 +325,6 @@ def from_source(src: Source) -> RobotConfig:
     identity_file = src.resolve(f.identity_file) if f.identity_file is not None else None
     if swarm is not None:
         problems = _deployable(swarm, f.robot, identity_file, src, problems)
-    if (swarm is not None and swarm.auth_mode == "per-robot"
-            and isinstance(f.transport, SerialTransportConfig)
-            and f.transport.max_payload < PER_ROBOT_MAX_FRAME):
-        problems.append(src.problem(
-            ("transport", "max_payload"),
-            f"{f.transport.max_payload} B is below the {PER_ROBOT_MAX_FRAME} B a per-robot "
-            "signed frame takes (its CERT): set max_payload to your radio's packet less "
-            "7 B of framing (93 for an 802.15.4 XBee), or sign with a shared key"))
     key_files = tuple(src.resolve(k) for k in f.key_files)
     for i, k in enumerate(key_files):
         try:

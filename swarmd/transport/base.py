@@ -14,7 +14,9 @@ Rules:
 - `send` is synchronous and non-blocking: it queues or writes at once. A frame that
   cannot go out (queue full, radio down, oversize) is counted and reported through
   `on_event`, never raised into the runtime (bad I/O never takes the daemon down).
-- `max_payload` is the largest frame the channel carries (bytes).
+- `max_payload` is the largest datagram the channel carries in one piece (bytes). The
+  XBee and serial transports send a larger frame in fragments and reassemble it on
+  receipt (`fragment.py`); `on_frame` only ever gets whole frames.
 - `on_event(name, fields)` reports channel conditions for the event log and monitor,
   e.g. ("transport_down", {"reason": ...}), ("transport_up", {}).
 """

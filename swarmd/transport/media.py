@@ -19,9 +19,10 @@ MAX_PAYLOAD_ENCRYPTED = {"zigbee": 74, "802.15.4": 95, "digimesh": 65}
 """The same with encryption on (EE=1): the security headers take the difference."""
 
 SERIAL_MAX_PAYLOAD = 64
-"""Largest swarmd frame on a transparent serial radio: after framing (+7 B) it still fits
-one RF packet of the smallest radio payload in use (DigiMesh 73 B), so radios never split
-a frame and packets of two senders cannot interleave inside one."""
+"""Largest datagram (a swarmd frame, or a fragment of a larger one: fragment.py) on a
+transparent serial radio: after framing (+7 B) it still fits one RF packet of the
+smallest radio payload in use (DigiMesh 73 B), so radios never split a datagram and
+packets of two senders cannot interleave inside one."""
 
 UDP_MAX_PAYLOAD = 1472
 """A UDP datagram that fits a 1500-byte Ethernet MTU (IPv4 20 B + UDP 8 B headers)."""

@@ -4,7 +4,10 @@ For an XBee in transparent mode (AP=0, the paper's DH/DL 0x0000/0xFFFF broadcast
 setting on every robot) or a SiK telemetry radio: whatever is written comes out of
 every other radio's UART as a byte stream, packetised, merged and maybe corrupted by
 the radios. Frames are therefore COBS-delimited and CRC-checked (`framing.py`), so the
-receiver yields exactly the good frames and counts the rest.
+receiver yields exactly the good frames and counts the rest. A swarmd frame larger than
+`max_payload` (a per-robot signed frame on a radio with small packets) goes out in
+fragments, each framed on its own, and is put back together on receipt (`fragment.py`;
+drops counted as `fragment_drop:<reason>`).
 
 The port is opened on the event loop by pyserial-asyncio (non-blocking fd, no thread).
 A lost port (USB pulled) is reported as `transport_down` and reopened with back-off
@@ -15,10 +18,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import time
 from collections import Counter
 from typing import Any
 
-from swarmd.transport import framing
+from swarmd.transport import fragment, framing
 from swarmd.transport.base import (
     ChannelEvents,
     EventCallback,
@@ -31,7 +36,7 @@ from swarmd.transport.reopen import Reopener
 log = logging.getLogger(__name__)
 
 DEFAULT_MAX_PAYLOAD = SERIAL_MAX_PAYLOAD
-"""Largest swarmd frame (media.py: one RF packet after framing)."""
+"""Largest datagram (a frame or a fragment; media.py: one RF packet after framing)."""
 
 
 class _Protocol(asyncio.Protocol):
@@ -73,6 +78,10 @@ class SerialTransport:
         self._on_frame: FrameCallback | None = None
         self._closing = False
         self._reopener: Reopener | None = None
+        self._reassembler = fragment.Reassembler()
+        self._msg_id = int.from_bytes(os.urandom(2), "big")
+        """Fragment message ids start anywhere: a restarted sender does not reuse the
+        ids receivers still remember (`fragment.EXPIRY`)."""
 
     @classmethod
     def from_config(cls, cfg: Any) -> SerialTransport:
@@ -124,8 +133,11 @@ class SerialTransport:
             await asyncio.sleep(0)  # let connection_lost run before the loop goes
 
     def send(self, frame: bytes) -> None:
-        """Write one framed broadcast; never blocks and never raises (base.py)."""
-        if len(frame) > self._max_payload:
+        """Write one framed broadcast (in fragments if it exceeds `max_payload`); never
+        blocks and never raises (base.py)."""
+        try:
+            datagrams = fragment.split(frame, self._max_payload, self._msg_id)
+        except fragment.FragmentError:
             self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
             return
         transport = self._transport
@@ -137,8 +149,12 @@ class SerialTransport:
             # than queue stale heartbeats without bound.
             self._events.send_error("write buffer full")
             return
+        if len(datagrams) > 1:
+            self._msg_id = (self._msg_id + 1) & fragment.MSG_ID_MASK
+            self.counters["fragmented"] += 1
         try:
-            transport.write(framing.encode(frame))
+            # One write: the fragments of a frame leave back to back.
+            transport.write(b"".join(framing.encode(d) for d in datagrams))
         except Exception as exc:
             self._events.send_error(f"write failed: {exc}")
             return
@@ -146,13 +162,19 @@ class SerialTransport:
 
     def _on_bytes(self, data: bytes) -> None:
         before = sum(self.decoder.drops.values())
-        for frame in self.decoder.feed(data):
+        r = self._reassembler
+        dropped_fragments = sum(r.drops.values())
+        for datagram in self.decoder.feed(data):
             self.counters["received"] += 1
-            if self._on_frame is not None:
+            frame = r.feed(datagram, time.monotonic())
+            if frame is not None and self._on_frame is not None:
                 try:
                     self._on_frame(frame)
                 except Exception:
                     log.exception("on_frame raised")
+        if sum(r.drops.values()) != dropped_fragments:
+            for reason, n in r.drops.items():
+                self.counters[f"fragment_drop:{reason}"] = n
         dropped = sum(self.decoder.drops.values()) - before
         if dropped:
             self.counters["bad_chunks"] += dropped

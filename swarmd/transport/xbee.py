@@ -15,7 +15,10 @@ arm's length from the event loop (DESIGN section 1: the loop never blocks). Thre
 - this module: the lifecycle, on the loop.
 
 Also:
-- the payload limit comes from the radio's protocol (and encryption, EE; media.py);
+- the payload limit comes from the radio's protocol (and encryption, EE; media.py); a
+  frame larger than it (a per-robot signed frame on DigiMesh) goes out in fragments and
+  received fragments are put back together (`fragment.py`), counted as
+  `fragment_drop:<reason>` when dropped;
 - 802.15.4 radios are set to MY=0xFFFE so frames arrive as 0x80 with the 64-bit source:
   16-bit sources (0x81) stall digi-xbee's reader 4 s a frame (xbee-python #296);
 - at start the radio's protocol, API mode, PAN id, channel and role (CE) are compared
@@ -37,10 +40,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
 import time
 from collections import Counter
 from typing import Any
 
+from swarmd.transport import fragment
 from swarmd.transport.base import (
     ChannelEvents,
     EventCallback,
@@ -117,6 +122,11 @@ class XBeeTransport:
         self._window = SendWindow(max_in_flight=max_in_flight, queue_size=send_queue,
                                   status_timeout=status_timeout)
         self._status_timer: asyncio.TimerHandle | None = None
+        self._reassembler = fragment.Reassembler()
+        self._on_frame: FrameCallback | None = None
+        self._msg_id = int.from_bytes(os.urandom(2), "big")
+        """Fragment message ids start anywhere, so a restarted sender does not reuse the
+        ids its last fragments carried (receivers remember them `fragment.EXPIRY` s)."""
 
     @classmethod
     def from_config(cls, cfg: Any) -> XBeeTransport:
@@ -140,12 +150,13 @@ class XBeeTransport:
         `transport_down` and retried in the background (the daemon keeps running)."""
         self._loop = asyncio.get_running_loop()
         self._events.callback = on_event
+        self._on_frame = on_frame
         self._radio = DeviceThread(
             port=self.port, baud=self.baud,
             settings=RadioSettings(self.protocol, self.api_mode, self.pan_id, self.channel,
                                    self.role),
             write_timeout=self.status_timeout, receive_queue=self.receive_queue,
-            counters=self.counters, loop=self._loop, on_frame=on_frame,
+            counters=self.counters, loop=self._loop, on_frame=self._received,
             on_status=self._on_status, on_hangup=self._reader_reported_hangup)
         self._reopener = Reopener(f"XBee {self.port}", self._open, self.counters,
                                   minimum=self.reopen_min, maximum=self.reopen_max,
@@ -231,16 +242,35 @@ class XBeeTransport:
 
     # -- send -------------------------------------------------------------------------------
     def send(self, frame: bytes) -> None:
-        """Queue one broadcast; never blocks and never raises (base.py)."""
-        if len(frame) > self._max_payload:
+        """Queue one broadcast (in fragments if it exceeds the payload limit); never
+        blocks and never raises (base.py)."""
+        try:
+            datagrams = fragment.split(frame, self._max_payload, self._msg_id)
+        except fragment.FragmentError:
             self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
             return
         if not self._up:
             self._events.send_error("radio down")
             return
-        if self._window.offer(frame):
-            self._events.send_error("queue full")
+        if len(datagrams) > 1:
+            self._msg_id = (self._msg_id + 1) & fragment.MSG_ID_MASK
+            self.counters["fragmented"] += 1
+        for datagram in datagrams:
+            if self._window.offer(datagram):
+                self._events.send_error("queue full")
         self._pump()
+
+    def _received(self, datagram: bytes) -> None:
+        """On the loop (DeviceThread hands over): fragments in, whole frames out."""
+        assert self._loop is not None
+        r = self._reassembler
+        before = sum(r.drops.values())
+        frame = r.feed(datagram, self._loop.time())
+        if sum(r.drops.values()) != before:
+            for reason, n in r.drops.items():
+                self.counters[f"fragment_drop:{reason}"] = n
+        if frame is not None and self._on_frame is not None:
+            self._on_frame(frame)
 
     def _pump(self) -> None:
         if self._up:
