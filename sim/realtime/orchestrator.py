@@ -175,8 +175,9 @@ class Orchestrator:
             return None
         port = self.medium.path(self.radio_of[robot])
         if self.transport == "serial":
-            # The emulated medium is 802.15.4: 100 B packets, so frames up to 93 B stay
-            # whole, which per-robot signed frames (92 B CERT) need.
+            # The emulated medium is 802.15.4: its 100 B packets carry 93 B of framed
+            # swarmd frame, so even a per-robot CERT (92 B) goes whole; the 64 B default
+            # of a serial radio would send signed frames in fragments (transport/fragment).
             return {"kind": "serial", "port": port, "max_payload": 93}
         role = "coordinator" if self.radio_of[robot] == 1 else "router"
         return {"kind": "xbee", "port": port, "protocol": "802.15.4", "api_mode": 1,
