@@ -22,6 +22,15 @@ FAST = dict(heartbeat_interval=0.1, standby_heartbeat_interval=0.3, t_max=0.4,
             standby_timeout=1.0, alert_after=3.0, rejoin_hold=0.5)
 
 
+async def _standby_6_hears_f2(swarm: RadioSwarm) -> None:
+    """Wait until standby 6 has heard f2's holder: the swarm is up on the air."""
+    for _ in range(100):
+        if swarm.robots[6].node.snapshot().known.get("f2", (0, 0))[0] == 2:
+            break
+        await swarm.wait_for(lambda e: False, 0.02)
+    assert swarm.robots[6].node.snapshot().known["f2"][0] == 2
+
+
 @pytest.mark.parametrize(("protocol", "api_mode"),
                          [("zigbee", 2), ("802.15.4", 1), ("digimesh", 2)])
 async def test_paper_swarm_fails_over_across_emulated_radios(
@@ -39,11 +48,7 @@ async def test_paper_swarm_fails_over_across_emulated_radios(
             # Wait until standby 6 has heard f2's holder: the swarm is up on the air.
             heard = await swarm.wait_for(lambda e: e["event"] == "started", 1)
             assert heard is not None
-            for _ in range(100):
-                if swarm.robots[6].node.snapshot().known.get("f2", (0, 0))[0] == 2:
-                    break
-                await swarm.wait_for(lambda e: False, 0.02)
-            assert swarm.robots[6].node.snapshot().known["f2"][0] == 2
+            await _standby_6_hears_f2(swarm)
             await swarm.kill(2)
             takeover = await swarm.wait_for(lambda e: e["event"] == "takeover", 10)
             assert takeover is not None, [e for e in swarm.events if e["event"] != "send_error"]
@@ -75,11 +80,7 @@ async def test_per_robot_swarm_fails_over_on_digimesh_in_fragments(tmp_path: Pat
                            identities=throwaway_identities(range(1, 7)))
         await swarm.start()
         try:
-            for _ in range(100):
-                if swarm.robots[6].node.snapshot().known.get("f2", (0, 0))[0] == 2:
-                    break
-                await swarm.wait_for(lambda e: False, 0.02)
-            assert swarm.robots[6].node.snapshot().known["f2"][0] == 2
+            await _standby_6_hears_f2(swarm)
             await swarm.kill(2)
             takeover = await swarm.wait_for(lambda e: e["event"] == "takeover", 10)
             assert takeover is not None, [e for e in swarm.events if e["event"] != "send_error"]

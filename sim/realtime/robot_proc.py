@@ -235,7 +235,24 @@ DROPS_PERIOD = 1.0
 """s between two drop reports of a robot process (only when the counts changed)."""
 
 
-class DropReporter:
+class _Periodic:
+    """A task on the robot's loop, started once and cancelled at the end (`_run`)."""
+
+    _task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    async def _run(self) -> None:
+        raise NotImplementedError
+
+
+class DropReporter(_Periodic):
     """Every `DROPS_PERIOD`, the daemon's counted drops (`sim.shared.summary.counted_drops`
     of the core's, plus the runtime's queue overflow) as `{"_ctl": "drops", "d": {...}}`
     when they changed, and once more when the daemon stops: the run's summary shows
@@ -246,15 +263,9 @@ class DropReporter:
         self.emit = emit
         self.daemon: Daemon | None = None
         self._last: dict[str, int] = {}
-        self._task: asyncio.Task[None] | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run())
 
     def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
+        super().stop()
         self.report()
 
     def report(self) -> None:
@@ -276,7 +287,7 @@ class DropReporter:
 # -- lateness -------------------------------------------------------------------------------
 
 
-class LatenessProbe:
+class LatenessProbe(_Periodic):
     """How late this process's event loop runs: every `PROBE_PERIOD` it asks to wake up
     and measures by how much it overslept; every `PROBE_REPORT` it emits
     `{"_ctl": "late", "n": wake-ups, "s": [[t, ms], ...]}`, listing only the wake-ups
@@ -290,15 +301,6 @@ class LatenessProbe:
                  clock: Callable[[], float]) -> None:
         self.emit = emit
         self.clock = clock
-        self._task: asyncio.Task[None] | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run())
-
-    def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
 
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
