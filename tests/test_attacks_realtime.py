@@ -4,10 +4,11 @@ the swarm key (shared-key mode), and its frames go raw on the transport, so ever
 daemon's decoding and verifying is what is attacked (DESIGN section 2, "Who may say
 what"). The same attacks on virtual time: tests/test_attacks.py.
 
-Per robot, every attack leaves the swarm whole: no live holder fenced, no healthy robot
-replaced, no robot muted (the checker's violations), a dead robot taken over within the
-checker's takeover bound plus one T_max, and the attack shows in the daemons' counted
-drops. In shared-key mode the test pins down what DESIGN says still gets through.
+Per robot, every attack leaves the swarm whole: no live holder fenced and no healthy
+robot replaced (the checker's violations), no robot muted (a muted holder would be
+suspected and taken over: the holders and the takeover count say so), a dead robot taken
+over within the checker's takeover bound plus one T_max, and the attack shows in the
+daemons' counted drops. In shared-key mode the test pins down what DESIGN says still gets through.
 
 The runs are independent processes, so the module starts them all at once and each
 test judges its own: the whole module costs about one run of wall time."""
