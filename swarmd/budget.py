@@ -89,23 +89,25 @@ def airtime(medium: str, payload: int) -> float:
     return (payload + frame_overhead(medium)) * BYTE_TIME + IFS
 
 
+def _transmissions(medium: str, size: int) -> list[int]:
+    """Datagram sizes a `size`-byte frame goes out as on `medium` (`fragment.sizes`);
+    empty when it cannot be carried."""
+    try:
+        return fragment.sizes(size, MAX_PAYLOAD[medium])
+    except fragment.FragmentError:
+        return []
+
+
 def fragments(medium: str, size: int) -> int:
     """Transmissions a `size`-byte frame takes on `medium` (1: unsplit; 0: it cannot be
     carried, more than `fragment.MAX_FRAGMENTS` would be needed)."""
-    try:
-        return len(fragment.sizes(size, MAX_PAYLOAD[medium]))
-    except fragment.FragmentError:
-        return 0
+    return len(_transmissions(medium, size))
 
 
 def frame_airtime(medium: str, size: int) -> float:
     """s. Channel time of one `size`-byte frame, every fragment counted (no relays); a
     frame that cannot be carried costs nothing (it never goes out)."""
-    try:
-        parts = fragment.sizes(size, MAX_PAYLOAD[medium])
-    except fragment.FragmentError:
-        return 0.0
-    return sum(airtime(medium, p) for p in parts)
+    return sum(airtime(medium, p) for p in _transmissions(medium, size))
 
 
 @dataclass(frozen=True, slots=True)

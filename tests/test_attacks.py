@@ -229,18 +229,20 @@ def test_per_robot_a_takeover_needs_a_certificate_of_signed_witnesses(paper: Pap
     observer = Node(1, plan, params, 0.0, identity=ids[1])
     observer.tick(0.0)
     slot = plan.slot("f2")
-    claim = _signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1))
-    beat = wire.encode(wire.Frame(plan.swarm_id, 6, next(seq), wire.Heartbeat(slot, 1, 1, 0)))
-    observer.receive(claim, 1.0)
-    observer.receive(beat, 1.01)
+
+    def claim_and_beat(t: float) -> None:
+        """Robot 6's signed CLAIM of f2 at epoch 1, then its heartbeat as the holder."""
+        observer.receive(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1)), t)
+        observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, next(seq),
+                                                wire.Heartbeat(slot, 1, 1, 0))), t + 0.01)
+
+    claim_and_beat(1.0)
     assert observer.snapshot().known["f2"] == (2, 0)
     assert observer.drops["uncertified"] == 2
     # One witness (robot 3, holder of f3, watches f2) is not a quorum ...
     w3 = _signed(ids[3], plan, 3, next(seq), wire.Warn(2, slot, 0))
     observer.receive(cert(plan, next(seq), slot, w3), 1.1)
-    observer.receive(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1)), 1.11)
-    observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, next(seq),
-                                            wire.Heartbeat(slot, 1, 1, 0))), 1.12)
+    claim_and_beat(1.11)
     assert observer.snapshot().known["f2"] == (2, 0)
     # ... and a "warning" signed by robot 6 in robot 4's name is no witness at all.
     fake = _signed(ids[6], plan, 4, next(seq), wire.Warn(2, slot, 0))
@@ -251,9 +253,7 @@ def test_per_robot_a_takeover_needs_a_certificate_of_signed_witnesses(paper: Pap
     # The claimant's own signed warning is rule 9's second witness: now certified.
     w6 = _signed(ids[6], plan, 6, next(seq), wire.Warn(2, slot, 0))
     observer.receive(cert(plan, next(seq), slot, w6), 1.3)
-    observer.receive(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1)), 1.31)
-    observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, next(seq),
-                                            wire.Heartbeat(slot, 1, 1, 0))), 1.32)
+    claim_and_beat(1.31)
     assert observer.snapshot().known["f2"] == (6, 1)
 
 

@@ -3,10 +3,8 @@ signed frames crossing a 73-byte DigiMesh medium and a 64-byte serial link."""
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import os
-import tty
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -14,6 +12,8 @@ from typing import Any
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_runtime import wait_until
+from test_serial_transport import raw_pty
 
 from sim.xbee_emu import Medium
 from swarmd.core import wire
@@ -210,13 +210,6 @@ class Sink:
         self.events.append((name, dict(fields)))
 
 
-async def _until(cond: Any, timeout: float = 10.0) -> None:
-    async def loop() -> None:
-        while not cond():
-            await asyncio.sleep(0.01)
-    await asyncio.wait_for(loop(), timeout)
-
-
 async def test_signed_frames_cross_a_digimesh_medium(tmp_path: Path) -> None:
     frames = _signed_frames()
     with Medium(2, protocol="digimesh", directory=tmp_path) as medium:
@@ -230,12 +223,13 @@ async def test_signed_frames_cross_a_digimesh_medium(tmp_path: Path) -> None:
             heartbeat = _frame(23)
             for f in (*frames, heartbeat):
                 tx.send(f)
-            await _until(lambda: len(b.frames) == 4)
+            await wait_until(lambda: len(b.frames) == 4, 10.0, "the four frames")
             assert sorted(b.frames) == sorted([*frames, heartbeat])
             ver = _verifier()
             for f in (g for g in b.frames if g != heartbeat):
                 assert wire.decode(f, verifier=ver).sender in (3, 4)
-            await _until(lambda: tx.counters["delivered"] == 7)  # 2 + 2 + 2 + 1
+            await wait_until(lambda: tx.counters["delivered"] == 7,  # 2 + 2 + 2 + 1
+                             10.0, "seven deliveries")
             assert tx.counters["fragmented"] == 3
             assert not [e for e in a.events if e[0] == "send_error"]
         finally:
@@ -245,16 +239,8 @@ async def test_signed_frames_cross_a_digimesh_medium(tmp_path: Path) -> None:
 
 def _pty_pair(tmp_path: Path) -> tuple[Path, Path, list[int]]:
     """Two pseudo-terminals whose masters a test copies into each other: a radio link."""
-    fds: list[int] = []
-    links = []
-    for name in ("a", "b"):
-        master, slave = os.openpty()
-        tty.setraw(slave)
-        link = tmp_path / name
-        link.symlink_to(os.ttyname(slave))
-        fds += [master, slave]
-        links.append(link)
-    return links[0], links[1], fds
+    link_a, link_b = tmp_path / "a", tmp_path / "b"
+    return link_a, link_b, [*raw_pty(link_a), *raw_pty(link_b)]
 
 
 async def test_signed_frames_cross_a_64_byte_serial_link(tmp_path: Path) -> None:
@@ -280,14 +266,15 @@ async def test_signed_frames_cross_a_64_byte_serial_link(tmp_path: Path) -> None
         assert tx.max_payload == 64
         for f in frames:
             tx.send(f)
-        await _until(relay)
+        await wait_until(relay, 10.0, "the relayed frames")
         assert b.frames == frames
         ver = _verifier()
         assert [wire.decode(f, verifier=ver).sender for f in b.frames] == [3, 4, 4]
         assert tx.counters["fragmented"] == 3
         assert rx.counters["received"] == 6  # datagrams: 2 fragments each
         os.write(master_b, framing.encode(b"\xf1\x00\x03\x00\x01\x01x"))  # count 1
-        await _until(lambda: rx.counters["fragment_drop:bad_count"] == 1)
+        await wait_until(lambda: rx.counters["fragment_drop:bad_count"] == 1, 10.0,
+                         "the bad-count drop")
         assert b.frames == frames
     finally:
         await tx.close()

@@ -27,7 +27,9 @@ class Sink:
         self.events.append(name)
 
 
-def _pty(link: Path) -> tuple[int, int]:
+def raw_pty(link: Path) -> tuple[int, int]:
+    """A raw pseudo-terminal whose slave `link` names (the radio's serial port): the
+    (master, slave) fds; the test plays the radio on the master."""
     master, slave = os.openpty()
     tty.setraw(slave)
     tmp = link.with_suffix(".tmp")
@@ -45,7 +47,7 @@ async def _until(cond: Any, timeout: float = 5.0) -> None:
 
 async def test_noisy_split_stream_yields_exactly_the_good_frames(tmp_path: Path) -> None:
     link = tmp_path / "radio"
-    master, slave = _pty(link)
+    master, slave = raw_pty(link)
     tr = SerialTransport(port=str(link))
     sink = Sink()
     await tr.start(sink.frame, sink.event)
@@ -71,7 +73,7 @@ async def test_noisy_split_stream_yields_exactly_the_good_frames(tmp_path: Path)
 async def test_send_writes_framed_bytes_and_refuses_what_cannot_be_split(
         tmp_path: Path) -> None:
     link = tmp_path / "radio"
-    master, slave = _pty(link)
+    master, slave = raw_pty(link)
     tr = SerialTransport(port=str(link), max_payload=32)
     sink = Sink()
     await tr.start(sink.frame, sink.event)
@@ -101,7 +103,7 @@ async def test_send_writes_framed_bytes_and_refuses_what_cannot_be_split(
 
 async def test_lost_port_is_reported_and_reopened(tmp_path: Path) -> None:
     link = tmp_path / "radio"
-    master, slave = _pty(link)
+    master, slave = raw_pty(link)
     tr = SerialTransport(port=str(link), reopen_min=0.05, reopen_max=0.1)
     sink = Sink()
     await tr.start(sink.frame, sink.event)
@@ -112,7 +114,7 @@ async def test_lost_port_is_reported_and_reopened(tmp_path: Path) -> None:
         await _until(lambda: "transport_down" in sink.events)
         tr.send(b"x")
         assert tr.counters["send_error:radio down"] == 1
-        master, slave = _pty(link)
+        master, slave = raw_pty(link)
         await _until(lambda: sink.events.count("transport_up") == 2)
         os.write(master, framing.encode(b"back"))
         await _until(lambda: sink.frames == [b"back"])

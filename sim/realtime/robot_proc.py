@@ -133,10 +133,27 @@ LINK_FACTORIES: dict[str, Callable[[RobotSpec, Any], RobotLink]] = {
 """Robot links by name: the orchestrator picks one; add a robot model here."""
 
 
+class _Periodic:
+    """A task on the robot's loop, started once and cancelled at the end (`_run`)."""
+
+    _task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+
+    async def _run(self) -> None:
+        raise NotImplementedError
+
+
 # -- the liar -------------------------------------------------------------------------------
 
 
-class Liar:
+class Liar(_Periodic):
     """Forges WARN frames about this robot's neighbours once `start()` is called
     (whom: `sim.shared.liar.liar_warnings`).
 
@@ -151,11 +168,6 @@ class Liar:
         self.interval = interval
         self.runtime: Runtime | None = None
         self.forged = 0
-        self._task: asyncio.Task[None] | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run())
 
     async def _run(self) -> None:
         while True:
@@ -166,16 +178,12 @@ class Liar:
                     self.forged += 1
             await asyncio.sleep(self.interval)
 
-    def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-
 
 # -- the forger -----------------------------------------------------------------------------
 
 
-class Forger:
-    """`forge:R@T:ATTACK`: once `start(attack)` is called, the frames
+class Forger(_Periodic):
+    """`forge:R@T:ATTACK`: once `launch(attack)` is called, the frames
     `sim.shared.forge.forged_frames` names, as the virtual simulator sends them: one
     burst, or (`REPEATING` attacks) a new round every warn interval.
 
@@ -194,7 +202,7 @@ class Forger:
         self.interval = interval
         self.daemon: Daemon | None = None
         self.sent = 0
-        self._task: asyncio.Task[None] | None = None
+        self.attack = ""
         self._tape: collections.deque[bytes] = collections.deque(maxlen=CAPTURE)
 
     def hear(self, data: bytes) -> None:
@@ -202,11 +210,14 @@ class Forger:
         if self._task is None:
             self._tape.append(bytes(data))
 
-    def start(self, attack: str) -> None:
+    def launch(self, attack: str) -> None:
+        """Start `attack` (one of `sim.shared.faults.ATTACKS`); a second one is ignored."""
         if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run(attack))
+            self.attack = attack
+            self.start()
 
-    async def _run(self, attack: str) -> None:
+    async def _run(self) -> None:
+        attack = self.attack
         round_ = 0
         while True:
             daemon = self.daemon
@@ -224,32 +235,11 @@ class Forger:
                     return
             await asyncio.sleep(self.interval)
 
-    def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-
 
 # -- drops ----------------------------------------------------------------------------------
 
 DROPS_PERIOD = 1.0
 """s between two drop reports of a robot process (only when the counts changed)."""
-
-
-class _Periodic:
-    """A task on the robot's loop, started once and cancelled at the end (`_run`)."""
-
-    _task: asyncio.Task[None] | None = None
-
-    def start(self) -> None:
-        if self._task is None:
-            self._task = asyncio.get_running_loop().create_task(self._run())
-
-    def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-
-    async def _run(self) -> None:
-        raise NotImplementedError
 
 
 class DropReporter(_Periodic):
@@ -412,7 +402,7 @@ class _Robot:
         elif cmd == "liar":
             self.liar.start()
         elif cmd == "forge":
-            self.forger.start(str(msg.get("attack", "")))
+            self.forger.launch(str(msg.get("attack", "")))
         elif cmd == "motor":
             fail = getattr(self.link, "fail_motor", None)
             if fail is not None:
