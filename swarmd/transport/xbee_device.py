@@ -39,6 +39,9 @@ log = logging.getLogger("swarmd.transport.xbee")
 
 HANGUP_EVENTS = select.POLLHUP | select.POLLERR | select.POLLNVAL
 READER_LOGGER = "digi.xbee.reader"
+READ_GAP = 0.1
+"""s. Inside a frame, longer than this without a byte drops the frame (`_open_device`).
+At 9600 baud a byte takes about 1 ms; a USB adapter batches for up to 16 ms."""
 
 
 class ReaderHangups(logging.Filter):
@@ -255,6 +258,13 @@ class DeviceThread:
                 # A radio that stops reading its UART fails the write (-> down, reopen)
                 # instead of blocking this thread, and with it close(), for good.
                 serial_port.write_timeout = self.write_timeout
+                # digi-xbee's reader trusts a frame's length and reads that many bytes,
+                # each with the port's read timeout (4 s by default): one corrupt
+                # length (7E FF FF) kept the daemon deaf until 64 KiB or a 4 s silence
+                # came, and a busy channel has no such silence. A byte that does not
+                # come within READ_GAP ends the frame and the reader hunts for the
+                # next 0x7E. (digi-xbee's own AT and send timeouts are separate.)
+                serial_port.timeout = READ_GAP
         except BaseException:
             with contextlib.suppress(Exception):
                 dev.close()
