@@ -376,3 +376,53 @@ def test_unknown_command_and_frame_type(tmp_path: Path, opened: list[Any], firmw
         assert a.at(3, b"NI") == (0, b"robot1")  # ... and the radio goes on
         assert not a.frames
         assert medium.radios[1].counters["unsupported_frame"] == 1
+
+
+# -- what the daemon does with a failure status or a refused setting --------------------
+@pytest.mark.parametrize("code", [0x01, 0x21, 0x24, 0x25, 0x74, 0x99])
+async def test_daemon_reports_a_failed_transmit_status_and_goes_on(
+        tmp_path: Path, code: int) -> None:
+    # swarmd only broadcasts, whose status is always 0x00 on real radios; a radio that
+    # still reports a failure (whatever the code, one digi-xbee does not know included)
+    # gives one `send_error` naming it, and the transport stays up.
+    from test_xbee_transport import Sink
+
+    from swarmd.transport.xbee import XBeeTransport
+
+    with Medium(2, protocol="zigbee", directory=tmp_path) as medium:
+        radio = medium.radios[1]
+        honest = radio.status_frame
+        radio.status_frame = (  # type: ignore[method-assign]
+            lambda request, status, **_: bytes((0x8B, request.frame_id, 0xFF, 0xFD, 0, code,
+                                                0)))
+        ours = XBeeTransport(port=medium.path(1), protocol="zigbee")
+        sink = Sink()
+        await ours.start(sink.frame, sink.event)
+        try:
+            ours.send(b"heartbeat")
+            await sink.until(lambda: "send_error" in sink.names())
+            error = dict(sink.events)["send_error"]
+            assert error["status"] == (code if code != 0x99 else 0xFF)
+            assert error["reason"] != ""
+            assert ours.up
+            radio.status_frame = honest  # type: ignore[method-assign]
+            ours.send(b"next")
+            await sink.until(lambda: ours.counters["delivered"] == 1)
+        finally:
+            await ours.close()
+
+
+async def test_daemon_refuses_to_start_when_the_radio_refuses_a_setting(
+        tmp_path: Path) -> None:
+    from swarmd.transport.xbee import RadioRefused, XBeeTransport
+
+    with Medium(1, protocol="802.15.4", directory=tmp_path) as medium:
+        medium.radios[1]._valid = (  # type: ignore[method-assign]
+            lambda cmd, value: cmd != "MY")
+        ours = XBeeTransport(port=medium.path(1))
+        with pytest.raises(RadioRefused) as info:
+            await ours.start(lambda _: None, lambda *_: None)
+        text = str(info.value)
+        assert "\n" not in text
+        assert f"XBee on {medium.path(1)} refused MY=FFFE (AT status 0x03" in text
+        await ours.close()
