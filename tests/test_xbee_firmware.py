@@ -187,7 +187,12 @@ def test_channel_range_and_zigbee_scan_channels(tmp_path: Path, opened: list[Any
             assert a.at(2, b"CH", b"\x0b") == (ok, b"")
             assert a.at(3, b"CH", b"\x1a") == (ok, b"")
             assert a.at(4, b"CH") == (ok, b"\x1a")
-            assert a.at(5, b"SC")[0] == invalid_command  # not emulated (docs/radios.md)
+            if firmware == "802.15.4":  # association scans only; CH stays
+                assert a.at(5, b"SC") == (ok, b"\x1f\xfe")
+                assert a.at(6, b"SC", b"\x00\x01") == (ok, b"")
+                assert a.at(7, b"CH") == (ok, b"\x1a")
+            else:
+                assert a.at(5, b"SC")[0] == invalid_command  # DigiMesh has none
 
 
 @pytest.mark.parametrize(("firmware", "mode"), CASES, ids=IDS)

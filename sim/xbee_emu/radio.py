@@ -178,6 +178,9 @@ class EmulatedRadio:
             # Factory default MY=0 makes the radio send with 16-bit source addresses, the
             # ones that trip digi-xbee (xbee-python #296); the transport sets 0xFFFE.
             p["MY"] = b"\x00\x00"
+            # Channels an association scan looks at (scans are not emulated: stored only;
+            # 0 means "the CH channel").
+            p["SC"] = (0x1FFE).to_bytes(2, "big")
         # DigiMesh has no MY and no SS on XBee 3: both answer "invalid command".
         self.params = p
         self.saved = dict(p)
@@ -382,7 +385,7 @@ class EmulatedRadio:
             return value[0] in (1, 2)
         if cmd == "CH":
             return value[0] in CHANNELS  # 802.15.4 and DigiMesh: 0x0B-0x1A
-        if cmd == "SC":
+        if cmd == "SC" and self.protocol == "zigbee":
             return value != b"\x00\x00"  # at least one channel to form or join on
         return True
 
