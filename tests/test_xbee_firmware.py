@@ -300,6 +300,24 @@ def test_corrupt_length_does_not_deafen_the_radio(tmp_path: Path, opened: list[A
         assert drops["timeout" if mode == 1 else "truncated"] == 1
 
 
+def test_api1_parser_resyncs_only_on_a_start_after_a_silence() -> None:
+    good = api.encode(b"\x08\x01NI", 1)
+    gap = api.INTER_CHAR_TIMEOUT
+    parser = api.FrameParser(1)
+    # A plausible wrong length swallows what follows at once (no silence: data) ...
+    assert parser.feed(b"\x7e\x00\x40" + good, now=0.0) == []
+    # ... and a start delimiter after a silence begins a new frame.
+    assert parser.feed(good, now=1.0) == [b"\x08\x01NI"]
+    assert parser.drops["timeout"] == 1
+    # A frame that pauses longer than the gap but goes on with data is kept.
+    assert parser.feed(good[:4], now=2.0) + parser.feed(good[4:], now=2.0 + 3 * gap) == [
+        b"\x08\x01NI"]
+    # A zero or oversize length is dropped at once; the next frame comes through.
+    assert parser.feed(b"\x7e\x00\x00" + b"\x7e\x02\x01" + good, now=4.0) == [
+        b"\x08\x01NI"]
+    assert parser.drops["length"] == 2
+
+
 async def test_daemon_receive_side_resyncs_after_a_corrupt_length(
         tmp_path: Path, opened: list[Any]) -> None:
     # digi-xbee reads the daemon's side: a byte that does not come within its port
