@@ -132,6 +132,7 @@ def test_unicast_to_nobody_raw(tmp_path: Path, opened: list[Any], firmware: str,
             assert status_of(a.transmit(3, unknown64, b"x", dest16=0x4321)) == (
                 0xFFFD, 0x21, 0x00)
             assert status_of(a.transmit(4, medium.radios[1].address64, b"me"))[1] == 0x23
+            assert status_of(a.transmit(9, unknown64, b"me", dest16=0x0000))[1] == 0x23
             # 16-bit addressing reaches the radio that has that network address.
             assert status_of(a.transmit(5, unknown64, b"16", dest16=0x1002))[1] == 0x00
             # 64-bit 0 is the coordinator (radio 1); radio 2 sends to it.
@@ -293,6 +294,10 @@ def test_corrupt_length_does_not_deafen_the_radio(tmp_path: Path, opened: list[A
         a.write(b"\x7e\xff\xff")  # longer than any frame: dropped at once
         assert a.at(1, b"NI") == (0, b"robot1")
         a.write(b"\x7e\x00\x40\x08")  # plausible length, then the line goes quiet
+        parser = medium._ports[1].parser
+        deadline = time.monotonic() + WAIT
+        while not parser._buf and time.monotonic() < deadline:
+            time.sleep(0.01)  # until the radio has read them: the silence starts there
         time.sleep(3 * api.INTER_CHAR_TIMEOUT)
         assert a.at(2, b"NI") == (0, b"robot1")
         drops = medium._ports[1].parser.drops
@@ -334,6 +339,9 @@ async def test_daemon_receive_side_resyncs_after_a_corrupt_length(
         await ours.start(sink.frame, sink.event)
         try:
             medium._write_raw(2, b"\x7e\xff\xff")  # what a UART bit error could give
+            assert ours._radio is not None
+            port = ours._radio._device.serial_port
+            await sink.until(lambda: port.in_waiting == 0)  # digi-xbee's reader has them
             await asyncio.sleep(3 * api.INTER_CHAR_TIMEOUT)
             other = raw(medium, 1, opened)
             other.at(1, b"MY", b"\xff\xfe")

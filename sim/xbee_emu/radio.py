@@ -323,7 +323,8 @@ class EmulatedRadio:
             return TX_ROUTE_NOT_FOUND, ROUTE_DISCOVERY
         if lost:
             return TX_NETWORK_ACK_FAILURE, NO_DISCOVERY
-        if request.dest64 == self.address64 and request.network16 in NO_ADDRESS16:
+        if (request.network16 == self.my16 if request.network16 not in NO_ADDRESS16
+                else request.dest64 == self.address64):
             return TX_SELF_ADDRESSED, NO_DISCOVERY
         if request.network16 in NO_ADDRESS16:
             return TX_ADDRESS_NOT_FOUND, ADDRESS_DISCOVERY  # the broadcast lookup failed
