@@ -41,9 +41,9 @@ from pathlib import Path
 from sim.xbee_emu import api
 from sim.xbee_emu.radio import (
     REMOTE_NO_RESPONSE,
-    TX_NO_ACK,
     TX_OK,
     TX_PAYLOAD_TOO_LARGE,
+    UNKNOWN16,
     EmulatedRadio,
     RemoteCommand,
     Reply,
@@ -268,7 +268,7 @@ class Medium:
             self._transparent(radio, data)
             return
         port.parser.api_mode = radio.current_api_mode
-        for frame in port.parser.feed(data):
+        for frame in port.parser.feed(data, time.monotonic()):
             for out in radio.handle(frame):
                 match out:
                     case Reply(reply):
@@ -309,7 +309,7 @@ class Medium:
 
     def _transmit(self, radio: EmulatedRadio, request: Transmit) -> None:
         n = radio.number
-        if len(request.data) > radio.max_payload:
+        if len(request.data) > radio.payload_limit(request):
             refusal = radio.status_frame(request, TX_PAYLOAD_TOO_LARGE)
             if refusal is not None:
                 self._at(self.reply_delay, functools.partial(self._write, n, refusal))
@@ -318,29 +318,40 @@ class Medium:
         now = time.monotonic()
         net = radio.network
         start = max(now, self._busy_until.get(net, 0.0))
-        end = start + airtime(radio.protocol, len(request.data))
+        end = start + sum(airtime(radio.protocol, size) for size in radio.packets(request))
         self._busy_until[net] = end
         done = end - now + radio.delay
         broadcast = request.broadcast
+        method = radio.delivery_method(request)
         addressees = [
             m for m, peer in self.radios.items()
             if m != n and m in self._ports and peer.network == net
-            and (broadcast or peer.addressed_by(request.dest64, request.dest16))
+            and (broadcast or peer.reached_by(request))
         ]
-        # 802.15.4 unicasts are MAC-acknowledged: nobody at that address -> No ACK (0x01).
-        # Broadcasts are never acknowledged, so they always report success.
-        ok = broadcast or bool(addressees) or radio.protocol != "802.15.4"
-        status = radio.status_frame(request, TX_OK if ok else TX_NO_ACK)
-        if status is not None:
-            self._at(max(done, self.reply_delay), functools.partial(self._write, n, status))
+        delivered: list[int] = []
         for m in addressees:
             peer = self.radios[m]
             if self._rng.random() < radio.loss or self._rng.random() < peer.loss:
                 self.lost += 1
                 continue
-            frame = peer.receive_frame(radio, request.data, broadcast)
+            delivered.append(m)
+            frame = peer.receive_frame(radio, request.data, broadcast, method)
             self.delivered += 1
             self._at(done, functools.partial(self._write, m, frame))
+        # Broadcasts are never acknowledged, so they always report success. A unicast
+        # reports what its firmware reports when nobody acknowledged it (radio.py).
+        if broadcast or delivered:
+            to16 = 0xFFFE
+            if delivered and not broadcast and radio.protocol == "zigbee":
+                to16 = self.radios[delivered[0]].my16  # where it was delivered
+            status = radio.status_frame(request, TX_OK, to16=to16)
+        else:
+            code, discovery = radio.unicast_failure(request, lost=bool(addressees))
+            status = radio.status_frame(request, code, discovery=discovery,
+                                        to16=UNKNOWN16 if radio.protocol == "zigbee"
+                                        else 0xFFFE)
+        if status is not None:
+            self._at(max(done, self.reply_delay), functools.partial(self._write, n, status))
 
     def _remote(self, radio: EmulatedRadio, request: RemoteCommand) -> None:
         """A remote AT command: over the air to its target(s), which run it and answer

@@ -18,7 +18,9 @@ import typer
 
 from swarmd.transport.media import PROTOCOL_NAMES, PROTOCOLS
 
-SETTINGS = ("AP", "ID", "CH", "CE", "SM", "MY", "DH", "DL", "NI", "EE")
+SETTINGS = ("AP", "ID", "CH", "SC", "CE", "SM", "MY", "DH", "DL", "NI", "EE")
+CHANNELS = range(0x0B, 0x1B)
+"""2.4 GHz channels 11-26; bit i of Zigbee's SC mask is channel 11 + i."""
 
 
 def _int(text: str) -> int:
@@ -58,7 +60,12 @@ def paper_settings(protocol: str, role: str, pan: int, channel: int | None,
     if protocol == "802.15.4":
         wanted["MY"] = b"\xff\xfe"
     if channel is not None:
-        wanted["CH"] = bytes((channel,))
+        if protocol == "zigbee":
+            # Zigbee's CH is read-only (the channel the network formed on): the
+            # coordinator forms, and routers join, within the SC mask.
+            wanted["SC"] = (1 << (channel - CHANNELS.start)).to_bytes(2, "big")
+        else:
+            wanted["CH"] = bytes((channel,))
     if api_mode is not None:
         wanted["AP"] = bytes((api_mode,))
     return wanted
@@ -131,7 +138,9 @@ def register(app: typer.Typer) -> None:
         pan: Annotated[str, typer.Option(help="PAN id (ID), hex 0x607 or decimal; the "
                                          "same on every robot.")] = "0x607",
         channel: Annotated[str | None, typer.Option(
-            help="Channel (CH), e.g. 0x0C. Default: keep the radio's.")] = None,
+            help="Channel, 0x0B-0x1A (11-26), e.g. 0x0C: CH on 802.15.4 and DigiMesh; "
+                 "on Zigbee the scan mask SC holding only that channel (CH is "
+                 "read-only there). Default: keep the radio's.")] = None,
         protocol: Annotated[str | None, typer.Option(
             help="Expected firmware: zigbee, 802.15.4 or digimesh (checked, not "
                  "changed: that needs a firmware update in XCTU). Default: not "
@@ -162,6 +171,8 @@ def register(app: typer.Typer) -> None:
             raise typer.BadParameter("--api-mode must be 1 or 2 (digi-xbee needs API mode)")
         pan_id = _int(pan)
         ch = _int(channel) if channel is not None else None
+        if ch is not None and ch not in CHANNELS:
+            raise typer.BadParameter(f"--channel must be 0x0B..0x1A (11-26), got 0x{ch:02X}")
         dev = _open(port, baud)
         try:
             actual = _protocol(dev)
@@ -171,14 +182,21 @@ def register(app: typer.Typer) -> None:
                 raise typer.Exit(1)
             before = _read(dev)
             wanted = paper_settings(actual, role, pan_id, ch, api_mode)
+            name, value = "AC", b""
             try:
                 for name, value in wanted.items():
                     dev.set_parameter(name, value, apply=False)  # queued (0x09) ...
+                name, value = "AC", b""
                 dev.apply_changes()  # ... and applied together (AC)
                 if write:
+                    name = "WR"
                     dev.write_changes()  # WR
             except XBeeException as exc:
-                typer.echo(f"the radio refused a setting: {exc}", err=True)
+                status = getattr(exc, "status", None)
+                why = status.description if status is not None else str(exc)
+                typer.echo(f"the radio refused {name}"
+                           f"{'=0x' + value.hex().upper() if value else ''}: {why}; "
+                           "nothing was saved", err=True)
                 raise typer.Exit(1) from None
             after = _read(dev)
         finally:

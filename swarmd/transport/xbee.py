@@ -55,9 +55,16 @@ from swarmd.transport.base import (
 from swarmd.transport.media import MAX_PAYLOAD, PROTOCOLS
 from swarmd.transport.reopen import Reopener
 from swarmd.transport.window import SendWindow
-from swarmd.transport.xbee_device import DeviceThread, RadioInfo, RadioMismatch, RadioSettings
+from swarmd.transport.xbee_device import (
+    DeviceThread,
+    RadioInfo,
+    RadioMismatch,
+    RadioRefused,
+    RadioSettings,
+    RadioSetupError,
+)
 
-__all__ = ["RadioInfo", "RadioMismatch", "XBeeTransport"]
+__all__ = ["RadioInfo", "RadioMismatch", "RadioRefused", "RadioSetupError", "XBeeTransport"]
 
 log = logging.getLogger(__name__)
 
@@ -146,8 +153,10 @@ class XBeeTransport:
     # -- lifecycle ----------------------------------------------------------------------
     async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
         """Open the radio and check it against the config. A radio whose settings
-        differ raises `RadioMismatch`; a missing or silent one is reported as
-        `transport_down` and retried in the background (the daemon keeps running)."""
+        differ raises `RadioMismatch`, one that refuses a setting the transport makes
+        `RadioRefused` (both `RadioSetupError`: the daemon does not start); a missing
+        or silent one is reported as `transport_down` and retried in the background
+        (the daemon keeps running)."""
         self._loop = asyncio.get_running_loop()
         self._events.callback = on_event
         self._on_frame = on_frame
@@ -164,7 +173,7 @@ class XBeeTransport:
                                   on_success=self._reopened, logger=log)
         try:
             await self._open()
-        except RadioMismatch:
+        except RadioSetupError:
             self._radio.shutdown()
             raise
         except Exception as exc:  # no device, timeout, wrong mode: keep running, retry
@@ -201,7 +210,7 @@ class XBeeTransport:
         })
 
     def _reopen_failed(self, exc: Exception) -> None:
-        if isinstance(exc, RadioMismatch):
+        if isinstance(exc, RadioSetupError):
             self._events.emit("transport_error", {"kind": "xbee", "reason": str(exc)})
 
     def _reopened(self) -> None:
@@ -331,8 +340,13 @@ class XBeeTransport:
 
 _STATUS_TEXT = {
     0x01: "MAC ACK failure", 0x02: "CCA failure (channel busy)", 0x21: "network ACK failure",
-    0x22: "not joined to network", 0x74: "payload too large", 0x75: "indirect message unrequested",
+    0x22: "not joined to network", 0x23: "self-addressed", 0x24: "address not found",
+    0x25: "route not found", 0x26: "no neighbour relayed the broadcast",
+    0x31: "internal resource error", 0x32: "resource error (no free buffers)",
+    0x74: "payload too large", 0x75: "indirect message unrequested",
+    0xFF: "transmit status unknown to digi-xbee",
 }
+"""Names of the delivery statuses in the XBee 3 guides' Transmit Status (0x8B / 0x89)."""
 
 
 def _describe(exc: BaseException) -> str:

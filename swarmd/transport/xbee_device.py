@@ -39,6 +39,11 @@ log = logging.getLogger("swarmd.transport.xbee")
 
 HANGUP_EVENTS = select.POLLHUP | select.POLLERR | select.POLLNVAL
 READER_LOGGER = "digi.xbee.reader"
+UNKNOWN_STATUS = 0xFF
+"""The status passed on for a transmit status code digi-xbee does not know."""
+READ_GAP = 0.1
+"""s. Inside a frame, longer than this without a byte drops the frame (`_open_device`).
+At 9600 baud a byte takes about 1 ms; a USB adapter batches for up to 16 ms."""
 
 
 class ReaderHangups(logging.Filter):
@@ -71,7 +76,12 @@ def install_hangup_filter() -> ReaderHangups:
     return _HANGUPS
 
 
-class RadioMismatch(TransportError):
+class RadioSetupError(TransportError):
+    """The radio cannot run as configured: the daemon refuses to start (at start) or
+    reports `transport_error` (on a reopen); retrying does not help."""
+
+
+class RadioMismatch(RadioSetupError):
     """The radio's settings differ from the config; `differences` lists them."""
 
     def __init__(self, port: str, differences: list[str]) -> None:
@@ -81,6 +91,17 @@ class RadioMismatch(TransportError):
             "... --write`."
         )
         self.differences = differences
+
+
+class RadioRefused(RadioSetupError):
+    """The radio answered a setting the transport makes with an error status."""
+
+    def __init__(self, port: str, name: str, value: bytes, status: str) -> None:
+        super().__init__(
+            f"XBee on {port} refused {name}={value.hex().upper()} ({status}); its "
+            f"firmware does not take that setting: check it with `swarmd xbee info "
+            f"--port {port}`.")
+        self.name = name
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,7 +266,7 @@ class DeviceThread:
                 if int.from_bytes(my, "big") != 0xFFFE:
                     # Applied (0x08), not written: redone on every open, the radio's saved
                     # settings stay the user's.
-                    dev.set_parameter("MY", b"\xff\xfe")
+                    self._set(dev, "MY", b"\xff\xfe")
                     log.info("XBee %s: MY %s -> FFFE (64-bit source addresses)",
                              self.port, my.hex().upper())
             dev.add_data_received_callback(self._on_data)
@@ -255,6 +276,13 @@ class DeviceThread:
                 # A radio that stops reading its UART fails the write (-> down, reopen)
                 # instead of blocking this thread, and with it close(), for good.
                 serial_port.write_timeout = self.write_timeout
+                # digi-xbee's reader trusts a frame's length and reads that many bytes,
+                # each with the port's read timeout (4 s by default): one corrupt
+                # length (7E FF FF) kept the daemon deaf until 64 KiB or a 4 s silence
+                # came, and a busy channel has no such silence. A byte that does not
+                # come within READ_GAP ends the frame and the reader hunts for the
+                # next 0x7E. (digi-xbee's own AT and send timeouts are separate.)
+                serial_port.timeout = READ_GAP
         except BaseException:
             with contextlib.suppress(Exception):
                 dev.close()
@@ -266,6 +294,18 @@ class DeviceThread:
         if isinstance(listener, threading.Thread):
             _HANGUPS.listeners[listener] = self
         return info
+
+    def _set(self, dev: Any, name: str, value: bytes) -> None:
+        """Set and apply one parameter; a refusal becomes `RadioRefused`."""
+        from digi.xbee.exception import ATCommandException
+
+        try:
+            dev.set_parameter(name, value)
+        except ATCommandException as exc:
+            status = getattr(exc, "status", None)
+            text = (f"AT status 0x{status.code:02X}, {status.description}"
+                    if status is not None else str(exc))
+            raise RadioRefused(self.port, name, value, text) from None
 
     def _inspect(self, dev: Any, operating_mode: Any) -> RadioInfo:
         want = self.settings
@@ -334,7 +374,10 @@ class DeviceThread:
         from digi.xbee.packets.aft import ApiFrameType
 
         if packet.get_frame_type() in (ApiFrameType.TRANSMIT_STATUS, ApiFrameType.TX_STATUS):
-            self._call_soon(self._on_status, packet.frame_id, int(packet.transmit_status.code))
+            # digi-xbee leaves a status code it does not know as None: still a failure.
+            status = packet.transmit_status
+            code = int(status.code) if status is not None else UNKNOWN_STATUS
+            self._call_soon(self._on_status, packet.frame_id, code)
 
     def _hand_over(self, data: bytes) -> None:
         """Bounded queue, one wake-up per batch."""
