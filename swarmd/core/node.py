@@ -29,6 +29,7 @@ from swarmd.core import replay, wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
 from swarmd.core.evidence import CLAIMS_REMEMBERED, EvidenceStore, cert_says
+from swarmd.core.evidence import seq_of as evidence_seq
 from swarmd.core.limits import check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -980,6 +981,10 @@ class Node:
 
     def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
                          raw: bytes, now: float | None = None) -> None:
+        if suspect == self._robot_id and witness != suspect and now is not None:
+            # Evidence against us, relayed in a certificate (we may have missed the
+            # warning itself): while we hold the slot, we refute it (rule 4).
+            self._refute(f, witness, epoch, evidence_seq(raw), now)
         ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
         if ready is None:
             if suspect != self._robot_id:  # what we refuted ourselves is no news
@@ -1019,11 +1024,10 @@ class Node:
     # after a warning voids that warning everywhere the word reaches.
 
     def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
-        """We hold f at `epoch` and hear `witness`'s warning number `seq` about us, live:
-        sign and broadcast that we are alive after it. Only live: a warning we read out of
-        a buffer after our own stall, or first see relayed in a certificate (we were cut
-        off from its witness), was right about our silence, and the takeover it backs
-        fences us (rule 2) as it does in every mode."""
+        """We hold f at `epoch` and hear `witness`'s warning number `seq` about us: sign
+        and broadcast that we are alive after it. Not out of a buffer read after our own
+        stall: then the warning was right (we were silent), and the takeover it backs
+        fences us (rule 2)."""
         if self._identity is None or self._role != Role.ACTIVE or f != self._function \
                 or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
             return
