@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.auth import Identity
 from swarmd.core.events import Event
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
@@ -33,6 +34,12 @@ class Net:
     seed: int = 0
     delay: float = 0.001
     keys: Sequence[bytes] = ()
+    identities: dict[int, Identity] = field(default_factory=dict)
+    """Per-robot mode: each robot's identity (`sim.shared.fakeid.fake_identities`)."""
+    cuts: list[tuple[int | None, int | None, float, float]] = field(default_factory=list)
+    """Link faults: (sender, receiver, from, until): frames from `sender` (None: any) to
+    `receiver` (None: any) sent in [from, until) are lost. A fade of R is (R, None, ..),
+    R deaf to S is (S, R, ..): one way only."""
     now: float = 0.0
     nodes: dict[int, Node] = field(default_factory=dict)
     alive: set[int] = field(default_factory=set)
@@ -53,7 +60,8 @@ class Net:
     def boot(self, rid: int, restored: Restored | None = None, seq_start: int = 0) -> Node:
         """Start (or restart) robot `rid` now and run its start-up tick."""
         node = Node(rid, self.plan, self.params, self.now, keys=self.keys,
-                    seq_start=seq_start, restored=restored)
+                    identity=self.identities.get(rid), seq_start=seq_start,
+                    restored=restored)
         self.nodes[rid] = node
         self.alive.add(rid)
         self.outputs.setdefault(rid, [])
@@ -102,7 +110,8 @@ class Net:
                 case Broadcast(frame):
                     self.frames.append((self.now, rid, frame))
                     for dst in sorted(self.alive):
-                        if dst == rid or (self.loss and self._rng.random() < self.loss):
+                        if dst == rid or (self.loss and self._rng.random() < self.loss) \
+                                or self._cut(rid, dst):
                             continue
                         heapq.heappush(self._queue,
                                        (self.now + self.delay, next(self._order), dst, frame))
@@ -111,7 +120,21 @@ class Net:
                 case Assign() | Release():
                     self.outputs[rid].append(a)
 
+    def _cut(self, src: int, dst: int) -> bool:
+        return any((s is None or s == src) and (d is None or d == dst) and a <= self.now < b
+                   for s, d, a, b in self.cuts)
+
     # -- queries -----------------------------------------------------------------------
+    def executing(self) -> dict[int, str]:
+        """Robot -> the function it executes now (its last Assign not yet Released), of
+        the live robots."""
+        out: dict[int, str] = {}
+        for rid in sorted(self.alive):
+            last = self.outputs[rid][-1] if self.outputs[rid] else None
+            if isinstance(last, Assign):
+                out[rid] = last.function
+        return out
+
     def named(self, name: str, robot: int | None = None) -> list[dict[str, Any]]:
         """Events called `name` (of one robot, if given), in order."""
         return [e for e in self.events

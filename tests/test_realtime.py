@@ -24,6 +24,7 @@ from sim.realtime.view import SwarmView
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import check_events
 from swarmd.config import load_swarm
+from tests.swarms import unsigned_paper
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
@@ -31,15 +32,16 @@ PAPER = ROOT / "configs" / "paper.yaml"
 pytestmark = pytest.mark.slow
 
 
-async def run(duration: float, *specs: str, tmp_path: Path, **kw: Any) -> RealtimeResult:
+async def run(duration: float, *specs: str, tmp_path: Path, swarm_file: Path = PAPER,
+              **kw: Any) -> RealtimeResult:
     faults = [parse_fault(s) for s in specs]
     result = await asyncio.wait_for(
-        run_realtime_async(PAPER, duration=duration, faults=faults, report_dir=tmp_path,
-                           events_path=tmp_path / "events.jsonl", **kw),
+        run_realtime_async(swarm_file, duration=duration, faults=faults,
+                           report_dir=tmp_path, events_path=tmp_path / "events.jsonl", **kw),
         timeout=duration + 30.0,
     )
     assert result.problems == []
-    swarm = load_swarm(PAPER)
+    swarm = load_swarm(swarm_file)
     checker = check_events(result.events, faults, swarm.to_plan(), swarm.params(),
                            loss=kw.get("loss", 0.0), duration=duration)
     assert [v.as_dict() for v in checker.violations] == []
@@ -123,20 +125,29 @@ async def test_realtime_leave_and_unhealthy_hand_over_without_a_timeout(tmp_path
     assert holders_at_end(result) == {"f1": 1, "f2": 2, "f3": 6, "f4": 5}
 
 
-async def test_realtime_partition_cutting_off_holder_and_watcher_is_healed_by_epochs(
-        tmp_path: Path) -> None:
+@pytest.mark.parametrize("auth", ["per-robot", "none"])
+async def test_realtime_partition_cutting_off_holder_and_watcher_is_healed(
+        tmp_path: Path, auth: str) -> None:
     # {1,2} | {3,4,5,6}: to the standbys' side this is robots 1 and 2 failing together
-    # (each slot keeps one watcher there): DESIGN rule 9 takes both slots over, and
-    # rule 2 fences the cut-off holders as soon as the partition heals.
+    # (each slot keeps one watcher there): DESIGN rule 9 takes both slots over. The
+    # paper swarm signs per robot: when the partition heals, the cut-off holders, alive
+    # all along, refute the warnings in the standbys' certificates and the standbys
+    # step down (DESIGN, "Convergence"); unsigned, rule 2 fences the cut-off holders.
+    swarm_file = PAPER if auth == "per-robot" else unsigned_paper(tmp_path)
     result = await run(6.5, "partition:1,2|3,4,5,6@1+3", tmp_path=tmp_path, loss=0.02,
-                       seed=3)
+                       seed=3, swarm_file=swarm_file)
     takeovers = {e["function"]: (e["robot"], e["replaced"]) for e in named(result, "takeover")}
     assert takeovers == {"f1": (5, 1), "f2": (6, 2)}
     healed = 4.0
     assert all(e["t"] < healed for e in named(result, "takeover"))
     fenced = {e["robot"]: e for e in named(result, "fenced")}
-    assert set(fenced) == {1, 2} and all(e["t"] >= healed for e in fenced.values())
-    assert holders_at_end(result) == {"f1": 5, "f2": 6, "f3": 3, "f4": 4}
+    assert all(e["t"] >= healed for e in fenced.values())
+    if auth == "per-robot":
+        assert set(fenced) == {5, 6}
+        assert holders_at_end(result) == {"f1": 1, "f2": 2, "f3": 3, "f4": 4}
+    else:
+        assert set(fenced) == {1, 2}
+        assert holders_at_end(result) == {"f1": 5, "f2": 6, "f3": 3, "f4": 4}
 
 
 def _alive(pid: int) -> bool:

@@ -411,7 +411,10 @@ class VirtualSwarm:
             case "leave", _:
                 if node is not None and r.alive:
                     self._call(rid, _OP_STOP, None)
-                    r.dropped.update(node.snapshot().drops)
+                    # What the daemon writes on a graceful stop (swarmd.state): a robot
+                    # that left and comes back starts above its last seq, or every peer
+                    # drops its frames as replays (it would be muted).
+                    self._persist(r, node, left=True)
                 r.alive = False
             case "unhealthy" | "motor", _:
                 if node is not None and r.alive:
@@ -424,17 +427,23 @@ class VirtualSwarm:
     def _kill(self, r: _Robot) -> None:
         """A crash: the node's persisted state is kept (DESIGN rule 2), the rest is gone."""
         if r.node is not None and r.alive:
-            snap = r.node.snapshot()
-            held = (snap.function, snap.epoch) if snap.function and \
-                snap.role == Role.ACTIVE else None
-            r.persisted = Restored(known=dict(snap.known), held=held,
-                                   peer_seq=dict(snap.peer_seq),
-                                   certificate=snap.certificate if held else ())
-            r.seq_high = snap.seq
-            r.dropped.update(snap.drops)
+            self._persist(r, r.node)
         r.alive = False
         r.timer_gen += 1
         r.timer_at = None
+
+    @staticmethod
+    def _persist(r: _Robot, node: Node, *, left: bool = False) -> None:
+        """What a robot's state file holds when it stops (crash: its last write; a
+        robot that left handed its function over and holds nothing)."""
+        snap = node.snapshot()
+        held = (snap.function, snap.epoch) if snap.function and not left and \
+            snap.role == Role.ACTIVE else None
+        r.persisted = Restored(known=dict(snap.known), held=held,
+                               peer_seq=dict(snap.peer_seq),
+                               certificate=snap.certificate if held else ())
+        r.seq_high = snap.seq
+        r.dropped.update(snap.drops)
 
     def _forge(self, rid: int, what: tuple[str, int]) -> None:
         """`forge:R@T:ATTACK`: R's forged frames (`sim.shared.forge`), delivered to every

@@ -1,32 +1,38 @@
 """Takeover certificates of one robot, per-robot mode (DESIGN section 2, "Who may say what").
 
-In per-robot mode every WARN, CLAIM and LEAVE is signed by its own sender, so a robot
-can prove what others said. A *certificate* is the set of signed frames that back a
-takeover of slot f from `suspect` at `epoch`: the suspect's own signed LEAVE, or the
+In per-robot mode every WARN, CLAIM, LEAVE and REFUTE is signed by its own sender, so a
+robot can prove what others said. A *certificate* is the set of signed frames that back
+a takeover of slot f from `suspect` at `epoch`: the suspect's own signed LEAVE, or the
 signed WARNs of at least a quorum of distinct witnesses (rule 3: the robots that may
-hold a slot watching f, plus the claimant's own ears once, rule 9; never the suspect).
-An epoch rises only for a CLAIM whose certificate this robot verified, so one liar
-alone — whatever it signs — never moves a slot; and the new holder relays its
-certificate to whoever missed it.
+hold a slot watching f, plus the claimant's own ears once, rule 9; never the suspect)
+that the suspect has not refuted. An epoch rises only for a CLAIM whose certificate
+this robot verified, so one liar alone — whatever it signs — never moves a slot; and
+the new holder relays its certificate to whoever missed it.
+
+*One answer everywhere* (DESIGN, "Convergence"): whether a claim is certified is a
+function of signed frames only — the warnings, the suspect's LEAVE, the suspect's
+REFUTEs — never of when this robot happened to hear what. A suspect alive after a
+witness's warning says so in a signed REFUTE naming that warning's seq; it voids that
+warning and every earlier one of that witness, at every robot that has the REFUTE,
+which the frames' holders relay to whoever still acts on a voided claim. Robots that
+hold the same frames therefore hold the same view of every slot.
 
 State, per slot f (all bounded: a flood of invented epochs or claimants pushes out
 the oldest, it cannot grow the store):
-- `evidence`: {(suspect, epoch): {witness: signed WARN or LEAVE bytes}}.
-- `certified`: {(claimant, epoch)} whose CLAIM a certificate backs here.
+- `evidence`: {(suspect, epoch): {witness: its latest signed WARN or LEAVE}}.
+- `refutes`: {(holder, epoch): {witness: (highest refuted seq, the signed REFUTE)}}.
+- `certified`: {(claimant, epoch): (failed, {backer: seq})} of the CLAIMs a certificate
+  backed here, re-judged against the refutes whenever it is asked about.
 - `pending`: {(claimant, epoch): (failed, first heard)}, claims heard before their
   certificate (a channel that reorders), counted once it comes, if still fresh.
 - `mine`: (failed, frames), the certificate of this robot's own hold of f.
-- `relayed_at`: when `mine` was last relayed (at most once per T_max).
-- `alive`: ((holder, epoch), {witness: its highest seq}) when f's holder was last
-  heard alive: warnings about it sent before then are void (rule 4).
+- `relayed_at`: when `mine`, or the refutes of f, were last relayed (once per T_max).
 
 Sans-IO and pure: every method takes what it needs (`now`, the epoch floor of f) and
 returns a decision or frames; the `Node` sends, emits and counts drops.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
@@ -43,34 +49,43 @@ CLAIMS_REMEMBERED = 16
 pushes out the oldest, it cannot grow the node."""
 
 
+_LEAVE_BACKED = -1
+"""`certified`'s backer seq for a claim backed by the suspect's own LEAVE, which no
+REFUTE can void: a holder's word about its own slot."""
+
+
+def seq_of(raw: bytes) -> int:
+    """The sequence number in a signed frame's header (bytes 5..10)."""
+    return int.from_bytes(raw[5:11], "big")
+
+
 class EvidenceStore:
-    """The evidence, certificates and pending claims of one robot (see module doc)."""
+    """The evidence, refutes, certificates and pending claims of one robot (module doc)."""
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params) -> None:
         self._robot_id = robot_id
         self._plan = plan
         self._params = params
         self._evidence: dict[str, dict[tuple[int, int], dict[int, bytes]]] = {}
-        self._certified: dict[str, set[tuple[int, int]]] = {}
+        self._refutes: dict[str, dict[tuple[int, int], dict[int, tuple[int, bytes]]]] = {}
+        self._certified: dict[str, dict[tuple[int, int], tuple[int, dict[int, int]]]] = {}
         self._pending: dict[str, dict[tuple[int, int], tuple[int, float]]] = {}
         self._mine: dict[str, tuple[int, tuple[bytes, ...]]] = {}
         self._relayed_at: dict[str, float] = {}
+        self._refutes_relayed_at: dict[str, float] = {}
         self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
-        self._alive: dict[str, tuple[tuple[int, int], dict[int, int]]] = {}
 
+    # ------------------------------------------------------------------ evidence
     def record(self, f: str, witness: int, suspect: int, epoch: int, raw: bytes,
                floor: int, now: float | None = None) -> list[tuple[int, wire.Claim]] | None:
         """Keep `witness`'s signed frame `raw` against `suspect` at `epoch` (`floor`:
-        the epoch of f as known). None when it is void (sent before the suspect was
-        last heard alive); otherwise the pending claims it now certifies, still fresh
-        at `now`, for the node to count."""
+        the epoch of f as known). None when the suspect refuted it; otherwise the
+        pending claims it now certifies, still fresh at `now`, for the node to count."""
         if not raw or epoch < floor:
             return []
-        alive = self._alive.get(f)
-        if alive is not None and alive[0] == (suspect, epoch) \
-                and int.from_bytes(raw[5:11], "big") <= alive[1].get(witness, -1):
-            # Sent before the suspect was last heard alive: a suspicion it refuted
-            # (rule 4), perhaps captured and played back; it backs no takeover.
+        if witness != suspect and self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw):
+            # The suspect said, signed, that it was alive after this warning (rule 4): it
+            # backs no takeover, here or anywhere the REFUTE reaches.
             return None
         episodes = self._evidence.setdefault(f, {})
         got = episodes.get((suspect, epoch))
@@ -78,7 +93,9 @@ class EvidenceStore:
             if len(episodes) >= EVIDENCE_REMEMBERED:
                 del episodes[next(iter(episodes))]
             got = episodes[(suspect, epoch)] = {}
-        got[witness] = raw  # the latest: the least likely void where it is relayed
+        old = got.get(witness)
+        if old is None or seq_of(old) < seq_of(raw):
+            got[witness] = raw  # the latest: the least likely to be refuted
         ready: list[tuple[int, wire.Claim]] = []
         pending = self._pending.get(f)
         if pending:
@@ -93,17 +110,29 @@ class EvidenceStore:
                         ready.append((claimant, claim))
         return ready
 
-    def _backers(self, f: str, suspect: int, epoch: int, claimant: int) -> list[int]:
-        """The witnesses whose signed evidence backs `claimant` taking f over from
-        `suspect` at `epoch`: the suspect's own LEAVE alone, or the warnings of distinct
-        witnesses (the holders of the slots that watch f, rule 3, and the claimant
-        itself as rule 9's own ears, once), never the suspect's."""
+    def _backers(self, f: str, suspect: int, epoch: int, claimant: int) -> dict[int, int]:
+        """{witness: seq} of the signed evidence backing `claimant` taking f over from
+        `suspect` at `epoch`: the suspect's own LEAVE alone, or the unrefuted warnings of
+        distinct witnesses (the robots that may hold a slot watching f, rule 3, and the
+        claimant itself as rule 9's own ears, once), never the suspect's."""
         got = self._evidence.get(f, {}).get((suspect, epoch))
         if not got:
-            return []
+            return {}
         if suspect in got:
-            return [suspect]
-        return [w for w in got if w != suspect and (w == claimant or w in self.may_watch(f))]
+            return {suspect: _LEAVE_BACKED}
+        may = self.may_watch(f)
+        out: dict[int, int] = {}
+        for w, raw in got.items():
+            if w != suspect and (w == claimant or w in may):
+                seq = seq_of(raw)
+                if seq > self.refuted_up_to(f, suspect, epoch, w):
+                    out[w] = seq
+        return out
+
+    def _enough(self, failed: int, backers: dict[int, int]) -> bool:
+        if backers.get(failed) == _LEAVE_BACKED:
+            return True
+        return len(backers) >= self._params.quorum
 
     def may_watch(self, f: str, *, claimants: bool = False) -> frozenset[int]:
         """Every robot that may hold a slot watching f (its holder or a substitute):
@@ -119,24 +148,42 @@ class EvidenceStore:
             self._may_watch_cache[key] = got
         return got
 
+    # ------------------------------------------------------------------ certificates
     def certify(self, f: str, claimant: int, c: wire.Claim, floor: int) -> bool:
-        """Does the evidence held back `claimant`'s CLAIM `c` of f? (`floor`: the epoch
-        of f as known; certified takeovers older than it are forgotten first.)"""
-        certified = self._certified.setdefault(f, set())
-        if (claimant, c.epoch) in certified:
-            return True
+        """Does the evidence held back `claimant`'s CLAIM `c` of f, unrefuted? (`floor`:
+        the epoch of f as known; certified takeovers older than it are forgotten first.)"""
         if claimant not in self._plan.covered_by(f):
             return False
+        certified = self._certified.setdefault(f, {})
         backers = self._backers(f, c.failed, c.epoch - 1, claimant)
-        if not backers or (backers != [c.failed] and len(backers) < self._params.quorum):
-            return False
-        if len(certified) >= CLAIMS_REMEMBERED:  # older takeovers matter no more
-            certified.intersection_update({x for x in certified if x[1] >= floor})
-        certified.add((claimant, c.epoch))
+        if not self._enough(c.failed, backers):
+            old = certified.get((claimant, c.epoch))
+            # Evidence pushed out by a flood is judged by what it was, against the
+            # refutes known now.
+            return old is not None and old[0] == c.failed and self._still(f, c.epoch, old)
+        if (claimant, c.epoch) not in certified and len(certified) >= CLAIMS_REMEMBERED:
+            for key in [k for k in certified if k[1] < floor] or [next(iter(certified))]:
+                del certified[key]
+        certified[(claimant, c.epoch)] = (c.failed, backers)
         return True
 
+    def _still(self, f: str, epoch: int, entry: tuple[int, dict[int, int]]) -> bool:
+        failed, backers = entry
+        left = {w: s for w, s in backers.items()
+                if s == _LEAVE_BACKED or s > self.refuted_up_to(f, failed, epoch - 1, w)}
+        return self._enough(failed, left)
+
     def is_certified(self, f: str, claimant: int, epoch: int) -> bool:
-        return (claimant, epoch) in self._certified.get(f, ())
+        """Is (claimant, epoch) of f a takeover a certificate backs here, unrefuted?"""
+        entry = self._certified.get(f, {}).get((claimant, epoch))
+        if entry is None:
+            return False
+        return self.certify(f, claimant, wire.Claim(entry[0], self._plan.slot(f), epoch), 0)
+
+    def replaced(self, f: str, claimant: int, epoch: int) -> int | None:
+        """The robot a certified (claimant, epoch) of f replaced, if known here."""
+        entry = self._certified.get(f, {}).get((claimant, epoch))
+        return entry[0] if entry is not None else None
 
     def hold_pending(self, f: str, claimant: int, c: wire.Claim, now: float) -> None:
         """Keep an uncertified claim a while, in case its certificate comes later."""
@@ -146,89 +193,108 @@ class EvidenceStore:
         pending[(claimant, c.epoch)] = (c.failed, now)
 
     def cert_frames(self, f: str, suspect: int, epoch: int) -> tuple[bytes, ...]:
-        """The certificate this robot can show for taking f over from `suspect`."""
+        """The certificate this robot can show for taking f over from `suspect`: every
+        unrefuted backer, not just a quorum."""
         got = self._evidence.get(f, {}).get((suspect, epoch), {})
-        backers = self._backers(f, suspect, epoch, self._robot_id)
-        # Every backer, not just a quorum: a receiver may hold some of them void (a
-        # warning its suspect refuted in its hearing, `record`).
-        return tuple(got[w] for w in backers)
+        return tuple(got[w] for w in self._backers(f, suspect, epoch, self._robot_id))
 
     def took_over(self, f: str, failed: int, old_epoch: int, epoch: int) -> None:
         """This robot holds f at `epoch` now: keep the certificate of its hold."""
         self._mine[f] = (failed, self.cert_frames(f, failed, old_epoch))
-        self._certified.setdefault(f, set()).add((self._robot_id, epoch))
+        self._certified.setdefault(f, {})[(self._robot_id, epoch)] = (
+            failed, self._backers(f, failed, old_epoch, self._robot_id))
 
     def certificate(self, f: str | None) -> tuple[bytes, ...]:
         """The frames certifying this robot's hold of f (empty if none)."""
         return self._mine[f][1] if f is not None and f in self._mine else ()
 
-    def relay(self, f: str, now: float) -> tuple[int, tuple[bytes, ...]] | None:
-        """(failed, frames) of our hold of f to relay now, at most once per T_max."""
+    def relay(self, f: str, now: float, every: float | None = None,
+              ) -> tuple[int, tuple[bytes, ...]] | None:
+        """(failed, frames) of our hold of f to relay now, at most once per `every`
+        (default T_max)."""
         mine = self._mine.get(f)
-        if mine is None or now - self._relayed_at.get(f, -1e18) < self._params.t_max:
+        gap = self._params.t_max if every is None else every
+        if mine is None or now - self._relayed_at.get(f, -1e18) < gap:
             return None
         self._relayed_at[f] = now
         return mine
 
-    def restore(self, f: str, frames: tuple[bytes, ...], verifier: Verifier) -> None:
-        """The certificate of a hold kept across a reboot: its frames that verify and
-        name one and the same failed robot."""
-        failed = None
-        good: list[bytes] = []
+    def restore(self, f: str, epoch: int, frames: tuple[bytes, ...],
+                verifier: Verifier) -> bool:
+        """The certificate of a hold of f at `epoch` kept across a reboot, verified as if
+        it had just been received: frames that verify, about one and the same robot at
+        `epoch - 1`, enough of them (a quorum of witnesses or that robot's LEAVE). True
+        if it certifies the hold; then it is this robot's certificate again."""
+        failed: int | None = None
         for raw in frames:
             try:
                 got = wire.decode(bytes(raw), (), verifier)
             except wire.CodecError:
                 continue
-            if isinstance(got.msg, wire.Warn):
-                who = got.msg.suspect
-            elif isinstance(got.msg, wire.Leave):
-                who = got.sender
-            else:
+            said = _says(got)
+            if said is None or said[2] != epoch - 1 or got.msg.function != self._plan.slot(f):
                 continue
-            if failed is None or who == failed:
-                failed = who
-                good.append(bytes(raw))
-        if failed is not None and f in self._plan.functions:
-            self._mine[f] = (failed, tuple(good))
+            if failed is None:
+                failed = said[1]
+            if said[1] == failed:
+                self.record(f, said[0], said[1], said[2], bytes(raw), 0)
+        if failed is None or f not in self._plan.functions or epoch < 1:
+            return False
+        self.took_over(f, failed, epoch - 1, epoch)
+        return self._enough(failed, self._certified[f][(self._robot_id, epoch)][1])
 
-    def mark_alive(self, f: str, holder: int, epoch: int,
-                   top: Callable[[int], int | None], own_seq: int) -> None:
-        """f's holder is alive at `epoch` now (its heartbeat, or our own): the evidence
-        against it so far is void, and so is any warning its witnesses sent before
-        (`top`: a peer's highest seq accepted so far; `own_seq`: this robot's)."""
-        episodes = self._evidence.get(f)
-        if episodes:
-            episodes.pop((holder, epoch), None)
-        tops: dict[int, int] = {}
-        for w in self.may_watch(f, claimants=True):
-            seq = top(w) if w != self._robot_id else own_seq
-            if seq is not None:
-                tops[w] = seq
-        self._alive[f] = ((holder, epoch), tops)
+    # ------------------------------------------------------------------ refutes
+    def refuted_up_to(self, f: str, holder: int, epoch: int, witness: int) -> int:
+        """The highest seq of `witness`'s warnings about `holder` at `epoch` that the
+        holder refuted (-1: none)."""
+        got = self._refutes.get(f, {}).get((holder, epoch))
+        if not got:
+            return -1
+        entry = got.get(witness)
+        return entry[0] if entry is not None else -1
 
-    def refuted(self, f: str, epoch: int, witness: int, seq: int) -> None:
-        """This robot, holding f at `epoch`, heard `witness`'s warning (its `seq`) about
-        itself live and refutes it: that warning backs no takeover of f here."""
-        me = (self._robot_id, epoch)
-        mark = self._alive.get(f)
-        if mark is None or mark[0] != me:
-            mark = (me, {})
-            self._alive[f] = mark
-        mark[1][witness] = max(mark[1].get(witness, -1), seq)
-        self._evidence.get(f, {}).pop(me, None)
+    def add_refute(self, f: str, holder: int, r: wire.Refute, raw: bytes) -> bool:
+        """Keep `holder`'s signed REFUTE `r` (raw bytes). True if it refutes more than
+        what was known: the node then re-judges the claims it believes."""
+        if r.witness == holder or r.witness not in self.may_watch(f, claimants=True):
+            return False  # refutes nothing a certificate could count
+        episodes = self._refutes.setdefault(f, {})
+        got = episodes.get((holder, r.epoch))
+        if got is None:
+            if len(episodes) >= EVIDENCE_REMEMBERED:
+                del episodes[next(iter(episodes))]
+            got = episodes[(holder, r.epoch)] = {}
+        old = got.get(r.witness)
+        if old is not None and old[0] >= r.seq:
+            return False
+        got[r.witness] = (r.seq, raw)
+        return True
+
+    def refute_frames(self, f: str, holder: int, epoch: int, now: float) -> tuple[bytes, ...]:
+        """The signed REFUTEs `holder` made about f at `epoch`, to relay to a robot that
+        still acts on a claim they void; at most once per T_max (empty otherwise)."""
+        got = self._refutes.get(f, {}).get((holder, epoch))
+        if not got or now - self._refutes_relayed_at.get(f, -1e18) < self._params.t_max:
+            return ()
+        self._refutes_relayed_at[f] = now
+        return tuple(raw for _, raw in got.values())
+
+
+def _says(frame: wire.Frame) -> tuple[int, int, int] | None:
+    """(witness, suspect, epoch) that a signed frame says, if it is evidence: a WARN
+    about its suspect, or a LEAVE, its sender's own."""
+    msg = frame.msg
+    if isinstance(msg, wire.Warn):
+        return frame.sender, msg.suspect, msg.epoch
+    if isinstance(msg, wire.Leave):
+        return frame.sender, frame.sender, msg.epoch
+    return None
 
 
 def cert_says(cert: wire.Cert) -> tuple[int, int, int] | None:
     """(witness, suspect, epoch) that a CERT's relayed frame says, if it is evidence: a
     WARN about its suspect, or a LEAVE, its sender's own."""
-    inner = cert.inner
-    msg = inner.msg
-    if isinstance(msg, wire.Warn):
-        return inner.sender, msg.suspect, msg.epoch
-    if isinstance(msg, wire.Leave):
-        return inner.sender, inner.sender, msg.epoch
-    return None
+    return _says(cert.inner)
 
 
-__all__ = ["CLAIMS_REMEMBERED", "EVIDENCE_REMEMBERED", "EvidenceStore", "cert_says"]
+__all__ = ["CLAIMS_REMEMBERED", "EVIDENCE_REMEMBERED", "EvidenceStore", "cert_says", "seq_of"]

@@ -29,6 +29,7 @@ from swarmd.core import replay, wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
 from swarmd.core.evidence import CLAIMS_REMEMBERED, EvidenceStore, cert_says
+from swarmd.core.evidence import seq_of as evidence_seq
 from swarmd.core.limits import check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -130,6 +131,12 @@ _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
 
 
+RELAY_EVERY = 8
+"""Per-robot mode: a holder that took its slot over relays its certificate at least
+once per this many T_max even unasked (4 s at udp, 16 s at radio), so every robot that
+hears the slot holds the certificate of its holder within that bound."""
+
+
 class NodeError(RuntimeError):
     """Misuse of the node API (a bug in the driver), never caused by peer frames."""
 
@@ -174,7 +181,11 @@ class Node:
             self._known[f] = Holder(holder if holder is not None else 0, 0)
         if restored is not None:
             for f, (holder, epoch) in restored.known.items():
-                if f in self._known and epoch >= self._known[f].epoch:
+                if f in self._known and epoch >= self._known[f].epoch \
+                        and (identity is None or epoch == 0):
+                    # Per-robot mode believes a raised epoch only with its certificate,
+                    # read from a file as from the air (DESIGN, "Convergence"): the
+                    # holder relays it to a restarted robot that still shows the old one.
                     self._known[f] = Holder(holder, epoch)
 
         self._covers = frozenset(f for f in plan.functions if robot_id in plan.covered_by(f))
@@ -217,13 +228,13 @@ class Node:
         self._pending: list[Action] = []
 
         own = plan.robots[robot_id].function
-        if restored is not None and restored.held is not None and restored.certificate \
-                and self._verifier is not None:
-            self._ev.restore(restored.held[0], restored.certificate, self._verifier)
-        if restored is not None and restored.held is not None:
+        held = restored.held if restored is not None else None
+        if held is not None and self._verifier is not None and held[0] in self._known:
+            held = self._verified_hold(held[0], held[1], restored)
+        if restored is not None and held is not None:
             # Rule 2 across a reboot: listen before resuming, a takeover may have
             # happened while this robot was down.
-            f, epoch = restored.held
+            f, epoch = held
             if f in self._known:
                 self._rejoin = _Rejoin(f, epoch, now + params.rejoin_hold)
         elif restored is None and own is not None:
@@ -231,6 +242,20 @@ class Node:
             self._function = own
             self._epoch = self._known[own].epoch
             self._watch_neighbours(now)
+
+    def _verified_hold(self, f: str, epoch: int,
+                       restored: Restored | None) -> tuple[str, int] | None:
+        """Per-robot mode: the hold of f at `epoch` a restarted robot read from its state
+        file, if it is provable as a received one would be — the plan's own holder at
+        epoch 0, or a certificate that verifies and backs it; otherwise None (it rejoins
+        as a standby, and the slot's watchers take it over if nobody holds it)."""
+        assert self._verifier is not None and restored is not None
+        if epoch == 0:
+            return (f, 0) if self._plan.initial_holder(f) == self._robot_id else None
+        if self._ev.restore(f, epoch, tuple(restored.certificate), self._verifier):
+            self._known[f] = Holder(self._robot_id, epoch)
+            return (f, epoch)
+        return None
 
     # ------------------------------------------------------------------ read-only
     @property
@@ -340,6 +365,8 @@ class Node:
                 self._on_claim(sender, c, now)
             case wire.Leave() as lv:
                 self._on_leave(sender, lv, now, frame.raw)
+            case wire.Refute() as rf:
+                self._on_refute(sender, rf, now, frame.raw)
         return self._drain()
 
     def _own_frame(self, frame: wire.Frame) -> list[Action]:
@@ -381,6 +408,12 @@ class Node:
                 self._watch_fired(g, watch, now)
         if self._heartbeating() and now >= self._next_heartbeat:
             self._send_heartbeat(now)
+            if self._identity is not None and self._role == Role.ACTIVE and self._epoch:
+                # Anti-entropy: a robot that restarted, or missed the takeover and
+                # heard nothing since that would make us relay, learns it within
+                # RELAY_EVERY T_max (DESIGN, "Convergence").
+                self._relay_cert(f=self._function, now=now,
+                                 every=RELAY_EVERY * p.t_max)
             # No drift: the next one is due one period after the *deadline*.
             period = self._heartbeat_period()
             self._next_heartbeat += period
@@ -518,6 +551,7 @@ class Node:
             self._drops["uncertified"] += 1
             if f == self._function and self._role == Role.ACTIVE:
                 self._relay_cert(f, now)
+            self._relay_refutes(f, now)  # it may act on a claim they void
             if self._rejoin is not None and self._rejoin.function == f:
                 # Not believed, but enough to stay a standby rather than resume: the
                 # cautious side of rule 2 across a reboot (the slot's watchers and
@@ -533,8 +567,6 @@ class Node:
             return
         self._known[f] = Holder(sender, hb.epoch)
         self._slot_heard[f] = _SlotBeat(sender, hb.epoch, now)
-        if self._identity is not None:
-            self._ev.mark_alive(f, sender, hb.epoch, self._replay.top, self._seq)
         self._claims_seen.pop(f, None)
         # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
         if f == self._function and self._role == Role.ACTIVE and sender != self._robot_id:
@@ -574,12 +606,7 @@ class Node:
         if w.suspect == self._robot_id:
             # Rule 4: a warning about ourselves is answered with a heartbeat at once.
             if self._role == Role.ACTIVE and f == self._function:
-                if self._identity is not None and w.epoch == self._epoch \
-                        and now - self._stalled_at > self._params.t_max:
-                    # Heard live, not out of a buffer after our own stall: we refute
-                    # it, so this warning (captured and played back to us later)
-                    # backs no takeover of our slot here (`_record_evidence`).
-                    self._ev.refuted(f, self._epoch, sender, seq)
+                self._refute(f, sender, w.epoch, seq, now)
                 if self._heartbeat_now(now):
                     self._emit(ev.Refute(subject=self._robot_id, function=f))
             return
@@ -682,6 +709,7 @@ class Node:
                 # start a takeover); kept a while in case its certificate comes later.
                 self._ev.hold_pending(f, sender, c, now)
                 self._drops["uncertified"] += 1
+                self._relay_refutes(f, now)
                 return
         if not self._claim_believed(f, sender, c, now):
             self._drops["stale_claim"] += 1
@@ -759,7 +787,18 @@ class Node:
 
     def _take_over(self, now: float) -> None:
         assert self._claim is not None
-        c, self._claim = self._claim, None
+        c = self._claim
+        if self._identity is not None and not self._ev.certify(
+                c.function, self._robot_id,
+                wire.Claim(c.failed, self._plan.slot(c.function), c.epoch),
+                self._known[c.function].epoch):
+            # Its certificate was refuted during the hold (or never complete): a takeover
+            # no other robot would believe is none (DESIGN, "Convergence").
+            self._emit(ev.Refute(subject=c.failed, function=c.function))
+            self._claim = None
+            self._to(Trigger.REFUTED)
+            return
+        self._claim = None
         self._to(Trigger.CLAIM_HELD)
         self._function, self._epoch = c.function, c.epoch
         self._known[c.function] = Holder(self._robot_id, c.epoch)
@@ -913,7 +952,7 @@ class Node:
         for v in self._votes.values():
             v.clear()
 
-    def _send(self, msg: wire.Message, *, evidence: bool = False) -> None:
+    def _send(self, msg: wire.Message, *, evidence: bool = False) -> bytes:
         self._seq = min(self._seq + 1, wire.SEQ_MAX)
         frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
         data = wire.encode(frame, self._keys[0] if self._keys else None, self._signer)
@@ -923,6 +962,7 @@ class Node:
                 self._record_evidence(f, self._robot_id, self._robot_id, msg.epoch, data)
         self._pending.append(Broadcast(data))
         self._frames_out += 1
+        return data
 
     # ------------------------------------------------------------------ evidence
     # Per-robot mode: the certificates themselves are `evidence.py`'s.
@@ -941,18 +981,25 @@ class Node:
 
     def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
                          raw: bytes, now: float | None = None) -> None:
+        if suspect == self._robot_id and witness != suspect and now is not None:
+            # Evidence against us, relayed in a certificate (we may have missed the
+            # warning itself): while we hold the slot, we refute it (rule 4).
+            self._refute(f, witness, epoch, evidence_seq(raw), now)
         ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
         if ready is None:
-            self._drops["stale_evidence"] += 1
+            if suspect != self._robot_id:  # what we refuted ourselves is no news
+                self._drops["stale_evidence"] += 1
             return
         for claimant, claim in ready:
             assert now is not None  # `record` readies a claim only with a `now`
             self._on_claim(claimant, claim, now)
 
-    def _relay_cert(self, f: str, now: float) -> None:
+    def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
         """Someone still believes an older holder of our slot: relay the certificate of
-        our hold and re-announce the claim it backs, at most once per T_max."""
-        mine = self._ev.relay(f, now)
+        our hold and re-announce the claim it backs, at most once per T_max (`every`)."""
+        if f is None:
+            return
+        mine = self._ev.relay(f, now, every)
         if mine is None:
             return
         failed, frames = mine
@@ -965,9 +1012,73 @@ class Node:
         if f is None:
             self._drops["bad_function"] += 1
             return
+        if isinstance(cert.inner.msg, wire.Refute):
+            self._on_refute(cert.inner.sender, cert.inner.msg, now, cert.raw)
+            return
         said = cert_says(cert)
         if said is not None:
             self._record_evidence(f, *said, cert.raw, now)
+
+    # ------------------------------------------------------------------ refutes
+    # Per-robot mode (DESIGN, "Convergence"): a holder's signed word that it was alive
+    # after a warning voids that warning everywhere the word reaches.
+
+    def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
+        """We hold f at `epoch` and hear `witness`'s warning number `seq` about us: sign
+        and broadcast that we are alive after it. Not out of a buffer read after our own
+        stall: then the warning was right (we were silent), and the takeover it backs
+        fences us (rule 2)."""
+        if self._identity is None or self._role != Role.ACTIVE or f != self._function \
+                or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
+            return
+        if witness not in self._ev.may_watch(f, claimants=True) \
+                or seq <= self._ev.refuted_up_to(f, self._robot_id, epoch, witness):
+            return
+        msg = wire.Refute(witness, self._plan.slot(f), epoch, seq)
+        self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
+
+    def _on_refute(self, holder: int, r: wire.Refute, now: float, raw: bytes) -> None:
+        f = self._plan.function_at(r.function)
+        if f is None:
+            self._drops["bad_function"] += 1
+            return
+        if holder == self._robot_id:
+            return  # our own, relayed back
+        if self._ev.add_refute(f, holder, r, raw):
+            self._rejudge(f, now)
+
+    def _rejudge(self, f: str, now: float) -> None:
+        """New refutes of f came: a takeover of f they void is undone here as
+        everywhere they reach — our own hold or claim ends, and the view of f goes back
+        to the robot that refuted (DESIGN, "Convergence")."""
+        me = self._robot_id
+        c = self._claim
+        if c is not None and c.function == f and not self._ev.certify(
+                f, me, wire.Claim(c.failed, self._plan.slot(f), c.epoch), 0):
+            self._emit(ev.Refute(subject=c.failed, function=f))
+            self._claim = None
+            self._to(Trigger.REFUTED)
+        for _ in range(len(self._plan.robots)):  # each step lowers the epoch
+            holder, epoch = self._known[f]
+            failed = self._ev.replaced(f, holder, epoch)
+            if failed is None or epoch == 0 or self._ev.is_certified(f, holder, epoch):
+                return
+            self._known[f] = Holder(failed, epoch - 1)
+            if holder == me and self._function == f and self._role == Role.ACTIVE:
+                self._emit(ev.Fenced(function=f, epoch=epoch - 1))
+                self._release()
+                self._to(Trigger.FENCE)
+                self._fenced_until = now + self._params.heartbeat_interval
+
+    def _relay_refutes(self, f: str, now: float) -> None:
+        """Someone acts on a takeover of f that refutes we hold void (an uncertified
+        heartbeat or claim): relay them, inside CERTs (they may be older than its replay
+        window), at most once per T_max."""
+        if self._identity is None:
+            return
+        holder, epoch = self._known[f]
+        for raw in self._ev.refute_frames(f, holder, epoch, now):
+            self._send_cert(f, raw)
 
     def _emit(self, event: ev.Event) -> None:
         self._pending.append(event)

@@ -9,7 +9,8 @@ Layout (big-endian)::
   frame carries a tag. A signed HEARTBEAT is 11 + 4 + 8 = 23 bytes (DESIGN: <= 24, so
   it fits any XBee broadcast payload: Zigbee 92 B, 802.15.4 100 B, DigiMesh 73 B).
 - body: HEARTBEAT `slot, epoch (16), role|health (8)`; WARN and CLAIM `robot (16), slot,
-  epoch (16)`; LEAVE `slot, epoch (16), reason (8)`.
+  epoch (16)`; LEAVE `slot, epoch (16), reason (8)`; REFUTE `witness (16), slot, epoch
+  (16), the witness's seq (48)`; CERT `slot, a relayed signed frame`.
 - slot: a function's wire index (0 = none, 1..65535), variable length so that a swarm
   of fewer than 128 functions pays one byte as it always did: `0xxxxxxx` is 0..127 in
   one byte; a first byte 0x80..0xFE carries 15 bits `1hhhhhhh llllllll` (128..0x7EFF,
@@ -60,6 +61,7 @@ class MsgType(IntEnum):
     CLAIM = 3
     LEAVE = 4
     CERT = 5
+    REFUTE = 6
 
 
 class LeaveReason(IntEnum):
@@ -125,9 +127,22 @@ class Cert:
     raw: bytes
 
 
-Message = Heartbeat | Warn | Claim | Leave | Cert
+@dataclass(frozen=True, slots=True)
+class Refute:
+    """Per-robot mode: the holder of `function` at `epoch` says, under its own signature,
+    that it was alive after `witness`'s warning number `seq` about it (DESIGN rule 4 made
+    portable): that warning and every earlier one of `witness` about this holder at this
+    epoch back no takeover, at any robot that has this frame."""
 
-STRONG = frozenset({MsgType.WARN, MsgType.CLAIM, MsgType.LEAVE})
+    witness: int
+    function: int
+    epoch: int
+    seq: int
+
+
+Message = Heartbeat | Warn | Claim | Leave | Cert | Refute
+
+STRONG = frozenset({MsgType.WARN, MsgType.CLAIM, MsgType.LEAVE, MsgType.REFUTE})
 """The frames that change state: in per-robot mode they carry their sender's own
 signature (`SIGNATURE_LEN` bytes) instead of the swarm's HMAC tag."""
 
@@ -136,11 +151,13 @@ _HB_TAIL = struct.Struct(">HB")
 _PEEK = struct.Struct(">BHH")
 _U16 = struct.Struct(">H")
 _SLOT_AT = {MsgType.HEARTBEAT: 0, MsgType.WARN: 2, MsgType.CLAIM: 2, MsgType.LEAVE: 0,
-            MsgType.CERT: 0}
-"""Offset of the slot field in each body (after the 16-bit robot id in WARN and CLAIM)."""
-_TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None, None)
-"""Message type by the low 3 bits of byte 0 (0, 6 and 7 are no type)."""
-_FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 4, MsgType.CLAIM: 4, MsgType.LEAVE: 3}
+            MsgType.CERT: 0, MsgType.REFUTE: 2}
+"""Offset of the slot field in each body (after the 16-bit robot id in WARN, CLAIM and
+REFUTE)."""
+_TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None)
+"""Message type by the low 3 bits of byte 0 (0 and 7 are no type)."""
+_FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 4, MsgType.CLAIM: 4, MsgType.LEAVE: 3,
+               MsgType.REFUTE: 10}
 _INNER_MIN = HEADER_LEN + 4 + SIGNATURE_LEN
 """Body bytes besides the slot field."""
 
@@ -202,6 +219,8 @@ def _type_of(msg: Message) -> MsgType:
             return MsgType.LEAVE
         case Cert():
             return MsgType.CERT
+        case Refute():
+            return MsgType.REFUTE
     raise TypeError(f"not a message: {msg!r}")  # pragma: no cover - exhaustive above
 
 
@@ -216,6 +235,11 @@ def _body(msg: Message) -> bytes:
             return encode_slot(function) + struct.pack(">HB", epoch, reason)
         case Cert(function, _, raw):
             return encode_slot(function) + raw
+        case Refute(witness, function, epoch, seq):
+            if not 0 <= seq <= SEQ_MAX:
+                raise ValueError(f"seq {seq} does not fit 48 bits")
+            return _U16.pack(witness) + encode_slot(function) + _U16.pack(epoch) \
+                + seq.to_bytes(6, "big")
     raise TypeError(f"not a message: {msg!r}")  # pragma: no cover
 
 
@@ -310,6 +334,13 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
         case MsgType.LEAVE:
             epoch, reason = _HB_TAIL.unpack_from(data, after)
             msg = Leave(function=slot, epoch=epoch, reason=reason)
+        case MsgType.REFUTE:
+            if not strong:
+                # Only its sender's own signature gives it meaning (per-robot mode).
+                raise CodecError("auth", "REFUTE outside per-robot mode")
+            msg = Refute(witness=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
+                         epoch=_U16.unpack_from(data, after)[0],
+                         seq=int.from_bytes(data[after + 2:after + 8], "big"))
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
                  data if strong else b"")
 
@@ -327,9 +358,10 @@ def _decode_cert(data: bytes, swarm_id: int, sender: int, seq_bytes: bytes, slot
     if len(raw) < _INNER_MIN:
         raise CodecError("malformed", f"certificate of {len(data)} bytes is too short")
     got = decode(raw, (), verifier, inner=True)  # raises CodecError("auth") if forged
-    if not isinstance(got.msg, (Warn, Leave)) or got.msg.function != slot \
+    if not isinstance(got.msg, (Warn, Leave, Refute)) or got.msg.function != slot \
             or got.swarm_id != swarm_id:
-        raise CodecError("malformed", "a certificate relays a WARN or LEAVE of its slot")
+        raise CodecError("malformed",
+                         "a certificate relays a WARN, LEAVE or REFUTE of its slot")
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), Cert(slot, got, raw))
 
 
@@ -341,7 +373,8 @@ class Peek(NamedTuple):
     mtype: MsgType
     slot: int
     robot: int
-    """WARN's suspect or CLAIM's failed robot; 0 for HEARTBEAT and LEAVE."""
+    """WARN's suspect, CLAIM's failed robot or REFUTE's witness; 0 for HEARTBEAT, LEAVE
+    and CERT."""
 
 
 def peek(data: bytes) -> Peek | None:

@@ -1,0 +1,146 @@
+"""One answer everywhere (DESIGN section 2, "Convergence"), on virtual time.
+
+Link faults that lose frames one way — a robot whose transmissions fade while it still
+hears everyone, a standby deaf to one robot a little longer — must end, once the channel
+heals, with every live robot holding the same (holder, epoch) for every slot and exactly
+one robot executing each, in every authentication mode. The paper swarm: robots 1-4
+hold f1-f4 in a ring (f2 watched by the holders of f1 and f3), standby 6 covers f2/f3.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from sim.shared.fakeid import fake_identities
+from swarmd.core import wire
+from swarmd.core.auth import Identity
+from swarmd.core.node import Node, Restored
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+from tests.harness import Net
+
+Paper = tuple[SwarmPlan, Params]
+KEY = b"s" * 32
+MODES = ("per-robot", "shared", "none")
+
+
+def net(paper: Paper, auth: str, cuts: list[tuple[int | None, int | None, float, float]],
+        seed: int = 0, loss: float = 0.0) -> Net:
+    plan, params = paper
+    ids: dict[int, Identity] = fake_identities(plan.robots) if auth == "per-robot" else {}
+    keys = (KEY,) if auth in ("shared", "per-robot") else ()
+    return Net(plan, params, keys=keys, identities=ids, cuts=cuts, seed=seed, loss=loss)
+
+
+def settled(n: Net) -> None:
+    """Every live robot that hears a slot (DESIGN section 2, "What a robot hears") holds
+    the same view of it, and the slot is executed by exactly the robot that view names
+    (rules 1, 2)."""
+    executing = n.executing()
+    for f in n.plan.functions:
+        slot = n.plan.slot(f)
+        views = {rid: n.nodes[rid].snapshot().known[f] for rid in sorted(n.alive)
+                 if slot in n.plan.relevant(rid).slots or n.nodes[rid].snapshot().function == f}
+        assert len(set(views.values())) == 1, (f, views)
+        holder = next(iter(views.values())).robot
+        doers = sorted(r for r, g in executing.items() if g == f)
+        assert doers == [holder], (f, doers, views, executing)
+
+
+def fade(robot: int, at: float, dur: float) -> tuple[int | None, int | None, float, float]:
+    return (robot, None, at, at + dur)
+
+
+def deaf(robot: int, to: int, at: float, dur: float) -> tuple[int | None, int | None,
+                                                               float, float]:
+    return (to, robot, at, at + dur)
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_faded_holder_and_a_standby_deaf_a_little_longer_end_with_one_holder(
+        paper: Paper, auth: str) -> None:
+    """Robot 2's transmissions fade for 0.46 s (it still hears everyone); standby 6 stays
+    deaf to robot 2 for 0.4 s longer. 6 takes f2 over while 2 refutes unheard; once the
+    channel heals, one of them holds f2 everywhere and the other executes nothing."""
+    n = net(paper, auth, [fade(2, 5.0, 0.46), deaf(6, 2, 5.0, 0.86)])
+    n.run_until(5.0 + 0.86 + 3.0)
+    settled(n)
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize(("fade_s", "extra_s"), list(itertools.product(
+    (0.3, 0.46, 0.6, 0.8, 1.2, 2.5), (0.0, 0.2, 0.4, 1.0, 3.0))))
+def test_fades_and_deafness_of_any_length_converge(paper: Paper, auth: str, fade_s: float,
+                                                   extra_s: float) -> None:
+    """The same shape over a grid of lengths around T_max (0.5 s) and claim_hold (0.2 s):
+    whichever robot wins, the swarm agrees within a few T_max of the last heal."""
+    n = net(paper, auth, [fade(2, 5.0, fade_s), deaf(6, 2, 5.0, fade_s + extra_s)])
+    n.run_until(5.0 + fade_s + extra_s + 3.0)
+    settled(n)
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize("who", [(1, 2), (3, 2), (2, 1), (6, 2), (2, 6), (1, 6)])
+def test_one_way_deafness_of_a_pair_converges(paper: Paper, auth: str,
+                                              who: tuple[int, int]) -> None:
+    """R deaf to S for 2 s (S still hears R), for pairs of a holder, its watchers and its
+    standby: a false suspicion or a takeover, then one view everywhere."""
+    r, s = who
+    n = net(paper, auth, [deaf(r, s, 5.0, 2.0)])
+    n.run_until(10.0)
+    settled(n)
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize("seed", range(8))
+def test_fades_under_loss_converge(paper: Paper, auth: str, seed: int) -> None:
+    """The fade with 20 % loss on every link until the heal, then a clean channel."""
+    n = net(paper, auth, [fade(2, 5.0, 0.7), deaf(6, 2, 5.0, 1.1)], seed=seed, loss=0.2)
+    n.run_until(6.5)
+    n.loss = 0.0
+    n.run_until(10.0)
+    settled(n)
+
+
+def test_a_refuted_claim_is_certified_nowhere_after_the_refutes_arrive(paper: Paper) -> None:
+    """Per-robot mode: 6 took f2 over while robot 2, faded, refuted unheard; 6's claim
+    was certified at the watchers before 2's refutes reached them. Once they do, 6 steps
+    down and no robot takes a heartbeat in 6's name at the claimed epoch (one frame, no
+    key needed) as the new holder: the live holder is fenced nowhere."""
+    plan, _ = paper
+    n = net(paper, "per-robot", [fade(2, 5.0, 0.8), deaf(6, 2, 5.0, 1.8)])
+    n.run_until(10.0)
+    settled(n)
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    assert n.nodes[1].snapshot().known["f2"] == (2, 0)
+    assert [e["epoch"] for e in n.named("fenced", 6)] == [0]  # 6 stepped down
+    forged = wire.encode(wire.Frame(plan.swarm_id, 6, 10**12,
+                                    wire.Heartbeat(plan.slot("f2"), 1, 1, 0)), KEY)
+    for rid in sorted(n.alive):
+        if rid != 6:
+            n.inject(rid, n.nodes[rid].receive(forged, n.now))
+    n.run_until(12.0)
+    settled(n)
+    assert n.nodes[1].snapshot().known["f2"] == (2, 0)
+    assert n.named("fenced", 2) == []
+
+
+def test_a_restored_hold_needs_a_certificate_that_backs_it(paper: Paper) -> None:
+    """Per-robot mode: a state file that says `held: f2 at epoch 3` with no certificate
+    (or one that does not back it) restores a standby, not a holder of f2."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    bare = Node(6, plan, params, 0.0, identity=ids[6],
+                restored=Restored(known={"f2": (6, 3)}, held=("f2", 3)))
+    bare.tick(0.0)
+    bare.tick(params.rejoin_hold + 0.1)
+    snap = bare.snapshot()
+    assert snap.function is None and snap.known["f2"] == (2, 0)
+    # The same file in shared-key mode resumes: there is nothing to verify there.
+    keyed = Node(6, plan, params, 0.0, keys=(KEY,),
+                 restored=Restored(known={"f2": (6, 3)}, held=("f2", 3)))
+    keyed.tick(0.0)
+    keyed.tick(params.rejoin_hold + 0.1)
+    assert keyed.snapshot().function == "f2"
