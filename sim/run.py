@@ -268,7 +268,7 @@ def check(options: SimOptions) -> _Checked:
         raise SimError(*[str(p) for p in exc.problems]) from None
     plan, params = cfg.to_plan(), cfg.params()
     problems = check_faults(list(options.parsed_faults), set(plan.robots),
-                            physics=options.physics, duration=options.duration)
+                            physics=options.flies, duration=options.duration)
     if problems:
         raise SimError(*[f"--fault: {p}" for p in problems])
     unknown = sorted(set(options.refuse_arm) - set(plan.robots))

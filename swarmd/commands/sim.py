@@ -16,18 +16,27 @@ from typing import Annotated, Any
 
 import typer
 
+from swarmd.commands.numbers import finite, probability
+
 FAULT_HELP = (
-    "Inject a fault (repeatable): crash:R@T, restart:R@T, pause:R@T+D, "
-    "partition:1,2|3,4@T+D, liar:R@T, leave:R@T, unhealthy:R@T, motor:R@T (physics "
-    "only). R a robot id; T seconds from the start, before --duration; D seconds it "
-    "lasts. docs/sim.md tells what each one does."
+    "Inject a fault (repeatable), e.g. crash:2@5: robot 2 dies 5 s into the run. Every "
+    "kind is listed below the options; docs/sim.md tells more."
 )
+
+
+def _fault_kinds() -> str:
+    """The fault table under the options (sim/shared/faults.py, the one source)."""
+    from rich.markup import escape
+
+    from sim.shared.faults import help_table
+
+    return escape(help_table())
 
 
 def register(app: typer.Typer) -> None:
     """Add the `sim` command to the CLI."""
 
-    @app.command("sim")
+    @app.command("sim", epilog=_fault_kinds())
     def sim(
         swarm: Annotated[Path, typer.Argument(help="Swarm file, e.g. configs/paper.yaml.")],
         virtual: Annotated[bool, typer.Option(
@@ -35,13 +44,13 @@ def register(app: typer.Typer) -> None:
             "clock: deterministic by --seed, far faster than real time, no robot "
             "processes, no physics.")] = False,
         duration: Annotated[float, typer.Option(
-            "--duration", min=0.1, help="Length of the run in seconds (wall-clock in "
-            "real time, simulated with --virtual).")] = 15.0,
-        seed: Annotated[int, typer.Option("--seed", help="Seed of frame loss, jitter and "
-                                          "start times.")] = 0,
+            "--duration", min=0.1, callback=finite, help="Length of the run in seconds "
+            "(wall-clock in real time, simulated with --virtual).")] = 15.0,
+        seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of frame loss, "
+                                          "jitter and start times, 0 or more.")] = 0,
         loss: Annotated[float, typer.Option(
-            "--loss", min=0.0, max=1.0, help="Probability, 0 to 1, that a receiver misses "
-            "a frame (drawn per frame and per receiver).")] = 0.0,
+            "--loss", callback=probability, help="Probability, 0 to below 1, "
+            "that a receiver misses a frame (drawn per frame and per receiver).")] = 0.0,
         fault: Annotated[list[str] | None, typer.Option("--fault", help=FAULT_HELP)] = None,
         events: Annotated[Path | None, typer.Option(
             "--events", help="Also write the merged event log to this file (JSON Lines, "
@@ -75,9 +84,9 @@ def register(app: typer.Typer) -> None:
             "--autopilot", help="Flavour of the simulated autopilot of --link mavlink: px4 "
             "(OFFBOARD setpoints) or ardupilot (GUIDED). Default: px4.")] = None,
         refuse_arm: Annotated[list[int] | None, typer.Option(
-            "--refuse-arm", help="Robot id whose simulated autopilot denies every arm "
-            "command, as a failing pre-arm check (repeatable; --link mavlink only). "
-            "Default: none.")] = None,
+            "--refuse-arm", min=1, max=0xFFFF, help="Robot id whose simulated autopilot "
+            "denies every arm command, as a failing pre-arm check (repeatable; --link "
+            "mavlink only). Default: none.")] = None,
     ) -> None:
         """Run the whole swarm on this machine, inject faults, print a summary.
 
