@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sim.shared.eventlog import write_events
+from sim.shared.eventlog import stops_at_end, write_events
 from sim.shared.faults import Fault, FaultSpecError, check_faults, parse_fault
 from sim.shared.summary import Summary, counted_drops, summarize
 
@@ -268,7 +268,7 @@ def check(options: SimOptions) -> _Checked:
         raise SimError(*[str(p) for p in exc.problems]) from None
     plan, params = cfg.to_plan(), cfg.params()
     problems = check_faults(list(options.parsed_faults), set(plan.robots),
-                            physics=options.physics, duration=options.duration)
+                            physics=options.flies, duration=options.duration)
     if problems:
         raise SimError(*[f"--fault: {p}" for p in problems])
     unknown = sorted(set(options.refuse_arm) - set(plan.robots))
@@ -356,7 +356,7 @@ def _run_virtual(checked: _Checked, faults: list[Fault], options: SimOptions,
     summary.extra["frames_sent"] = result.frames_sent
     summary.extra["robot_seconds_per_wall_second"] = round(
         result.robot_seconds / max(wall, 1e-9))
-    return summary, result.events, None
+    return summary, [*result.events, *stops_at_end(result.events, options.duration)], None
 
 
 def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOptions,
@@ -389,7 +389,9 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
                for r in options.refuse_arm]
     summary = summarize_realtime(result, [*refused, *faults], checked.plan, checked.params,
                                  loss=options.loss)
-    return summary, result.events, result.t0
+    end = result.ended_at if result.ended_at is not None else result.duration
+    stops = stops_at_end(result.events, end, dead=result.deaths)
+    return summary, [*result.events, *stops], result.t0
 
 
 @dataclass(frozen=True, slots=True)

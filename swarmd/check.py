@@ -42,6 +42,9 @@ class Section:
     """JSON-serialisable form of the same content."""
     notes: tuple[str, ...] = ()
     """Lines printed under the table."""
+    warnings: tuple[str, ...] = ()
+    """Lines printed under the table that are warnings (a radio the swarm would
+    overload, a function a simulated craft cannot fly): counted in the last line."""
 
 
 SectionBuilder = Callable[[SwarmConfig], Section | None]
@@ -55,6 +58,12 @@ class CheckReport:
     unreadable: bool = False
 
     @property
+    def warnings(self) -> int:
+        """Warnings found: the problems that are not errors, and the sections'."""
+        return sum(p.severity != "error" for p in self.problems) + sum(
+            len(s.warnings) for s in self.sections)
+
+    @property
     def exit_code(self) -> int:
         if self.unreadable:
             return EXIT_UNREADABLE
@@ -65,6 +74,7 @@ class CheckReport:
             "file": self.file,
             "ok": self.exit_code == EXIT_OK,
             "problems": [p.as_json() for p in self.problems],
+            "warnings": self.warnings,
         }
         for s in self.sections:
             out[s.key] = s.data
@@ -172,6 +182,7 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
     rows = []
     data = []
     notes: list[str] = []
+    warnings: list[str] = []
     for medium in MEDIA:
         b = channel_budget(plan, params, medium=medium, signed=signed,
                            per_robot=cfg.auth_mode == "per-robot")
@@ -185,7 +196,7 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
                                                         "DOES NOT FIT"),
         ))
         data.append(b.as_dict())
-        notes += [f"{medium}: {w}" for w in b.warnings]
+        warnings += [f"{medium}: {w}" for w in b.warnings]
         if b.warn_fragments > 1 or b.cert_fragments > 1:
             split = [f"{what} ({size} B) in {n}" for what, size, n in (
                 ("warning/claim", b.warn_bytes, b.warn_fragments),
@@ -200,6 +211,7 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
         rows=tuple(rows),
         data=data,
         notes=tuple(notes),
+        warnings=tuple(warnings),
     )
 
 
@@ -245,10 +257,11 @@ def flight_section(cfg: SwarmConfig) -> Section | None:
         return None
     problems = {name: flight_problems({name: cfg.function_spec(name)})
                 for name in cfg.functions}
-    notes = tuple(f"swarmd sim (physics) will refuse: {p}"
-                  for bad in problems.values() for p in bad)
+    refused = tuple(f"swarmd sim (physics) will refuse: {p}"
+                    for bad in problems.values() for p in bad)
     # No table: the coverage table already lists the functions; only problems print.
-    return Section(key="flight", title="", columns=(), rows=(), data=problems, notes=notes)
+    return Section(key="flight", title="", columns=(), rows=(), data=problems,
+                   warnings=refused)
 
 
 SECTIONS: list[SectionBuilder] = [coverage_section, timing_section, auth_section,
@@ -305,11 +318,23 @@ def render(report: CheckReport, console: Console) -> None:
             console.print(table)
         for note in s.notes:
             console.print(Text(note), soft_wrap=True)
+        for warning in s.warnings:
+            console.print(Text(warning, style="yellow"), soft_wrap=True)
+    console.print(verdict(report), soft_wrap=True)
+
+
+def verdict(report: CheckReport) -> Text:
+    """The last line: what was found, in the words of the exit code (0 usable, warnings
+    allowed; 1 errors; 2 unreadable). "OK" only when nothing at all was found."""
     errors = sum(p.severity == "error" for p in report.problems)
-    warnings = len(report.problems) - errors
-    if report.exit_code == EXIT_OK:
-        console.print(Text(f"{report.file}: OK ({warnings} warning(s))", style="green"),
-                      soft_wrap=True)
-    else:
-        console.print(Text(f"{report.file}: {errors} error(s), {warnings} warning(s)",
-                           style="red"), soft_wrap=True)
+    warnings = report.warnings
+    code = report.exit_code
+    if code == EXIT_UNREADABLE:
+        return Text(f"{report.file}: cannot be read (exit {code})", style="red")
+    if code != EXIT_OK:
+        return Text(f"{report.file}: NOT usable: {errors} error(s), {warnings} warning(s) "
+                    f"(exit {code})", style="red")
+    if warnings:
+        return Text(f"{report.file}: usable, with {warnings} warning(s) above (exit {code})",
+                    style="yellow")
+    return Text(f"{report.file}: OK, no errors or warnings (exit {code})", style="green")

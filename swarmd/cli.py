@@ -7,6 +7,8 @@ file only assembles them, so owners of different commands never edit the same co
 from __future__ import annotations
 
 import importlib
+import inspect
+import re
 
 import typer
 
@@ -53,6 +55,29 @@ COMMAND_MODULES = (
 )
 
 
+def unwrap(text: str) -> str:
+    """A docstring as paragraphs, each one line: rich keeps a docstring's line breaks
+    and wraps again at the terminal's width, which leaves one word on a line of its own
+    at 80 columns. Blank lines still separate paragraphs; a line that starts a list item
+    (`- `) or is indented keeps its break."""
+    paragraphs = inspect.cleandoc(text).split("\n\n")
+    return "\n\n".join(re.sub(r"\n(?![ \t]|- )", " ", p) for p in paragraphs)
+
+
+def _unwrap_all(group: typer.Typer) -> None:
+    """Every command's and sub-group's help, unwrapped (`unwrap`)."""
+    for info in group.registered_commands:
+        text = info.help or (info.callback.__doc__ if info.callback else None)
+        if text:
+            info.help = unwrap(text)
+    for sub in group.registered_groups:
+        if sub.typer_instance is not None:
+            sub_info = sub.typer_instance.info
+            if isinstance(sub_info.help, str):
+                sub_info.help = unwrap(sub_info.help)
+            _unwrap_all(sub.typer_instance)
+
+
 def _register_all() -> None:
     for name in COMMAND_MODULES:
         try:
@@ -62,6 +87,7 @@ def _register_all() -> None:
                 continue  # command not built yet in this tree
             raise
         module.register(app)
+    _unwrap_all(app)
 
 
 _register_all()

@@ -45,6 +45,7 @@ from swarmd.notify import Notifier
 from swarmd.runtime import EventSink, ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
+from swarmd.waiting import Waiting, describe_channel, report_waiting
 
 log = logging.getLogger("swarmd.daemon")
 
@@ -142,6 +143,7 @@ class Daemon:
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
+        self._waiting: asyncio.Task[None] | None = None
         self.signer: Ed25519Signer | None = None
         self.keyring: Keyring | None = None
         """Per-robot auth: this robot's key and every robot's public keys, the objects
@@ -264,11 +266,17 @@ class Daemon:
             "restored": persisted.to_json() if persisted is not None else None,
             "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode})
         await self.runtime.start()
+        rt = self.runtime
+        self._waiting = loop.create_task(report_waiting(
+            Waiting.of(cfg.swarm.to_plan(), cfg.robot), lambda: rt.heard(),
+            grace=params.startup_grace, channel=describe_channel(cfg.transport)))
         return self.runtime
 
     async def stop(self) -> None:
         """Stop the node (LEAVE if configured), then close everything, in that order."""
         self.notifier.stopping()
+        if self._waiting is not None:
+            self._waiting.cancel()
         rt = self.runtime
         if rt is not None:
             await rt.stop(handover=self.handover_on_stop)

@@ -252,27 +252,33 @@ class MonitorState:
         return doc
 
     def table(self, now: float) -> Any:
-        """A rich renderable: the robots table and the alerts under it."""
+        """A rich renderable: the robots table and the alerts under it. It fits 80
+        columns: no outer box, short cells that never wrap (ids, roles, numbers), and
+        each robot's alerts in the ALERT lines under the table (full sentences that a
+        column would cut), its id in red when it has one."""
+        from rich import box
         from rich.console import Group
         from rich.table import Table
         from rich.text import Text
 
         table = Table(title=f"swarm {self.plan.swarm_id}: {len(self.robots)} robots heard, "
-                            f"{self.frames} frames, {sum(self.drops.values())} dropped")
-        for col in ("robot", "status", "role", "function", "epoch", "last heard", "health",
-                    "warned by", "votes", "alerts"):
-            table.add_column(col)
+                            f"{self.frames} frames, {sum(self.drops.values())} dropped",
+                      box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False,
+                      padding=(0, 1, 0, 0), title_justify="left")
+        for col, wrap in (("robot", False), ("status", True), ("role", False),
+                          ("function", False), ("epoch", False), ("heard", False),
+                          ("health", False), ("warned by", True), ("votes", False)):
+            table.add_column(col, no_wrap=not wrap, min_width=6 if wrap else None)
         styles = {"live": "", "left": "dim"}
         for row in self.rows(now):
             heard = row["last_heard_s"]
             table.add_row(
-                str(row["robot"]),
+                Text(str(row["robot"]), style="bold red" if row["alerts"] else ""),
                 Text(row["status"], style=styles.get(row["status"], "bold yellow")),
                 row["role"] or "-", row["function"] or "-",
                 "-" if row["epoch"] is None else str(row["epoch"]),
-                "never" if heard is None else f"{heard:.1f} s ago", row["health"] or "-",
-                ",".join(map(str, row["warned_by"])) or "-", str(row["votes"]),
-                "; ".join(row["alerts"]) or "-",
+                "never" if heard is None else f"{heard:.1f} s", row["health"] or "-",
+                ", ".join(map(str, row["warned_by"])) or "-", str(row["votes"]),
             )
         alerts = self.alerts(now)
         lines = [Text(f"ALERT {a}", style="bold red") for a in alerts]

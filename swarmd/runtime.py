@@ -195,6 +195,10 @@ class Runtime:
             self._watchdog = None
         self._check_state(force=True)
 
+    def heard(self) -> Mapping[int, float]:
+        """robot -> loop time of the last frame the node accepted from it."""
+        return self.node.snapshot().heard
+
     def inject(self, msg: wire.Message) -> None:
         """Broadcast an arbitrary message as this robot (fault injection: `liar:R@T`)."""
         self._step(lambda now: self.node.send_message(msg, now))

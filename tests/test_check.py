@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from typer.testing import CliRunner
+from typer.testing import CliRunner, Result
 
 from swarmd import check as check_mod
 from swarmd.check import Section, run_check
@@ -184,3 +184,37 @@ def test_check_counts_per_robot_fragments_instead_of_refusing_digimesh() -> None
     assert ("digimesh: warning/claim (80 B) in 2 and certificate (92 B) in 2 fragments of "
             "<= 73 B") in notes
     assert "not split" not in notes and "cannot be sent" not in notes
+
+
+def _last_line(result: Result) -> str:
+    return result.output.rstrip().splitlines()[-1]
+
+
+def test_the_last_line_counts_every_warning_printed_and_says_ok_only_when_clean(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # The paper swarm overloads Zigbee and DigiMesh (channel budget): usable, not "OK".
+    report = run_check(CONFIGS / "paper.yaml")
+    budget = next(s for s in report.sections if s.key == "channel_budget")
+    assert budget.warnings and report.warnings == len(budget.warnings)
+    result = runner.invoke(app, ["check", str(CONFIGS / "paper.yaml")])
+    assert result.exit_code == 0
+    assert _last_line(result) == (f"{CONFIGS / 'paper.yaml'}: usable, with "
+                                  f"{report.warnings} warning(s) above (exit 0)")
+    for line in budget.warnings:
+        assert line in " ".join(result.output.split())
+    assert json.loads(runner.invoke(app, ["check", str(CONFIGS / "paper.yaml"), "--json"])
+                      .stdout)["warnings"] == report.warnings
+    # Without the radio budget the paper swarm has nothing to say: "OK".
+    monkeypatch.setattr(check_mod, "SECTIONS", [check_mod.coverage_section,
+                                                check_mod.timing_section])
+    clean = runner.invoke(app, ["check", str(CONFIGS / "paper.yaml")])
+    assert clean.exit_code == 0, clean.output
+    assert _last_line(clean) == f"{CONFIGS / 'paper.yaml'}: OK, no errors or warnings (exit 0)"
+
+
+def test_the_last_line_of_a_swarm_with_errors_says_not_usable(tmp_path: Path) -> None:
+    path = _paper_with(tmp_path, r2={"neighbors": [2]})
+    result = runner.invoke(app, ["check", str(path)])
+    assert result.exit_code == 1, result.output
+    assert _last_line(result).startswith(f"{path}: NOT usable: ")
+    assert _last_line(result).endswith("(exit 1)")

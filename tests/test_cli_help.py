@@ -150,3 +150,43 @@ def test_sim_refuses_an_option_its_mode_would_ignore(args: list[str], words: str
     result = runner.invoke(app, ["sim", str(ROOT / "configs" / "paper.yaml"), "--duration", "1",
                                  *args])
     assert result.exit_code == 2 and words in result.stderr
+
+
+PAPER_ARGS = ["sim", str(ROOT / "configs" / "paper.yaml"), "--virtual"]
+
+
+@pytest.mark.parametrize(("args", "option"), [
+    ([*PAPER_ARGS, "--duration", "inf"], "--duration"),
+    ([*PAPER_ARGS, "--duration", "1e400"], "--duration"),
+    ([*PAPER_ARGS, "--duration", "nan"], "--duration"),
+    ([*PAPER_ARGS, "--duration", "-5"], "--duration"),
+    ([*PAPER_ARGS, "--seed", "-1"], "--seed"),
+    ([*PAPER_ARGS, "--loss", "1"], "--loss"),
+    ([*PAPER_ARGS, "--loss", "-0.1"], "--loss"),
+    ([*PAPER_ARGS, "--loss", "nan"], "--loss"),
+    ([*PAPER_ARGS, "--refuse-arm", "0"], "--refuse-arm"),
+    (["monitor", "--swarm", str(ROOT / "configs" / "paper.yaml"), "--duration", "-5"],
+     "--duration"),
+    (["monitor", "--swarm", str(ROOT / "configs" / "paper.yaml"), "--duration", "0"],
+     "--duration"),
+    (["monitor", "--swarm", str(ROOT / "configs" / "paper.yaml"), "--duration", "inf"],
+     "--duration"),
+    (["monitor", "--swarm", str(ROOT / "configs" / "paper.yaml"), "--port", "70000"],
+     "--port"),
+    (["xbee", "emulate", "2", "--loss", "1.5"], "--loss"),
+    (["xbee", "emulate", "2", "--delay", "-1"], "--delay"),
+    (["xbee", "emulate", "2", "--delay", "inf"], "--delay"),
+    (["xbee", "emulate", "2", "--seed", "-2"], "--seed"),
+    (["xbee", "emulate", "2", "--api-mode", "3"], "--api-mode"),
+    (["xbee", "info", "--port", "/dev/null", "--baud", "0"], "--baud"),
+])
+def test_a_bad_number_is_a_usage_error_naming_the_option(args: list[str], option: str) -> None:
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert f"Invalid value for '{option}'" in " ".join(result.output.split())
+
+
+def test_a_motor_fault_needs_a_flying_craft() -> None:
+    result = runner.invoke(app, [*PAPER_ARGS, "--fault", "motor:2@5"])
+    assert result.exit_code == 2
+    assert "unhealthy:2@5 is what a failed motor does" in result.stderr

@@ -136,8 +136,8 @@ def test_check_faults_motor_needs_physics() -> None:
     motor = [parse_fault("motor:2@5")]
     assert check_faults(motor, PAPER_IDS, physics=True) == []
     assert check_faults(motor, PAPER_IDS, physics=False) == [
-        "motor:2@5: motor faults need physics (drop --no-physics; --virtual models one as "
-        "the robot reporting itself unhealthy)"]
+        "motor:2@5: motor faults need physics (not with --virtual or --no-physics); "
+        "unhealthy:2@5 is what a failed motor does to the protocol"]
 
 
 def test_check_faults_after_the_end_of_the_run() -> None:

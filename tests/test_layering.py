@@ -26,7 +26,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
              "swarmd.budget", "swarmd.state", "swarmd.eventlog", "swarmd.logs",
              "swarmd.metrics", "swarmd.notify", "swarmd.functions", "swarmd.launch",
              "swarmd.runtime", "swarmd.files", "swarmd.identity"),
-    "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.check"),
+    "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.check", "swarmd.waiting"),
     "sim.shared": ("sim.shared",),
     "sim.virtual": ("sim.virtual",),
     "sim.physics": ("sim.physics",),

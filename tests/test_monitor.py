@@ -253,3 +253,30 @@ def test_the_table_shows_the_status() -> None:
     console.print(state.table(1.0))
     text = console.export_text()
     assert "superseded, silent" in text and "live" in text
+
+
+def test_the_table_fits_80_columns_without_cutting_a_word() -> None:
+    from rich.console import Console
+
+    p = params.udp()
+    state = MonitorState(paper_plan(), p)
+    tx = Sender()
+    healthy_swarm(state, tx, 0.0)
+    t = 1.0
+    while t < 1.0 + p.alert_after + 0.5:  # 1 and 3 warn about 2 and nobody claims
+        state.feed(tx.frame(1, wire.Warn(2, 2, 0)), t)
+        state.feed(tx.frame(3, wire.Warn(2, 2, 0)), t)
+        t += p.warn_interval
+    state.feed(tx.hb(6, 2, epoch=1), t)  # then 6 takes f2 over: 2 is superseded
+    console = Console(width=80, record=True)
+    console.print(state.table(t))
+    lines = console.export_text().splitlines()
+    assert all(len(line) <= 80 for line in lines)
+    assert "…" not in "".join(lines)
+    header = next(line for line in lines if line.startswith("robot"))
+    assert header.split() == ["robot", "status", "role", "function", "epoch", "heard",
+                              "health", "warned", "by", "votes"]
+    row2 = next(line for line in lines if line.startswith("2 "))
+    assert row2.split() == ["2", "superseded,", "ACTIVE", "f2", "0", "3.5", "s", "OK", "1,",
+                            "3", "2"]
+    assert "ALERT robot 2: warned about by [1, 3] for 2.5 s and nobody claimed" in lines

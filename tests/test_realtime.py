@@ -183,7 +183,10 @@ def test_realtime_interrupt_leaves_no_process_behind(tmp_path: Path, sig: int) -
         f"    run_realtime(Path({str(PAPER)!r}), duration=60, report_dir=Path(sys.argv[1]),"
         " live=False)\n"
     )
-    proc = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], cwd=ROOT,
+    # A SIGKILLed run cannot remove multiprocessing's temp dir (the forkserver's
+    # socket, pymp-*): it goes to this test's own directory, not /tmp.
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    proc = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], cwd=ROOT, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     pids_file = tmp_path / "realtime" / "pids.json"
     try:

@@ -105,11 +105,14 @@ def test_a_reused_report_directory_starts_a_fresh_run(tmp_path: Path) -> None:
     proc = _sim("--no-physics", "--duration", "2", "--report", str(tmp_path), "--json",
                 timeout=60)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    started = {e["robot"]: (e["role"], e["function"])
-               for e in map(json.loads, (tmp_path / "events.jsonl").read_text().splitlines())
+    records = [json.loads(x) for x in (tmp_path / "events.jsonl").read_text().splitlines()]
+    started = {e["robot"]: (e["role"], e["function"]) for e in records
                if e["event"] == "started"}
     assert started == {1: ("active", "f1"), 2: ("active", "f2"), 3: ("active", "f3"),
                        4: ("active", "f4"), 5: ("standby", None), 6: ("standby", None)}
+    # The end of the run stops every robot: each log ends with `stopped`.
+    last = {e["robot"]: e["event"] for e in records}
+    assert last == {r: "stopped" for r in range(1, 7)}
     assert not (old / "traj-6.jsonl").exists()
     assert not list(tmp_path.glob("key-*.png"))
     assert (tmp_path / "notes.txt").read_text() == "mine"

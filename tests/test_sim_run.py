@@ -98,8 +98,9 @@ def test_a_run_without_pictures_needs_no_extra(
     code, _ = _sim("--virtual", "--events", str(tmp_path / "e.jsonl"))
     assert code == 0
     lines = (tmp_path / "e.jsonl").read_text().splitlines()
-    started = [json.loads(line)["robot"] for line in lines]
-    assert sorted(started) == [1, 2, 3, 4, 5, 6]
+    records = [json.loads(line) for line in lines]
+    assert sorted(e["robot"] for e in records if e["event"] == "started") == [1, 2, 3, 4, 5, 6]
+    assert [e["event"] for e in records[6:]] == ["stopped"] * 6  # the end of the run
 
 
 @pytest.mark.parametrize(("kw", "words"), [

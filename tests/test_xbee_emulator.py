@@ -169,3 +169,14 @@ def test_radios_on_other_pan_or_loss_do_not_hear(tmp_path: Path) -> None:
         with medium._lock:  # as the medium's own thread does
             medium._transmit(a, Transmit(0, 0x00, 0xFFFF, b"x"))
         assert medium.delivered == 0 and medium.lost == 1
+
+
+def test_the_medium_removes_the_directory_it_made_and_keeps_one_it_found(
+        tmp_path: Path) -> None:
+    made = tmp_path / "radios"
+    with Medium(2, directory=made) as medium:
+        assert Path(medium.path(1)).is_symlink()
+    assert not made.exists()
+    with Medium(2, directory=tmp_path):
+        pass
+    assert tmp_path.is_dir()

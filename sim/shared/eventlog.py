@@ -8,9 +8,12 @@ own event log uses (swarmd.eventlog: compact separators), so the same tools read
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+from sim.shared.holders import HolderFold
+from swarmd.core.events import Stopped
 
 
 def write_events(path: Path, events: Iterable[Mapping[str, Any]]) -> None:
@@ -19,3 +22,18 @@ def write_events(path: Path, events: Iterable[Mapping[str, Any]]) -> None:
     with path.open("w", encoding="utf-8") as fh:
         for rec in events:
             fh.write(json.dumps(rec, separators=(",", ":"), default=str) + "\n")
+
+
+def stops_at_end(events: Sequence[Mapping[str, Any]], end: float,
+                 dead: Iterable[int] = ()) -> list[dict[str, Any]]:
+    """The `stopped{}` records a run's end writes (DESIGN section 3): one for each robot
+    still up when the run ended, at the end (or the last event, if one came later), so
+    every robot's log ends as a daemon's does when it is stopped. A robot that crashed
+    (or collided), stopped already, or whose process died on its own (`dead`) gets none:
+    its log ends where it went down. The run's checker and summary have seen the log
+    before: the end of a run is no failure of the swarm."""
+    fold = HolderFold().feed_all(events)
+    gone = set(dead)
+    t = max([end, *(float(e.get("t", 0.0)) for e in events)])
+    return [Stopped().record(round(t, 6), robot) for robot, holding in sorted(fold.robots.items())
+            if holding.role not in ("crashed", "stopped") and robot not in gone]

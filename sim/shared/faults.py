@@ -1,28 +1,11 @@
 """Fault specifications for `swarmd sim --fault SPEC` (DESIGN section 3).
 
-    crash:R@T            robot R dies at T (real time: SIGKILL)
-    collide:R1,R2@T      R1 and R2 collide at T: with physics both crafts lose their
-                         motors at once and fall (each daemon notices through its
-                         health and the others through silence); in --virtual and
-                         --no-physics, two crashes at the same instant
-    restart:R@T          robot R comes back at T (a new process / node with its
-                         persisted state); usually after a crash
-    pause:R@T+D          robot R freezes at T for D seconds (SIGSTOP / SIGCONT)
-    partition:1,2|3,4@T+D  groups stop hearing each other from T for D seconds;
-                         robots not named stay in the first group
-    liar:R@T             robot R sends false warnings about its neighbours from T
-    leave:R@T            robot R leaves gracefully at T (LEAVE, then stops)
-    unhealthy:R@T        robot R reports itself faulty at T (DESIGN rule 7)
-    motor:R@T            a rotor of robot R fails at T (physics only)
-    forge:R@T:ATTACK     an insider holding robot R's key (per-robot mode) or the
-                         swarm key (shared) sends forged frames from T, raw on the
-                         radio (both simulators): `epoch` one HEARTBEAT as R for every slot it does
-                         not hold at epoch 65535; `seq` a HEARTBEAT and a WARN as R at
-                         seq 2^48-1; `claim` CLAIMs for every slot it does not hold at
-                         ever new epochs, every warn interval; `warn` WARNs in the names
-                         of every other witness about every slot's holder, every warn
-                         interval; `replay` the frames R's radio heard before T, played
-                         back every warn interval
+This module is the one source of the fault kinds: `KINDS`, their forms (`_FORMS`) and
+what each does (`WHAT`). `swarmd sim --help` prints `help_table()`; README.md,
+docs/DESIGN.md and docs/sim.md hold `markdown_table()` between `<!-- fault-table -->`
+markers, which `python scripts/fault_table.py` rewrites (tests/test_fault_table.py
+fails when they differ). A new kind is one entry in each of the three, then that
+command.
 
 Every kind but partition and collide targets one robot or several at once
 (`crash:1,2@T`: both at the same instant); `Fault.split()` gives one fault a robot,
@@ -148,6 +131,55 @@ _FORMS = {
     "forge": "forge:R@T:ATTACK (ATTACK: " + ", ".join(ATTACKS) + ")",
 }
 
+WHAT = {
+    "crash": "robot R dies at T (real time: SIGKILL of its process)",
+    "restart": "robot R comes back at T: a new process (node) on its persisted state, "
+               "usually after a crash",
+    "pause": "robot R freezes at T for D seconds (SIGSTOP, then SIGCONT)",
+    "partition": "the groups stop hearing each other from T for D seconds; robots named "
+                 "nowhere stay in the first group",
+    "liar": "robot R sends false warnings about its neighbours from T",
+    "leave": "robot R leaves gracefully at T (LEAVE, then stops)",
+    "unhealthy": "robot R reports itself faulty at T (DESIGN rule 7: LEAVE, standby)",
+    "motor": "a rotor of robot R fails at T (physics only: not with --virtual or "
+             "--no-physics)",
+    "collide": "R1 and R2 collide at T: with physics both crafts lose their motors and "
+               "fall; in --virtual and --no-physics, two crashes at one instant",
+    "forge": "an insider holding R's key sends forged frames from T; ATTACK is "
+             + ", ".join(ATTACKS) + " (docs/sim.md)",
+}
+"""What each fault kind does, one sentence: `swarmd sim --help` and the docs' tables."""
+
+_SEVERAL = ("R is a robot id, T the seconds from the start (before --duration), D how "
+            "many seconds it lasts. Every kind but partition and collide also takes "
+            "several robots at once: crash:1,2@T.")
+
+
+def _short_form(kind: str) -> str:
+    """The kind's SPEC in its shortest form (`crash:R@T`, `forge:R@T:ATTACK`)."""
+    return _FORMS[kind].split(" or ")[0].split(" (")[0]
+
+
+def help_table(width: int = 76) -> str:
+    """The fault kinds as plain text lines of at most `width` columns: the SPEC, then
+    what it does, wrapped under its own column (`swarmd sim --help`)."""
+    import textwrap
+
+    forms = {k: _short_form(k) for k in KINDS}
+    indent = max(map(len, forms.values())) + 2
+    lines = ["Fault kinds (--fault SPEC):"]
+    for kind in KINDS:
+        lines += textwrap.wrap(WHAT[kind], width, initial_indent=forms[kind].ljust(indent),
+                               subsequent_indent=" " * indent, break_on_hyphens=False)
+    lines += textwrap.wrap(_SEVERAL, width, break_on_hyphens=False)
+    return "\n".join(lines)
+
+
+def markdown_table() -> str:
+    """The fault kinds as a Markdown table, with the same words as `help_table`."""
+    rows = [f"| `{_short_form(k).replace('|', chr(92) + '|')}` | {WHAT[k]} |" for k in KINDS]
+    return "\n".join(["| SPEC | what it does |", "|---|---|", *rows, "", _SEVERAL])
+
 
 def parse_fault(spec: str) -> Fault:
     """Parse one SPEC. Raises FaultSpecError naming what is wrong and the expected form.
@@ -256,9 +288,10 @@ def _robot(text: str, bad: Callable[[str], FaultSpecError]) -> int:
 
 def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
                  duration: float | None = None) -> list[str]:
-    """Problems with a fault list against a swarm: unknown robots, motor without
-    physics (`physics` is True for --virtual too: sim.virtual.simulator turns a motor fault into
-    `unhealthy`), and (given the run's `duration`) a fault that would start after the end."""
+    """Problems with a fault list against a swarm: unknown robots, a motor fault
+    without a flying craft (`physics` is False for --virtual and --no-physics: a motor
+    needs rotors), and (given the run's `duration`) a fault that would start after the
+    end."""
     problems = []
     for f in faults:
         unknown = [r for r in f.robots if r not in robot_ids]
@@ -266,8 +299,9 @@ def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
             problems.append(f"{f.spec()}: robot {unknown[0]} is not in the swarm "
                             f"(robots: {_ranges(robot_ids)})")
         if f.kind == "motor" and not physics:
-            problems.append(f"{f.spec()}: motor faults need physics (drop --no-physics; "
-                            "--virtual models one as the robot reporting itself unhealthy)")
+            problems.append(f"{f.spec()}: motor faults need physics (not with --virtual "
+                            f"or --no-physics); unhealthy:{','.join(map(str, f.robots))}"
+                            f"@{_num(f.at)} is what a failed motor does to the protocol")
         if duration is not None and f.at >= duration:
             problems.append(f"{f.spec()}: starts at {_num(f.at)} s, not before the end of the "
                             f"run (--duration {_num(duration)})")

@@ -115,12 +115,14 @@ class Medium:
         self._selector.register(self._wake_r, selectors.EVENT_READ, 0)
         self._thread: threading.Thread | None = None
         self._stopping = False
+        self._made_dir = False
         self.delivered = 0
         self.lost = 0
         self.uart_overflows = 0
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self) -> Medium:
+        self._made_dir = not self.directory.exists()
         self.directory.mkdir(parents=True, exist_ok=True)
         with self._lock:
             for n in self.radios:
@@ -141,6 +143,9 @@ class Medium:
         for fd in (self._wake_r, self._wake_w):
             with contextlib.suppress(OSError):
                 os.close(fd)
+        if self._made_dir:  # what start() made goes, if nobody put anything else in it
+            with contextlib.suppress(OSError):
+                self.directory.rmdir()
 
     def __enter__(self) -> Medium:
         return self.start()

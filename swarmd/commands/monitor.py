@@ -14,6 +14,7 @@ from typing import Annotated
 
 import typer
 
+from swarmd.commands.numbers import positive
 from swarmd.transport.addresses import DEFAULT_GROUP, DEFAULT_INTERFACE, DEFAULT_PORT
 
 
@@ -31,7 +32,8 @@ def register(app: typer.Typer) -> None:
             "--group, --port, --interface.")] = None,
         group: Annotated[str, typer.Option(
             "--group", help="UDP multicast group (with --swarm).")] = DEFAULT_GROUP,
-        port: Annotated[int, typer.Option("--port", help="UDP port (with --swarm).")] = (
+        port: Annotated[int, typer.Option("--port", min=1, max=0xFFFF,
+                                          help="UDP port (with --swarm).")] = (
             DEFAULT_PORT),
         interface: Annotated[str, typer.Option(
             "--interface",
@@ -44,8 +46,8 @@ def register(app: typer.Typer) -> None:
             "--json", help="Print one JSON document instead of a table (implies "
             "--once).")] = False,
         duration: Annotated[float | None, typer.Option(
-            "--duration",
-            help="Seconds to listen. Default: 2 with --once or --json, else until "
+            "--duration", callback=positive,
+            help="Seconds to listen, more than 0. Default: 2 with --once or --json, else until "
             "Ctrl-C.")] = None,
     ) -> None:
         """Watch the swarm channel, like the paper's base station; sends nothing.

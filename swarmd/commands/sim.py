@@ -16,68 +16,86 @@ from typing import Annotated, Any
 
 import typer
 
+from swarmd.commands.numbers import finite, probability
+
 FAULT_HELP = (
-    "Inject a fault (repeatable): crash:R@T, restart:R@T, pause:R@T+D, "
-    "partition:1,2|3,4@T+D, liar:R@T, leave:R@T, unhealthy:R@T, motor:R@T (physics "
-    "only). R a robot id; T seconds from the start, before --duration; D seconds it "
-    "lasts. docs/sim.md tells what each one does."
+    "Inject a fault (repeatable), e.g. crash:2@5: robot 2 dies 5 s into the run. Every "
+    "kind is listed below the options; docs/sim.md tells more."
 )
+
+
+def _fault_kinds() -> str:
+    """The fault table under the options (sim/shared/faults.py, the one source)."""
+    from rich.markup import escape
+
+    from sim.shared.faults import help_table
+
+    return escape(help_table())
 
 
 def register(app: typer.Typer) -> None:
     """Add the `sim` command to the CLI."""
 
-    @app.command("sim")
+    @app.command("sim", epilog=_fault_kinds())
     def sim(
         swarm: Annotated[Path, typer.Argument(help="Swarm file, e.g. configs/paper.yaml.")],
         virtual: Annotated[bool, typer.Option(
-            "--virtual", help="Run every protocol core in this process on a virtual "
+            "--virtual", metavar="", help="Run every protocol core in this process on a virtual "
             "clock: deterministic by --seed, far faster than real time, no robot "
             "processes, no physics.")] = False,
         duration: Annotated[float, typer.Option(
-            "--duration", min=0.1, help="Length of the run in seconds (wall-clock in "
-            "real time, simulated with --virtual).")] = 15.0,
-        seed: Annotated[int, typer.Option("--seed", help="Seed of frame loss, jitter and "
-                                          "start times.")] = 0,
+            "--duration", metavar="S", min=0.1, callback=finite,
+            help="Length of the run in seconds "
+            "(wall-clock in real time, simulated with --virtual).")] = 15.0,
+        seed: Annotated[int, typer.Option("--seed", metavar="N", min=0, help="Seed of frame loss, "
+                                          "jitter and start times, 0 or more.")] = 0,
         loss: Annotated[float, typer.Option(
-            "--loss", min=0.0, max=1.0, help="Probability, 0 to 1, that a receiver misses "
-            "a frame (drawn per frame and per receiver).")] = 0.0,
-        fault: Annotated[list[str] | None, typer.Option("--fault", help=FAULT_HELP)] = None,
+            "--loss", metavar="P", callback=probability, help="Probability, 0 to below 1, "
+            "that a receiver misses a frame (drawn per frame and per receiver).")] = 0.0,
+        fault: Annotated[list[str] | None, typer.Option(
+            "--fault", metavar="SPEC", help=FAULT_HELP)] = None,
         events: Annotated[Path | None, typer.Option(
-            "--events", help="Also write the merged event log to this file (JSON Lines, "
+            "--events", metavar="FILE",
+            help="Also write the merged event log to this file (JSON Lines, "
             "one event a line). Default: not written.")] = None,
         report: Annotated[Path | None, typer.Option(
-            "--report", help="Directory for summary.json, events.jsonl, timeline.png and, "
+            "--report", metavar="DIR",
+            help="Directory for summary.json, events.jsonl, timeline.png and, "
             "with physics, trajectories.png, swarm.mp4 and key frames; what an earlier run "
             "wrote there is removed first. Default: no report.")]
         = None,
         json_out: Annotated[bool, typer.Option(
-            "--json", help="Print the summary as JSON on stdout; no live table, the "
+            "--json", metavar="", help="Print the summary as JSON on stdout; no live table, the "
             "report lines go to stderr.")] = False,
         no_physics: Annotated[bool, typer.Option(
-            "--no-physics", help="Real time with bare daemons (robot link 'none'): no "
+            "--no-physics", metavar="", help="Real time with bare daemons (robot link 'none'): no "
             "MuJoCo quadrotors, so no trajectories or video.")] = False,
         craft: Annotated[str | None, typer.Option(
-            "--craft", help="Quadrotor every robot flies (physics only): x2 (Skydio "
+            "--craft", metavar="NAME",
+            help="Quadrotor every robot flies (physics only): x2 (Skydio "
             "X2-class, 1.3 kg, visible in pictures) or crazyflie (27 g). Default: "
             "$SWARMD_QUAD_PRESET, else x2.")] = None,
         transport: Annotated[str, typer.Option(
-            "--transport", help="Channel in real time: udp (multicast on loopback), xbee "
+            "--transport", metavar="NAME",
+            help="Channel in real time: udp (multicast on loopback), xbee "
             "or serial (emulated radios on pseudo-terminals). Refused with --virtual.")]
         = "udp",
         link: Annotated[str, typer.Option(
-            "--link", help="How each daemon reaches its quadrotor (physics only): direct "
+            "--link", metavar="NAME",
+            help="How each daemon reaches its quadrotor (physics only): direct "
             "(the daemon's link drives the MuJoCo craft) or mavlink (the daemon's MAVLink "
             "link over loopback UDP to a simulated autopilot, one system id and UDP port per "
             "robot, that flies the craft; faults reach the daemon only as MAVLink health). "
             "Default: direct.")] = "direct",
         autopilot: Annotated[str | None, typer.Option(
-            "--autopilot", help="Flavour of the simulated autopilot of --link mavlink: px4 "
+            "--autopilot", metavar="NAME",
+            help="Flavour of the simulated autopilot of --link mavlink: px4 "
             "(OFFBOARD setpoints) or ardupilot (GUIDED). Default: px4.")] = None,
         refuse_arm: Annotated[list[int] | None, typer.Option(
-            "--refuse-arm", help="Robot id whose simulated autopilot denies every arm "
-            "command, as a failing pre-arm check (repeatable; --link mavlink only). "
-            "Default: none.")] = None,
+            "--refuse-arm", metavar="R", min=1, max=0xFFFF,
+            help="Robot id whose simulated autopilot "
+            "denies every arm command, as a failing pre-arm check (repeatable; --link "
+            "mavlink only). Default: none.")] = None,
     ) -> None:
         """Run the whole swarm on this machine, inject faults, print a summary.
 

@@ -1,6 +1,7 @@
 """`swarmd start --config robot.yaml`: run one robot's daemon (systemd runs this).
 
-Logs one JSON object a line on stdout (journald), appends the event log if configured,
+Logs one JSON object a line on stdout (journald), or readable lines on a terminal
+(`--log-format`), appends the event log if configured,
 stops cleanly on SIGTERM / SIGINT (LEAVE when it held a function and handover_on_stop),
 reloads on SIGHUP. Exit codes: 0 clean stop, 1 start-up failure, 2 unusable config.
 """
@@ -21,6 +22,14 @@ def _check_level(value: str) -> str:
     return value.lower()
 
 
+def _check_format(value: str | None) -> str | None:
+    from swarmd.logs import FORMATS
+
+    if value is not None and value.lower() not in FORMATS:
+        raise typer.BadParameter(f"{value!r} is not one of {', '.join(FORMATS)}")
+    return value.lower() if value is not None else None
+
+
 def register(app: typer.Typer) -> None:
     """Add the `start` command to the CLI."""
 
@@ -32,10 +41,16 @@ def register(app: typer.Typer) -> None:
         log_level: Annotated[str, typer.Option(
             "--log-level", callback=_check_level,
             help="Least severe level logged: debug, info, warning or error.")] = "info",
+        log_format: Annotated[str | None, typer.Option(
+            "--log-format", callback=_check_format,
+            help="How log lines look on stdout: text (local time, robot, event, fields; "
+            "for people) or json (one object a line, for journald and tools). Default: "
+            "text on a terminal, json otherwise.")] = None,
     ) -> None:
         """Run one robot's daemon until SIGTERM / SIGINT (what systemd runs).
 
-        Logs one JSON object a line on stdout. SIGTERM / SIGINT hand the robot's function
+        Logs one JSON object a line on stdout, or readable text lines on a terminal
+        (--log-format). SIGTERM / SIGINT hand the robot's function
         over (LEAVE, with handover_on_stop) and stop; SIGHUP reloads keys, event log and
         alert hook (docs/daemon.md).
 
@@ -49,9 +64,10 @@ def register(app: typer.Typer) -> None:
 
         from swarmd.config import ConfigError, load_robot
         from swarmd.daemon import EXIT_CONFIG, run_daemon
-        from swarmd.logs import setup_logging
+        from swarmd.logs import LogFormat, default_format, setup_logging
 
-        setup_logging(log_level)
+        fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"
+        setup_logging(log_level, fmt=fmt)
         log = logging.getLogger("swarmd.start")
         try:
             cfg = load_robot(config)
@@ -60,6 +76,7 @@ def register(app: typer.Typer) -> None:
             for problem in exc.problems:
                 log.error(str(problem), extra={"config": str(config)})
             raise typer.Exit(EXIT_CONFIG) from None
+        setup_logging(log_level, fmt=fmt, robot=cfg.robot)
         for warning in cfg.warnings:
             log.warning(str(warning))
         code = asyncio.run(run_daemon(cfg, handle_signals=True, config_path=config))

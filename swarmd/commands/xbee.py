@@ -16,6 +16,7 @@ from typing import Annotated, Any
 
 import typer
 
+from swarmd.commands.numbers import finite, probability
 from swarmd.transport.media import PROTOCOL_NAMES, PROTOCOLS
 
 SETTINGS = ("AP", "ID", "CH", "SC", "CE", "SM", "MY", "DH", "DL", "NI", "EE")
@@ -106,8 +107,8 @@ def register(app: typer.Typer) -> None:
     def info(
         port: Annotated[str, typer.Option(help="Serial device of the radio, e.g. "
                                           "/dev/xbee.")],
-        baud: Annotated[int, typer.Option(help="UART baud rate, bit/s (the radio's "
-                                          "BD).")] = 9600,
+        baud: Annotated[int, typer.Option(min=1, help="UART baud rate, bit/s (the "
+                                          "radio's BD).")] = 9600,
     ) -> None:
         """Print what the radio is: protocol, firmware, address, network settings.
 
@@ -146,9 +147,9 @@ def register(app: typer.Typer) -> None:
                  "changed: that needs a firmware update in XCTU). Default: not "
                  "checked.")] = None,
         api_mode: Annotated[int | None, typer.Option(
-            help="Set AP to 1 or 2. Default: keep the radio's.")] = None,
-        baud: Annotated[int, typer.Option(help="UART baud rate, bit/s (the radio's "
-                                          "BD).")] = 9600,
+            min=1, max=2, help="Set AP to 1 or 2. Default: keep the radio's.")] = None,
+        baud: Annotated[int, typer.Option(min=1, help="UART baud rate, bit/s (the "
+                                          "radio's BD).")] = 9600,
         write: Annotated[bool, typer.Option("--write", help="Save to flash (WR) so the "
                                             "settings survive a power cycle. Default: "
                                             "applied only.")] = False,
@@ -214,11 +215,13 @@ def register(app: typer.Typer) -> None:
         protocol: Annotated[str, typer.Option(help="Firmware emulated: zigbee, 802.15.4 "
                                               "or digimesh.")]
         = "802.15.4",
-        api_mode: Annotated[int, typer.Option(help="API mode (AP), 1 or 2.")] = 1,
+        api_mode: Annotated[int, typer.Option(min=1, max=2,
+                                              help="API mode (AP), 1 or 2.")] = 1,
         loss: Annotated[float, typer.Option(
-            help="Probability, 0 to 1, that a frame sent or received by a radio is "
-            "lost.")] = 0.0,
+            callback=probability, help="Probability, 0 to below 1, that a "
+            "frame sent or received by a radio is lost.")] = 0.0,
         delay: Annotated[float, typer.Option(
+            min=0.0, callback=finite,
             help="Extra delivery delay of every radio's frames, seconds.")] = 0.0,
         pan: Annotated[str, typer.Option(help="PAN id of every radio.")] = "0x607",
         channel: Annotated[str, typer.Option(help="Channel of every radio.")] = "0x0C",
@@ -226,7 +229,7 @@ def register(app: typer.Typer) -> None:
                                                "symlinks robot1..robotN.")]
         = "/tmp/swarmd-xbee",
         seed: Annotated[int | None, typer.Option(
-            help="Seed of the loss draws. Default: random.")] = None,
+            min=0, help="Seed of the loss draws, 0 or more. Default: random.")] = None,
         transparent: Annotated[bool, typer.Option(
             "--transparent", help="AP=0 radios (raw byte stream, for transport kind "
             "serial) instead of API mode.")] = False,
