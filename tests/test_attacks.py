@@ -328,19 +328,110 @@ def test_per_robot_random_chaos_breaks_no_invariant() -> None:
         assert res.violations == [], (seed, [v.as_dict() for v in res.violations])
 
 
-def test_replay_filter_bounds_jumps_by_elapsed_time() -> None:
-    from swarmd.core.replay import JUMP, RATE, ReplayFilter
+# ---------------------------------------------------------------- seqs bounded by the clock
+# (DESIGN section 2, "Sequence numbers"): a receiver bounds every sender's seq by its own
+# clock, from the first frame heard and after a restore.
+NOW_SEQ = wire.seq_seed(1_750_000_000.0)
+"""Where a daemon's counter starts: its wall clock in 10 us units."""
+MODES = ["none", "shared", "per-robot"]
 
-    f = ReplayFilter()
-    assert f.check(2, 1000, 0.0) is None
-    assert f.check(2, wire.SEQ_MAX, 0.1) == "seq_jump"
-    assert f.check(2, 1001, 0.2) is None  # not muted
-    assert f.check(2, 1001 + JUMP, 0.2) is None  # a restart from the reservation
-    later = 1001 + JUMP + JUMP + int(RATE * 10.0)
-    assert f.check(2, later, 10.2) is None  # a restart after 10 s of wall clock
-    f.restore(3, 500)
-    assert f.check(3, 480, 0.0) == "replay" and f.check(3, 500, 0.0) == "replay"
-    assert f.check(3, 10**12, 0.0) is None  # the first jump after a restore is free
+
+def _mode_node(plan: SwarmPlan, params: Params, mode: str, rid: int, now: float, *,
+               seq_start: int = NOW_SEQ, restored: Restored | None = None) -> Node:
+    key = (bytes(32),) if mode != "none" else ()
+    ident = fake_identities(plan.robots)[rid] if mode == "per-robot" else None
+    node = Node(rid, plan, params, now, keys=key, identity=ident, seq_start=seq_start,
+                restored=restored)
+    node.tick(now)
+    return node
+
+
+def _beat(plan: SwarmPlan, mode: str, sender: int, seq: int) -> bytes:
+    """A heartbeat of `sender` (holder of its home slot at epoch 0): what the robot sends,
+    or what an insider with the swarm key (anyone, unsigned) forges in its name."""
+    key = bytes(32) if mode != "none" else None
+    return wire.encode(wire.Frame(plan.swarm_id, sender, seq,
+                                  wire.Heartbeat(sender, 0, 1, 0)), key)
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("restart", [False, True])
+def test_a_max_seq_heard_first_mutes_nobody(paper: Paper, mode: str, restart: bool) -> None:
+    """One heartbeat in robot 2's name at 2^48-1 is the first frame robot 1 hears of it,
+    at its start or after a restart (the restored seq was no bound either): robot 2's
+    own heartbeats are still heard, not dropped as replays for good."""
+    plan, params = paper
+    restored = Restored(peer_seq={2: NOW_SEQ + 50}) if restart else None
+    node = _mode_node(plan, params, mode, 1, 10.0, restored=restored)
+    node.receive(_beat(plan, mode, 2, wire.SEQ_MAX - 1), 10.0)
+    assert node.drops["seq_jump"] == 1
+    for i in range(20):
+        node.receive(_beat(plan, mode, 2, NOW_SEQ + 100 + i), 10.1 + 0.1 * i)
+    assert node.drops["replay"] == 0
+    assert node.snapshot().heard[2] == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_walk_at_any_rate_stops_at_the_receivers_clock(paper: Paper, mode: str) -> None:
+    """Walking robot 2's seq up in big steps, 4,000 frames a second: the walk stops at
+    the receiver's own clock plus the stated allowance, so the 48-bit space cannot be
+    used up faster than real time, and robot 2 is muted at most until its counter is
+    above it (it hears the walk and follows it, `own`)."""
+    from swarmd.core.replay import AHEAD, JUMP, RATE
+
+    plan, params = paper
+    node = _mode_node(plan, params, mode, 1, 0.0)
+    step = JUMP // 2
+    for i in range(2000):
+        node.receive(_beat(plan, mode, 2, NOW_SEQ + step * (i + 1)), i / 4000)
+    top = node.snapshot().peer_seq[2]
+    assert top <= NOW_SEQ + int(RATE * 0.5) + AHEAD
+    assert node.drops["seq_jump"] >= 2000 - (AHEAD + RATE) // step - 1
+    # The robot it names heard the walk too and moved its counter above it.
+    two = _mode_node(plan, params, mode, 2, 0.0)
+    for i in range(2000):
+        two.receive(_beat(plan, mode, 2, NOW_SEQ + step * (i + 1)), i / 4000)
+    assert two.snapshot().seq >= top
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_an_absurd_restored_peer_seq_is_refused(paper: Paper, mode: str) -> None:
+    """A persisted seq of robot 2 far beyond any clock (written after a forged frame
+    was taken, or a corrupted file): refused at the restore, so it mutes nobody across
+    restarts; a plausible one still keeps old frames old."""
+    plan, params = paper
+    node = _mode_node(plan, params, mode, 1, 5.0,
+                      restored=Restored(peer_seq={2: wire.SEQ_MAX - 1, 4: NOW_SEQ - 10}))
+    assert 2 not in node.snapshot().peer_seq and node.drops["seq_jump"] == 1
+    node.receive(_beat(plan, mode, 2, NOW_SEQ + 5), 5.1)
+    node.receive(_beat(plan, mode, 4, NOW_SEQ - 20), 5.1)  # older than what was kept
+    assert node.drops["replay"] == 1 and 2 in node.snapshot().heard
+
+
+def test_a_sender_restarted_after_a_long_run_is_heard(paper: Paper) -> None:
+    """A sender's counter lags its clock by its uptime (one step a frame, 10^5 a
+    second): restarted after ten minutes it reseeds from its clock, 6*10^7 above its
+    last frame. That is no jump to drop: it is within the receiver's clock."""
+    plan, params = paper
+    node = _mode_node(plan, params, "none", 1, 0.0)
+    for i in range(6000):  # ten minutes of heartbeats at 10 Hz
+        node.receive(_beat(plan, "none", 2, NOW_SEQ + i), 0.1 * i)
+    restarted = wire.seq_seed(1_750_000_000.0 + 602.0)
+    node.receive(_beat(plan, "none", 2, restarted), 602.0)
+    assert node.drops["seq_jump"] == 0 and node.snapshot().peer_seq[2] == restarted
+
+
+def test_replay_filter_clock_and_limits() -> None:
+    from swarmd.core.replay import AHEAD, RATE, SKEW, ReplayFilter
+
+    f = ReplayFilter(1000, 2.0)
+    assert f.clock(2.0) == 1000 and f.clock(12.0) == 1000 + 10 * RATE
+    assert f.clock(1.0) == 1000  # never before the start
+    assert f.limit(2.0) == 1000 + AHEAD and f.follow_limit(2.0) == 1000 + AHEAD + SKEW
+    assert f.check(2, 1000 + AHEAD + 1, 2.0) == "seq_jump" and f.top(2) is None
+    assert f.check(2, 1000 + AHEAD, 2.0) is None
+    assert not f.restore(3, 1000 + AHEAD + 1) and f.restore(3, 1000 + AHEAD)
+    assert ReplayFilter().check(2, wire.SEQ_MAX, 5.0) is None  # no origin, no bound
 
 
 def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
