@@ -460,3 +460,72 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
            for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
     assert any(isinstance(m, wire.Cert) for m in out)
     assert any(isinstance(m, wire.Claim) and m.epoch == 1 for m in out)
+
+
+# ---------------------------------------------------------------- fragments
+# (DESIGN section 2, "Fragments"): a forger spoils at most the messages it has seen.
+class _Air:
+    """What a serial radio puts on the air: the transport's writes, as datagrams."""
+
+    def __init__(self) -> None:
+        from swarmd.transport import framing
+
+        self.decoder = framing.FrameDecoder()
+        self.datagrams: list[bytes] = []
+
+    def get_write_buffer_size(self) -> int:
+        return 0
+
+    def write(self, data: bytes) -> None:
+        self.datagrams += self.decoder.feed(data)
+
+
+def _warns(n: int) -> list[bytes]:
+    """Robot 3's per-robot signed WARNs: 80 B, two fragments each on a 64 B serial radio."""
+    ids = fake_identities([3])
+    return [wire.encode(wire.Frame(0x607, 3, 1000 + i, wire.Warn(1, 1, 0)), None, ids[3].signer)
+            for i in range(n)]
+
+
+def test_fragment_ids_cannot_be_predicted_from_a_heard_one() -> None:
+    """A listener heard one fragmented message of robot 3 (its id), then forges one
+    fragment in robot 3's name for each of the next eight ids a counter would give:
+    robot 3's next messages still reassemble whole (a random id is hit by a guess once
+    in 65,536; one hit is allowed, so the test cannot flake)."""
+    from typing import cast
+
+    from swarmd.transport import fragment
+    from swarmd.transport.serial import SerialTransport
+
+    tx = SerialTransport(port="/dev/null")  # never opened: the air is `_Air`
+    air = _Air()
+    cast(Any, tx)._transport = air
+    first, *later = _warns(9)
+    tx.send(first)
+    heard = fragment.HEADER.unpack_from(air.datagrams[0])[2]
+    rx = fragment.Reassembler()
+    for guess in range(heard + 1, heard + 9):
+        forged = fragment.HEADER.pack(fragment.MARKER, 3, guess & 0xFFFF, 1 << 4 | 2)
+        assert rx.feed(forged + bytes(40), 0.0) is None
+    air.datagrams.clear()
+    for f in later:
+        tx.send(f)
+    got = [out for d in air.datagrams if (out := rx.feed(d, 0.1)) is not None]
+    assert len(air.datagrams) == 2 * len(later)
+    assert len(set(got) & set(later)) >= len(later) - 1
+
+
+def test_a_fragment_flood_in_one_name_spoils_no_other_robots_message() -> None:
+    """One robot's name on a flood of first fragments of made-up messages: the other
+    robots' messages in flight are not evicted (a per-sender reassembly budget)."""
+    from swarmd.transport import fragment
+
+    warn = _warns(1)[0]
+    pieces = fragment.split(warn, 64, 0x5A5A)
+    rx = fragment.Reassembler()
+    assert rx.feed(pieces[0], 0.0) is None
+    for i in range(200):  # made-up messages of robot 9
+        forged = fragment.HEADER.pack(fragment.MARKER, 9, i, 1 << 4 | 2)
+        rx.feed(forged + bytes(40), 0.001)
+    assert rx.feed(pieces[1], 0.002) == warn
+    assert rx.drops["evicted_sender"] >= 190 and len(rx) <= fragment.MAX_PER_SENDER
