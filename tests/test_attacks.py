@@ -529,3 +529,104 @@ def test_a_fragment_flood_in_one_name_spoils_no_other_robots_message() -> None:
         rx.feed(forged + bytes(40), 0.001)
     assert rx.feed(pieces[1], 0.002) == warn
     assert rx.drops["evicted_sender"] >= 190 and len(rx) <= fragment.MAX_PER_SENDER
+
+
+# ---------------------------------------------------------------- the robot link
+async def test_a_robot_link_flood_never_starves_the_loop(tmp_path: Any,
+                                                         caplog: pytest.LogCaptureFixture) -> None:
+    """120 kB of short bad lines on the socket robot link: the loop gets a turn every
+    `LINES_PER_TURN` lines (its timers, the protocol's heartbeats, run between), the log
+    gets one line for the lot, not one a line, and the health line after them counts."""
+    import asyncio
+    import logging
+
+    from swarmd.core.roles import Health
+    from swarmd.link.socket import SocketLink
+
+    healths: list[Health] = []
+    link = SocketLink(tmp_path / "robot.sock", health_timeout=30.0)
+    await link.start(healths.append)
+    per_turn: list[int] = []
+    last = 0
+
+    def turn() -> None:  # one call per turn of the loop
+        nonlocal last
+        per_turn.append(link.counters["bad_lines"] - last)
+        last = link.counters["bad_lines"]
+        if not healths:
+            ticker[0] = asyncio.get_running_loop().call_soon(turn)
+
+    ticker = [asyncio.get_running_loop().call_soon(turn)]
+    try:
+        with caplog.at_level(logging.WARNING, logger="swarmd.link.socket"):
+            _, writer = await asyncio.open_unix_connection(str(tmp_path / "robot.sock"))
+            writer.write(b"x\n" * 60_000 + b'{"health": "ok"}\n')
+            await writer.drain()
+            await asyncio.wait_for(_until(lambda: bool(healths)), 30.0)
+            writer.close()
+    finally:
+        ticker[0].cancel()
+        await link.close()
+    assert healths == [Health.OK] and link.counters["bad_lines"] == 60_000
+    assert max(per_turn) <= 2 * 64  # two of the link's turns at most between two of ours
+    logged = [r for r in caplog.records if "bad line" in r.getMessage()]
+    assert 1 <= len(logged) <= 2 and "60000" not in logged[0].getMessage()
+
+
+async def _until(cond: Any) -> None:
+    import asyncio
+
+    while not cond():
+        await asyncio.sleep(0.01)
+
+
+class _Burst:
+    """An autopilot connection that delivers `n` heartbeats at once, their status
+    flapping between CRITICAL and ACTIVE, then nothing."""
+
+    def __init__(self, n: int) -> None:
+        import io
+
+        from pymavlink.dialects.v20 import common as mavlink2
+        from test_mavlink_link import Autopilot
+
+        ap = Autopilot("px4")
+        self.msgs = [ap.heartbeat(status=5 if i % 2 else 4) for i in range(n)]
+        self.mav = mavlink2.MAVLink(io.BytesIO(), srcSystem=1, srcComponent=191)
+
+    def recv_match(self, blocking: bool, timeout: float) -> Any:
+        import time
+
+        if self.msgs:
+            return self.msgs.pop()
+        time.sleep(min(timeout, 0.01))
+        return None
+
+    def close(self) -> None:
+        pass
+
+
+async def test_a_mavlink_burst_is_handed_over_and_logged_in_bounded_pieces(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """4,000 heartbeats at once whose health flaps: the loop is handed the latest health
+    a few times, not 4,000 callbacks, and the log counts the changes in one line."""
+    import asyncio
+    import logging
+
+    from swarmd.core.roles import Health
+    from swarmd.link.mavlink import MavlinkLink
+
+    burst = _Burst(4000)
+    got: list[Health] = []
+    link = MavlinkLink("/dev/ttyFAKE", opener=lambda: burst)
+    with caplog.at_level(logging.INFO, logger="swarmd.link.mavlink"):
+        await link.start(got.append)
+        try:
+            await asyncio.wait_for(_until(lambda: not burst.msgs), 30.0)
+            await asyncio.sleep(0.1)  # the hand-overs still queued, if any
+        finally:
+            await link.close()
+    assert got and set(got) <= {Health.OK, Health.DEGRADED}
+    assert len(got) <= 400
+    logged = [r for r in caplog.records if "robot health" in r.getMessage()]
+    assert 1 <= len(logged) <= 2
