@@ -630,3 +630,87 @@ async def test_a_mavlink_burst_is_handed_over_and_logged_in_bounded_pieces(
     assert len(got) <= 400
     logged = [r for r in caplog.records if "robot health" in r.getMessage()]
     assert 1 <= len(logged) <= 2
+
+
+# ---------------------------------------------------------------- the monitor
+class _Channel:
+    """A transport for `swarmd monitor` (`listen`): at its start, a forged heartbeat far
+    ahead in the name of every robot; `later` s after, each robot's own heartbeat."""
+
+    max_payload = 255
+
+    def __init__(self, plan: SwarmPlan, key: bytes | None, later: float) -> None:
+        self.plan, self.key, self.later = plan, key, later
+        self.heard_at: float | None = None
+
+    def _beats(self, seq: int) -> list[bytes]:
+        return [wire.encode(wire.Frame(self.plan.swarm_id, r, seq + r, wire.Heartbeat(
+            r if r <= 4 else 0, 0, 1 if r <= 4 else 2, 0)), self.key) for r in range(1, 7)]
+
+    async def start(self, on_frame: Any, on_event: Any) -> None:
+        import asyncio
+        import time
+
+        loop = asyncio.get_running_loop()
+        for f in self._beats(wire.SEQ_MAX - 10):
+            on_frame(f)
+
+        def genuine() -> None:
+            self.heard_at = loop.time()
+            for f in self._beats(wire.seq_seed(time.time())):
+                on_frame(f)
+
+        loop.call_later(self.later, genuine)
+
+    def send(self, frame: bytes) -> None:
+        raise AssertionError("a monitor never sends")
+
+    async def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("mode", ["none", "shared"])
+async def test_the_monitor_bounds_seqs_as_the_daemons_do(paper: Paper, mode: str) -> None:
+    """Forged (or bit-flipped) frames far ahead, one per robot, then the robots' own
+    heartbeats: every robot is live at the monitor, none silent, no false alert."""
+    from swarmd.monitor import MonitorState, listen
+
+    plan, params = paper
+    key = bytes(32) if mode == "shared" else None
+    state = MonitorState(plan, params, (key,) if key else ())
+    channel = _Channel(plan, key, later=params.t_max + 0.1)
+    await listen(state, channel, duration=params.t_max + 0.3)
+    assert channel.heard_at is not None
+    now = channel.heard_at
+    assert {r["robot"]: r["status"] for r in state.rows(now)} == dict.fromkeys(range(1, 7),
+                                                                                "live")
+    assert state.alerts(now) == [] and state.drops == {"seq_jump": 6}
+
+
+def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> None:
+    """Per-robot mode: one heartbeat with the swarm key in robot 1's name holding f2 at
+    epoch 1 supersedes nobody (robot 1 is shown `unverified`, no split brain); standby
+    6's heartbeat at epoch 1 after its signed CLAIM does supersede robot 2."""
+    from swarmd.monitor import MonitorState
+
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    key = bytes(32)
+    state = MonitorState(plan, params, (key,), verifier=ids[1].verifier)
+    seq = iter(range(1000, 2000))
+
+    def beat(r: int, slot: int, epoch: int) -> bytes:
+        return wire.encode(wire.Frame(plan.swarm_id, r, next(seq),
+                                      wire.Heartbeat(slot, epoch, 1, 0)), key)
+
+    for r in range(1, 5):
+        state.feed(beat(r, r, 0), 0.0)
+    state.feed(beat(1, 2, 1), 0.1)  # the insider's one frame
+    rows = {r["robot"]: r for r in state.rows(0.2)}
+    assert rows[2]["status"] == "live" and rows[1]["status"] == "unverified"
+    assert state.alerts(0.2) == []
+    claim = _signed(ids[6], plan, 6, next(seq), wire.Claim(2, 2, 1))
+    state.feed(claim, 0.3)
+    state.feed(beat(6, 2, 1), 0.3)
+    rows = {r["robot"]: r for r in state.rows(0.35)}
+    assert rows[2]["status"] == "superseded" and rows[6]["status"] == "live"
