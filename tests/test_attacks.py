@@ -714,3 +714,25 @@ def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> 
     state.feed(beat(6, 2, 1), 0.3)
     rows = {r["robot"]: r for r in state.rows(0.35)}
     assert rows[2]["status"] == "superseded" and rows[6]["status"] == "live"
+
+
+async def test_lines_waiting_for_their_turn_survive_the_robot_closing(tmp_path: Any) -> None:
+    """A robot writes 500 lines and closes at once: the lines still waiting for their
+    turn when the connection ends are handled one by one, the last health line too."""
+    import asyncio
+
+    from swarmd.core.roles import Health
+    from swarmd.link.socket import SocketLink
+
+    healths: list[Health] = []
+    link = SocketLink(tmp_path / "robot.sock", health_timeout=30.0)
+    await link.start(healths.append)
+    try:
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "robot.sock"))
+        writer.write(b'{"health": "degraded"}\n' * 499 + b'{"health": "ok"}')
+        await writer.drain()
+        writer.write_eof()
+        await asyncio.wait_for(_until(lambda: len(healths) == 500), 30.0)
+    finally:
+        await link.close()
+    assert healths[-1] == Health.OK and link.counters["bad_lines"] == 0

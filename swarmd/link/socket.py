@@ -288,8 +288,9 @@ class _Connection(asyncio.Protocol):
             self._rest()
 
     def eof_received(self) -> bool:
-        self._rest()
-        return False  # close our side too
+        # Close our side too; `connection_lost` follows and handles what is left (lines
+        # still waiting for their turn, then a last one without a newline).
+        return False
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.transport = None
