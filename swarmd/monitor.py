@@ -22,11 +22,25 @@ LEAVE. Alerts are the things an operator must look at:
   rule 2 says this must never last).
 Frames that do not decode (garbage, wrong key, another swarm, replays) are counted by
 reason, never raised (DESIGN section 2).
+
+The receive filter is the daemons' (`swarmd.core.replay`): a sliding window per sender,
+and sequence numbers bounded by the monitor's own clock (`listen` starts it from the wall
+clock), so one bit-flipped or forged frame far ahead is a `seq_jump` drop, not a robot
+muted for good that shows `silent` with false alerts. What the monitor cannot verify it
+shows as such: in per-robot mode a heartbeat is signed by no robot (the swarm key, or
+nothing), so a heartbeat at a newer epoch (or of another robot at the plan's epoch 0) is
+believed only from the robot whose signed CLAIM for that slot and epoch was heard, as
+the daemons believe only a certified holder. Any other is shown with the status
+`unverified` and moves nobody: no `superseded`, no split brain. A monitor started after
+a takeover has not heard its claim, so the new holder shows `unverified` until the next
+one. Shared-key and unsigned swarms have nothing more to check: what the daemons take,
+the monitor shows.
 """
 
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,6 +56,7 @@ from swarmd.core import wire
 from swarmd.core.auth import Verifier
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
 from swarmd.transport.base import Transport
 
@@ -63,6 +78,8 @@ class Heard:
     warned_since: float | None = None
     leave_at: float | None = None
     leave_function: str | None = None
+    unverified: bool = False
+    """Its last heartbeat named a holder nothing signed vouches for (module docstring)."""
 
 
 def _name(enum: type[Role] | type[Health], value: int) -> str:
@@ -89,6 +106,24 @@ class MonitorState:
         """function -> (claimant, epoch, time) of the last CLAIM heard."""
         self.newest: dict[str, tuple[int, int]] = {}
         """function -> (epoch, robot) of the newest-epoch ACTIVE heartbeat heard for it."""
+        self.signed_claims: set[tuple[str, int, int]] = set()
+        """Per-robot mode: (function, epoch, claimant) of every signed CLAIM heard."""
+        self.replay = ReplayFilter()
+        """The daemons' filter; unbounded until `start_clock` (`listen` calls it)."""
+
+    def start_clock(self, origin: int, now: float) -> None:
+        """Bound sequence numbers by the monitor's own clock from `now` on: `origin` is
+        the wall clock at `now` in sequence units (`wire.seq_seed`)."""
+        self.replay.origin, self.replay.since = origin, now
+
+    def _believed(self, function: str, epoch: int, robot: int) -> bool:
+        """Whether a heartbeat of `robot` holding `function` at `epoch` is vouched for
+        (module docstring): always without robot keys."""
+        if self.verifier is None:
+            return True
+        if epoch == 0 and self.plan.initial_holder(function) == robot:
+            return True
+        return (function, epoch, robot) in self.signed_claims
 
     def _drop(self, reason: str) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
@@ -106,12 +141,15 @@ class MonitorState:
         if frame.sender not in self.plan.robots:
             self._drop("unknown_sender")
             return
+        if isinstance(frame.msg, wire.Cert):
+            return  # relays a signed frame; no replay filter, as in the daemons
+        reason = self.replay.check(frame.sender, frame.seq, now)
+        if reason is not None:
+            self._drop(reason)
+            return
         seen = self.robots.get(frame.sender)
         if seen is None:
             seen = self.robots[frame.sender] = Heard(frame.sender, now)
-        if frame.seq <= seen.last_seq:
-            self._drop("replay")
-            return
         self.frames += 1
         seen.last_seq = frame.seq
         seen.last_heard = now
@@ -122,7 +160,11 @@ class MonitorState:
                 seen.function = self.plan.function_at(function)
                 seen.epoch = epoch
                 seen.health = _name(Health, health)
-                if seen.function is not None and seen.role == Role.ACTIVE.name:
+                seen.unverified = seen.function is not None \
+                    and seen.role == Role.ACTIVE.name \
+                    and not self._believed(seen.function, epoch, frame.sender)
+                if seen.function is not None and seen.role == Role.ACTIVE.name \
+                        and not seen.unverified:
                     newest = self.newest.get(seen.function)
                     if newest is None or epoch >= newest[0]:
                         self.newest[seen.function] = (epoch, frame.sender)
@@ -138,6 +180,8 @@ class MonitorState:
                 name = self.plan.function_at(function)
                 if name is not None:
                     self.claims[name] = (frame.sender, epoch, now)
+                    if self.verifier is not None:  # decoded: signed by its sender
+                        self.signed_claims.add((name, epoch, frame.sender))
                 failed_seen = self.robots.get(failed)
                 if failed_seen is not None:
                     # A claim tells the watchers to stop warning (paper section IV-A).
@@ -162,16 +206,20 @@ class MonitorState:
 
     def superseded(self, seen: Heard) -> bool:
         """Another robot was heard executing this robot's function at a newer epoch."""
-        if seen.function is None or seen.role != Role.ACTIVE.name or seen.epoch is None:
+        if seen.function is None or seen.role != Role.ACTIVE.name or seen.epoch is None \
+                or seen.unverified:
             return False
         newest = self.newest.get(seen.function)
         return newest is not None and newest[0] > seen.epoch and newest[1] != seen.robot
 
     def status(self, seen: Heard, now: float) -> str:
-        """`live`, `silent`, `superseded`, `superseded, silent` or `left`."""
+        """`live`, `silent`, `superseded`, `superseded, silent` or `left`; `unverified`
+        first when its heartbeat names a holder nothing signed vouches for."""
         if seen.leave_at is not None and seen.last_heard <= seen.leave_at:
             return "left"  # nothing heard since its LEAVE
-        parts = ["superseded"] if self.superseded(seen) else []
+        parts = ["unverified"] if seen.unverified else []
+        if self.superseded(seen):
+            parts.append("superseded")
         if self.silent(seen, now):
             parts.append("silent")
         return ", ".join(parts) or "live"
@@ -201,7 +249,7 @@ class MonitorState:
             rid for rid, seen in self.robots.items()
             if seen.function == function and seen.role == Role.ACTIVE.name
             and seen.frames and now - seen.last_heard <= self.params.t_max
-            and not self.superseded(seen)
+            and not self.superseded(seen) and not seen.unverified
         )
 
     def _robot_alerts(self, seen: Heard, now: float) -> list[str]:
@@ -209,7 +257,8 @@ class MonitorState:
         alerts = []
         silent = seen.frames == 0 or now - seen.last_heard > p.t_max
         if (seen.function is not None and silent and seen.role == Role.ACTIVE.name
-                and not self.superseded(seen) and not self._live_holders(seen.function, now)):
+                and not self.superseded(seen) and not seen.unverified
+                and not self._live_holders(seen.function, now)):
             alerts.append(f"holder of {seen.function} silent for "
                           f"{now - seen.last_heard:.1f} s")
         fresh = self._fresh_warnings(seen, now)
@@ -230,7 +279,7 @@ class MonitorState:
         for rid, seen in self.robots.items():
             live = seen.frames and now - seen.last_heard <= self.params.t_max
             if (live and seen.function is not None and seen.role == Role.ACTIVE.name
-                    and not self.superseded(seen)):
+                    and not self.superseded(seen) and not seen.unverified):
                 holders.setdefault((seen.function, seen.epoch or 0), []).append(rid)
         for (function, epoch), rids in sorted(holders.items()):
             if len(rids) > 1:
@@ -347,6 +396,8 @@ async def listen(
     `on_refresh(now)` is called every `refresh` s (the live table)."""
     loop = asyncio.get_running_loop()
     start = loop.time()
+    # The daemons' bound on sequence numbers: our own wall clock, from now on.
+    state.start_clock(wire.seq_seed(time.time()), start)
 
     def on_frame(data: bytes) -> None:
         state.feed(data, loop.time())

@@ -328,19 +328,110 @@ def test_per_robot_random_chaos_breaks_no_invariant() -> None:
         assert res.violations == [], (seed, [v.as_dict() for v in res.violations])
 
 
-def test_replay_filter_bounds_jumps_by_elapsed_time() -> None:
-    from swarmd.core.replay import JUMP, RATE, ReplayFilter
+# ---------------------------------------------------------------- seqs bounded by the clock
+# (DESIGN section 2, "Sequence numbers"): a receiver bounds every sender's seq by its own
+# clock, from the first frame heard and after a restore.
+NOW_SEQ = wire.seq_seed(1_750_000_000.0)
+"""Where a daemon's counter starts: its wall clock in 10 us units."""
+MODES = ["none", "shared", "per-robot"]
 
-    f = ReplayFilter()
-    assert f.check(2, 1000, 0.0) is None
-    assert f.check(2, wire.SEQ_MAX, 0.1) == "seq_jump"
-    assert f.check(2, 1001, 0.2) is None  # not muted
-    assert f.check(2, 1001 + JUMP, 0.2) is None  # a restart from the reservation
-    later = 1001 + JUMP + JUMP + int(RATE * 10.0)
-    assert f.check(2, later, 10.2) is None  # a restart after 10 s of wall clock
-    f.restore(3, 500)
-    assert f.check(3, 480, 0.0) == "replay" and f.check(3, 500, 0.0) == "replay"
-    assert f.check(3, 10**12, 0.0) is None  # the first jump after a restore is free
+
+def _mode_node(plan: SwarmPlan, params: Params, mode: str, rid: int, now: float, *,
+               seq_start: int = NOW_SEQ, restored: Restored | None = None) -> Node:
+    key = (bytes(32),) if mode != "none" else ()
+    ident = fake_identities(plan.robots)[rid] if mode == "per-robot" else None
+    node = Node(rid, plan, params, now, keys=key, identity=ident, seq_start=seq_start,
+                restored=restored)
+    node.tick(now)
+    return node
+
+
+def _beat(plan: SwarmPlan, mode: str, sender: int, seq: int) -> bytes:
+    """A heartbeat of `sender` (holder of its home slot at epoch 0): what the robot sends,
+    or what an insider with the swarm key (anyone, unsigned) forges in its name."""
+    key = bytes(32) if mode != "none" else None
+    return wire.encode(wire.Frame(plan.swarm_id, sender, seq,
+                                  wire.Heartbeat(sender, 0, 1, 0)), key)
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("restart", [False, True])
+def test_a_max_seq_heard_first_mutes_nobody(paper: Paper, mode: str, restart: bool) -> None:
+    """One heartbeat in robot 2's name at 2^48-1 is the first frame robot 1 hears of it,
+    at its start or after a restart (the restored seq was no bound either): robot 2's
+    own heartbeats are still heard, not dropped as replays for good."""
+    plan, params = paper
+    restored = Restored(peer_seq={2: NOW_SEQ + 50}) if restart else None
+    node = _mode_node(plan, params, mode, 1, 10.0, restored=restored)
+    node.receive(_beat(plan, mode, 2, wire.SEQ_MAX - 1), 10.0)
+    assert node.drops["seq_jump"] == 1
+    for i in range(20):
+        node.receive(_beat(plan, mode, 2, NOW_SEQ + 100 + i), 10.1 + 0.1 * i)
+    assert node.drops["replay"] == 0
+    assert node.snapshot().heard[2] == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_walk_at_any_rate_stops_at_the_receivers_clock(paper: Paper, mode: str) -> None:
+    """Walking robot 2's seq up in big steps, 4,000 frames a second: the walk stops at
+    the receiver's own clock plus the stated allowance, so the 48-bit space cannot be
+    used up faster than real time, and robot 2 is muted at most until its counter is
+    above it (it hears the walk and follows it, `own`)."""
+    from swarmd.core.replay import AHEAD, JUMP, RATE
+
+    plan, params = paper
+    node = _mode_node(plan, params, mode, 1, 0.0)
+    step = JUMP // 2
+    for i in range(2000):
+        node.receive(_beat(plan, mode, 2, NOW_SEQ + step * (i + 1)), i / 4000)
+    top = node.snapshot().peer_seq[2]
+    assert top <= NOW_SEQ + int(RATE * 0.5) + AHEAD
+    assert node.drops["seq_jump"] >= 2000 - (AHEAD + RATE) // step - 1
+    # The robot it names heard the walk too and moved its counter above it.
+    two = _mode_node(plan, params, mode, 2, 0.0)
+    for i in range(2000):
+        two.receive(_beat(plan, mode, 2, NOW_SEQ + step * (i + 1)), i / 4000)
+    assert two.snapshot().seq >= top
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_an_absurd_restored_peer_seq_is_refused(paper: Paper, mode: str) -> None:
+    """A persisted seq of robot 2 far beyond any clock (written after a forged frame
+    was taken, or a corrupted file): refused at the restore, so it mutes nobody across
+    restarts; a plausible one still keeps old frames old."""
+    plan, params = paper
+    node = _mode_node(plan, params, mode, 1, 5.0,
+                      restored=Restored(peer_seq={2: wire.SEQ_MAX - 1, 4: NOW_SEQ - 10}))
+    assert 2 not in node.snapshot().peer_seq and node.drops["seq_jump"] == 1
+    node.receive(_beat(plan, mode, 2, NOW_SEQ + 5), 5.1)
+    node.receive(_beat(plan, mode, 4, NOW_SEQ - 20), 5.1)  # older than what was kept
+    assert node.drops["replay"] == 1 and 2 in node.snapshot().heard
+
+
+def test_a_sender_restarted_after_a_long_run_is_heard(paper: Paper) -> None:
+    """A sender's counter lags its clock by its uptime (one step a frame, 10^5 a
+    second): restarted after ten minutes it reseeds from its clock, 6*10^7 above its
+    last frame. That is no jump to drop: it is within the receiver's clock."""
+    plan, params = paper
+    node = _mode_node(plan, params, "none", 1, 0.0)
+    for i in range(6000):  # ten minutes of heartbeats at 10 Hz
+        node.receive(_beat(plan, "none", 2, NOW_SEQ + i), 0.1 * i)
+    restarted = wire.seq_seed(1_750_000_000.0 + 602.0)
+    node.receive(_beat(plan, "none", 2, restarted), 602.0)
+    assert node.drops["seq_jump"] == 0 and node.snapshot().peer_seq[2] == restarted
+
+
+def test_replay_filter_clock_and_limits() -> None:
+    from swarmd.core.replay import AHEAD, RATE, SKEW, ReplayFilter
+
+    f = ReplayFilter(1000, 2.0)
+    assert f.clock(2.0) == 1000 and f.clock(12.0) == 1000 + 10 * RATE
+    assert f.clock(1.0) == 1000  # never before the start
+    assert f.limit(2.0) == 1000 + AHEAD and f.follow_limit(2.0) == 1000 + AHEAD + SKEW
+    assert f.check(2, 1000 + AHEAD + 1, 2.0) == "seq_jump" and f.top(2) is None
+    assert f.check(2, 1000 + AHEAD, 2.0) is None
+    assert not f.restore(3, 1000 + AHEAD + 1) and f.restore(3, 1000 + AHEAD)
+    assert ReplayFilter().check(2, wire.SEQ_MAX, 5.0) is None  # no origin, no bound
 
 
 def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
@@ -369,3 +460,279 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
            for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
     assert any(isinstance(m, wire.Cert) for m in out)
     assert any(isinstance(m, wire.Claim) and m.epoch == 1 for m in out)
+
+
+# ---------------------------------------------------------------- fragments
+# (DESIGN section 2, "Fragments"): a forger spoils at most the messages it has seen.
+class _Air:
+    """What a serial radio puts on the air: the transport's writes, as datagrams."""
+
+    def __init__(self) -> None:
+        from swarmd.transport import framing
+
+        self.decoder = framing.FrameDecoder()
+        self.datagrams: list[bytes] = []
+
+    def get_write_buffer_size(self) -> int:
+        return 0
+
+    def write(self, data: bytes) -> None:
+        self.datagrams += self.decoder.feed(data)
+
+
+def _warns(n: int) -> list[bytes]:
+    """Robot 3's per-robot signed WARNs: 80 B, two fragments each on a 64 B serial radio."""
+    ids = fake_identities([3])
+    return [wire.encode(wire.Frame(0x607, 3, 1000 + i, wire.Warn(1, 1, 0)), None, ids[3].signer)
+            for i in range(n)]
+
+
+def test_fragment_ids_cannot_be_predicted_from_a_heard_one() -> None:
+    """A listener heard one fragmented message of robot 3 (its id), then forges one
+    fragment in robot 3's name for each of the next eight ids a counter would give:
+    robot 3's next messages still reassemble whole (a random id is hit by a guess once
+    in 65,536; one hit is allowed, so the test cannot flake)."""
+    from typing import cast
+
+    from swarmd.transport import fragment
+    from swarmd.transport.serial import SerialTransport
+
+    tx = SerialTransport(port="/dev/null")  # never opened: the air is `_Air`
+    air = _Air()
+    cast(Any, tx)._transport = air
+    first, *later = _warns(9)
+    tx.send(first)
+    heard = fragment.HEADER.unpack_from(air.datagrams[0])[2]
+    rx = fragment.Reassembler()
+    for guess in range(heard + 1, heard + 9):
+        forged = fragment.HEADER.pack(fragment.MARKER, 3, guess & 0xFFFF, 1 << 4 | 2)
+        assert rx.feed(forged + bytes(40), 0.0) is None
+    air.datagrams.clear()
+    for f in later:
+        tx.send(f)
+    got = [out for d in air.datagrams if (out := rx.feed(d, 0.1)) is not None]
+    assert len(air.datagrams) == 2 * len(later)
+    assert len(set(got) & set(later)) >= len(later) - 1
+
+
+def test_a_fragment_flood_in_one_name_spoils_no_other_robots_message() -> None:
+    """One robot's name on a flood of first fragments of made-up messages: the other
+    robots' messages in flight are not evicted (a per-sender reassembly budget)."""
+    from swarmd.transport import fragment
+
+    warn = _warns(1)[0]
+    pieces = fragment.split(warn, 64, 0x5A5A)
+    rx = fragment.Reassembler()
+    assert rx.feed(pieces[0], 0.0) is None
+    for i in range(200):  # made-up messages of robot 9
+        forged = fragment.HEADER.pack(fragment.MARKER, 9, i, 1 << 4 | 2)
+        rx.feed(forged + bytes(40), 0.001)
+    assert rx.feed(pieces[1], 0.002) == warn
+    assert rx.drops["evicted_sender"] >= 190 and len(rx) <= fragment.MAX_PER_SENDER
+
+
+# ---------------------------------------------------------------- the robot link
+async def test_a_robot_link_flood_never_starves_the_loop(tmp_path: Any,
+                                                         caplog: pytest.LogCaptureFixture) -> None:
+    """120 kB of short bad lines on the socket robot link: the loop gets a turn every
+    `LINES_PER_TURN` lines (its timers, the protocol's heartbeats, run between), the log
+    gets one line for the lot, not one a line, and the health line after them counts."""
+    import asyncio
+    import logging
+
+    from swarmd.core.roles import Health
+    from swarmd.link.socket import SocketLink
+
+    healths: list[Health] = []
+    link = SocketLink(tmp_path / "robot.sock", health_timeout=30.0)
+    await link.start(healths.append)
+    per_turn: list[int] = []
+    last = 0
+
+    def turn() -> None:  # one call per turn of the loop
+        nonlocal last
+        per_turn.append(link.counters["bad_lines"] - last)
+        last = link.counters["bad_lines"]
+        if not healths:
+            ticker[0] = asyncio.get_running_loop().call_soon(turn)
+
+    ticker = [asyncio.get_running_loop().call_soon(turn)]
+    try:
+        with caplog.at_level(logging.WARNING, logger="swarmd.link.socket"):
+            _, writer = await asyncio.open_unix_connection(str(tmp_path / "robot.sock"))
+            writer.write(b"x\n" * 60_000 + b'{"health": "ok"}\n')
+            await writer.drain()
+            await asyncio.wait_for(_until(lambda: bool(healths)), 30.0)
+            writer.close()
+    finally:
+        ticker[0].cancel()
+        await link.close()
+    assert healths == [Health.OK] and link.counters["bad_lines"] == 60_000
+    assert max(per_turn) <= 2 * 64  # two of the link's turns at most between two of ours
+    logged = [r for r in caplog.records if "bad line" in r.getMessage()]
+    assert 1 <= len(logged) <= 2 and "60000" not in logged[0].getMessage()
+
+
+async def _until(cond: Any) -> None:
+    import asyncio
+
+    while not cond():
+        await asyncio.sleep(0.01)
+
+
+class _Burst:
+    """An autopilot connection that delivers `n` heartbeats at once, their status
+    flapping between CRITICAL and ACTIVE, then nothing."""
+
+    def __init__(self, n: int) -> None:
+        import io
+
+        from pymavlink.dialects.v20 import common as mavlink2
+        from test_mavlink_link import Autopilot
+
+        ap = Autopilot("px4")
+        self.msgs = [ap.heartbeat(status=5 if i % 2 else 4) for i in range(n)]
+        self.mav = mavlink2.MAVLink(io.BytesIO(), srcSystem=1, srcComponent=191)
+
+    def recv_match(self, blocking: bool, timeout: float) -> Any:
+        import time
+
+        if self.msgs:
+            return self.msgs.pop()
+        time.sleep(min(timeout, 0.01))
+        return None
+
+    def close(self) -> None:
+        pass
+
+
+async def test_a_mavlink_burst_is_handed_over_and_logged_in_bounded_pieces(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """4,000 heartbeats at once whose health flaps: the loop is handed the latest health
+    a few times, not 4,000 callbacks, and the log counts the changes in one line."""
+    import asyncio
+    import logging
+
+    from swarmd.core.roles import Health
+    from swarmd.link.mavlink import MavlinkLink
+
+    burst = _Burst(4000)
+    got: list[Health] = []
+    link = MavlinkLink("/dev/ttyFAKE", opener=lambda: burst)
+    with caplog.at_level(logging.INFO, logger="swarmd.link.mavlink"):
+        await link.start(got.append)
+        try:
+            await asyncio.wait_for(_until(lambda: not burst.msgs), 30.0)
+            await asyncio.sleep(0.1)  # the hand-overs still queued, if any
+        finally:
+            await link.close()
+    assert got and set(got) <= {Health.OK, Health.DEGRADED}
+    assert len(got) <= 400
+    logged = [r for r in caplog.records if "robot health" in r.getMessage()]
+    assert 1 <= len(logged) <= 2
+
+
+# ---------------------------------------------------------------- the monitor
+class _Channel:
+    """A transport for `swarmd monitor` (`listen`): at its start, a forged heartbeat far
+    ahead in the name of every robot; `later` s after, each robot's own heartbeat."""
+
+    max_payload = 255
+
+    def __init__(self, plan: SwarmPlan, key: bytes | None, later: float) -> None:
+        self.plan, self.key, self.later = plan, key, later
+        self.heard_at: float | None = None
+
+    def _beats(self, seq: int) -> list[bytes]:
+        return [wire.encode(wire.Frame(self.plan.swarm_id, r, seq + r, wire.Heartbeat(
+            r if r <= 4 else 0, 0, 1 if r <= 4 else 2, 0)), self.key) for r in range(1, 7)]
+
+    async def start(self, on_frame: Any, on_event: Any) -> None:
+        import asyncio
+        import time
+
+        loop = asyncio.get_running_loop()
+        for f in self._beats(wire.SEQ_MAX - 10):
+            on_frame(f)
+
+        def genuine() -> None:
+            self.heard_at = loop.time()
+            for f in self._beats(wire.seq_seed(time.time())):
+                on_frame(f)
+
+        loop.call_later(self.later, genuine)
+
+    def send(self, frame: bytes) -> None:
+        raise AssertionError("a monitor never sends")
+
+    async def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("mode", ["none", "shared"])
+async def test_the_monitor_bounds_seqs_as_the_daemons_do(paper: Paper, mode: str) -> None:
+    """Forged (or bit-flipped) frames far ahead, one per robot, then the robots' own
+    heartbeats: every robot is live at the monitor, none silent, no false alert."""
+    from swarmd.monitor import MonitorState, listen
+
+    plan, params = paper
+    key = bytes(32) if mode == "shared" else None
+    state = MonitorState(plan, params, (key,) if key else ())
+    channel = _Channel(plan, key, later=params.t_max + 0.1)
+    await listen(state, channel, duration=params.t_max + 0.3)
+    assert channel.heard_at is not None
+    now = channel.heard_at
+    assert {r["robot"]: r["status"] for r in state.rows(now)} == dict.fromkeys(range(1, 7),
+                                                                                "live")
+    assert state.alerts(now) == [] and state.drops == {"seq_jump": 6}
+
+
+def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> None:
+    """Per-robot mode: one heartbeat with the swarm key in robot 1's name holding f2 at
+    epoch 1 supersedes nobody (robot 1 is shown `unverified`, no split brain); standby
+    6's heartbeat at epoch 1 after its signed CLAIM does supersede robot 2."""
+    from swarmd.monitor import MonitorState
+
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    key = bytes(32)
+    state = MonitorState(plan, params, (key,), verifier=ids[1].verifier)
+    seq = iter(range(1000, 2000))
+
+    def beat(r: int, slot: int, epoch: int) -> bytes:
+        return wire.encode(wire.Frame(plan.swarm_id, r, next(seq),
+                                      wire.Heartbeat(slot, epoch, 1, 0)), key)
+
+    for r in range(1, 5):
+        state.feed(beat(r, r, 0), 0.0)
+    state.feed(beat(1, 2, 1), 0.1)  # the insider's one frame
+    rows = {r["robot"]: r for r in state.rows(0.2)}
+    assert rows[2]["status"] == "live" and rows[1]["status"] == "unverified"
+    assert state.alerts(0.2) == []
+    claim = _signed(ids[6], plan, 6, next(seq), wire.Claim(2, 2, 1))
+    state.feed(claim, 0.3)
+    state.feed(beat(6, 2, 1), 0.3)
+    rows = {r["robot"]: r for r in state.rows(0.35)}
+    assert rows[2]["status"] == "superseded" and rows[6]["status"] == "live"
+
+
+async def test_lines_waiting_for_their_turn_survive_the_robot_closing(tmp_path: Any) -> None:
+    """A robot writes 500 lines and closes at once: the lines still waiting for their
+    turn when the connection ends are handled one by one, the last health line too."""
+    import asyncio
+
+    from swarmd.core.roles import Health
+    from swarmd.link.socket import SocketLink
+
+    healths: list[Health] = []
+    link = SocketLink(tmp_path / "robot.sock", health_timeout=30.0)
+    await link.start(healths.append)
+    try:
+        _, writer = await asyncio.open_unix_connection(str(tmp_path / "robot.sock"))
+        writer.write(b'{"health": "degraded"}\n' * 499 + b'{"health": "ok"}')
+        await writer.drain()
+        writer.write_eof()
+        await asyncio.wait_for(_until(lambda: len(healths) == 500), 30.0)
+    finally:
+        await link.close()
+    assert healths[-1] == Health.OK and link.counters["bad_lines"] == 0

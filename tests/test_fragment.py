@@ -113,7 +113,7 @@ def test_bad_fragments_are_counted_by_reason() -> None:
 
 
 def test_partial_messages_expire_and_are_evicted() -> None:
-    r = Reassembler(max_partial=4, expiry=2.0)
+    r = Reassembler(max_partial=4, expiry=2.0, max_per_sender=8)  # one sender
     firsts = [split(_frame(92), 73, i)[0] for i in range(6)]
     for i, p in enumerate(firsts):
         r.feed(p, 0.1 * i)

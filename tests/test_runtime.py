@@ -231,7 +231,7 @@ t = threading.Thread(target=listen); t.start()
 time.sleep(1.0)
 sender = member()
 rnd = __import__("random").Random(7)
-seq = wire.seq_seed(time.time()) + 10**9
+seq = wire.seq_seed(time.time())
 valid = wire.encode(wire.Frame(1543, 2, seq, wire.Heartbeat(2, 0, 1, 0)))
 sender.sendto(valid, (group, port))
 flood_start = time.monotonic()

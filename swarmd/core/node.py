@@ -25,7 +25,7 @@ from types import MappingProxyType
 from typing import NamedTuple
 
 from swarmd.core import events as ev
-from swarmd.core import replay, wire
+from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
 from swarmd.core.evidence import CLAIMS_REMEMBERED, EvidenceStore, cert_says
@@ -208,11 +208,12 @@ class Node:
         # function -> {(claimant, epoch): first heard}: claims are believed for a
         # bounded time (rule 10); forgotten when the slot's next holder heartbeats.
         self._claims_seen: dict[str, dict[tuple[int, int], float]] = {}
-        self._replay = ReplayFilter()
+        self._replay = ReplayFilter(seq_start, now)  # bounded by our own clock
         if restored is not None:
             for peer, top in restored.peer_seq.items():
-                if peer != robot_id and peer in plan.robots:
-                    self._replay.restore(peer, top)
+                if peer != robot_id and peer in plan.robots \
+                        and not self._replay.restore(peer, top):
+                    self._drops["seq_jump"] += 1  # an absurd persisted value: refused
         # Per-robot mode (DESIGN section 2, "Who may say what"): signed evidence and
         # the certificates it makes, `evidence.py`.
         self._ev = EvidenceStore(robot_id, plan, params)
@@ -350,7 +351,7 @@ class Node:
             self._on_cert(frame.msg, now)
             return self._drain()
         if sender == self._robot_id:
-            return self._own_frame(frame)
+            return self._own_frame(frame, now)
         reason = self._replay.check(sender, frame.seq, now)
         if reason is not None:
             return self._drop(reason)
@@ -369,7 +370,7 @@ class Node:
                 self._on_refute(sender, rf, now, frame.raw)
         return self._drain()
 
-    def _own_frame(self, frame: wire.Frame) -> list[Action]:
+    def _own_frame(self, frame: wire.Frame, now: float) -> list[Action]:
         """A verified frame sent as this robot. Multicast loopback echoes our own frames
         (`own`; the runtime tells a second daemon with our id by frames it did not send).
         One from before this node started is a replay, not a duplicate robot
@@ -379,7 +380,7 @@ class Node:
         "Sequence numbers")."""
         if frame.seq < self._seq_start:
             return self._drop("replay")
-        if self._seq < frame.seq <= self._seq + replay.JUMP:
+        if self._seq < frame.seq <= (self._replay.follow_limit(now) or wire.SEQ_MAX):
             # Further ahead, every receiver drops it as `seq_jump`: nothing to follow.
             self._seq = frame.seq
         return self._drop("own")

@@ -16,6 +16,13 @@ loop with `call_soon_threadsafe`. The loop never blocks on the autopilot: `assig
 `release` only put an order on a queue. Health goes to the daemon when it changes and at
 least every `health_period` s.
 
+Bursts never starve the daemon (the socket link's rule): health is handed to the loop
+at most once every `HANDOVER_GAP` s (a change within it goes with the next one, the
+latest value wins), the thread reads at most
+`BURST` messages per `poll` window and then waits for the window's end (the loop gets
+the interpreter), and health changes and bad data are logged at most once every 10 s
+with their count (`CountedLog`).
+
 Unplugged or rebooted: the autopilot's HEARTBEAT falls silent, health turns FAULTY after
 `heartbeat_timeout`, and the thread keeps reading (UDP) or reopens the device or socket
 every `reopen_interval` s (serial, TCP) until the autopilot is back; the daemon runs on
@@ -35,7 +42,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from swarmd.core.roles import Health
-from swarmd.link.base import HealthCallback
+from swarmd.link.base import CountedLog, HealthCallback
 from swarmd.link.mavlink_health import Assessment, Thresholds
 from swarmd.link.mavlink_pilot import Pilot, PilotConfig
 
@@ -51,6 +58,13 @@ POLL = 0.02
 """s the I/O thread waits for a message before it runs the pilot's clock anyway."""
 HEALTH_PERIOD = 0.5
 """s: longest time between two health reports to the daemon."""
+HANDOVER_GAP = 0.01
+"""s between two health hand-overs to the loop at least: a flapping burst costs the loop
+at most 100 callbacks a second; a change waits at most this long (plus one `poll`)."""
+BURST = 500
+"""Messages the I/O thread reads per `poll` window at most (25,000 a second: an
+autopilot streams a few hundred); more wait for the next window, and the counter
+`bursts` says how often that happened."""
 REOPEN_INTERVAL = 1.0
 """s between two attempts to reopen a connection that failed."""
 
@@ -103,7 +117,12 @@ class MavlinkLink:
         self.pilot: Pilot | None = None
         self.last: Assessment | None = None
         self.counters: dict[str, int] = {"opens": 0, "open_errors": 0, "io_errors": 0,
-                                         "bad_data": 0}
+                                         "bad_data": 0, "bursts": 0}
+        self._latest: Health | None = None
+        self._handed_at = float("-inf")  # thread time of the last hand-over (`_report`)
+        self._dirty = False  # a health not yet handed over
+        self._health_log = CountedLog(log, "robot health from the autopilot changed")
+        self._bad_log = CountedLog(log, "bad MAVLink data from the autopilot")
 
     # -- RobotLink -----------------------------------------------------------------------
     async def start(self, on_health: HealthCallback) -> None:
@@ -140,8 +159,18 @@ class MavlinkLink:
         conn: Any = None
         next_open = self._clock()
         last_report = float("-inf")
+        window, read = self._clock(), 0
         while not self._stop.is_set():
             now = self._clock()
+            self._health_log.tick(now)
+            self._bad_log.tick(now)
+            self._hand_over(now)  # a change held back by the gap
+            if now - window >= self.poll:
+                window, read = now, 0
+            elif read >= BURST:  # the rest of a burst waits: the loop gets its turn
+                self.counters["bursts"] += 1
+                self._stop.wait(self.poll - (now - window))
+                continue
             if conn is None:
                 if now < next_open:
                     self._stop.wait(min(self.poll, next_open - now))
@@ -159,6 +188,7 @@ class MavlinkLink:
                     continue
             try:
                 msg = conn.recv_match(blocking=True, timeout=self.poll)
+                read += msg is not None
                 now = self._clock()
                 out = self._tick(msg, now)
                 for m in out:
@@ -191,6 +221,7 @@ class MavlinkLink:
         if msg is not None:
             if msg.get_type() == "BAD_DATA":
                 self.counters["bad_data"] += 1
+                self._bad_log.hit("not a MAVLink message", now)
             else:
                 pilot.on_message(msg, now)
         return pilot.tick(now)
@@ -205,20 +236,26 @@ class MavlinkLink:
         changed = self.last is None or a.health != self.last.health
         if not changed and now - last < self.health_period:
             return last
-        if changed and a.health is not Health.OK:
-            log.warning("robot health %s from the autopilot: %s", a.health.name.lower(),
-                        "; ".join(a.reasons))
-        elif changed:
-            log.info("robot health ok from the autopilot")
+        if changed:
+            self._health_log.hit(f"{a.health.name.lower()}: {'; '.join(a.reasons)}"
+                                 if a.health is not Health.OK else "ok", now)
         self.last = a
-        loop, cb = self._loop, self._on_health
-        if loop is not None and cb is not None:
-            with contextlib.suppress(RuntimeError):  # the loop closed under us
-                loop.call_soon_threadsafe(self._deliver, a.health)
+        self._latest, self._dirty = a.health, True
+        self._hand_over(now)
         return now
 
-    def _deliver(self, health: Health) -> None:
-        if self._on_health is not None:
+    def _hand_over(self, now: float) -> None:
+        """Hand the latest health to the loop, at most once every `HANDOVER_GAP` s."""
+        loop = self._loop
+        if not self._dirty or now - self._handed_at < HANDOVER_GAP \
+                or loop is None or self._on_health is None:
+            return
+        self._dirty, self._handed_at = False, now
+        with contextlib.suppress(RuntimeError):  # the loop closed under us
+            loop.call_soon_threadsafe(self._deliver, self._latest)
+
+    def _deliver(self, health: Health | None) -> None:
+        if self._on_health is not None and health is not None:
             self._on_health(health)
 
 

@@ -14,19 +14,27 @@ reported FAULTY, so the daemon stops heartbeating and its function is handed ove
 next good health line clears it.
 
 Bad input never takes the daemon down: a line that is not JSON, not an object, too long,
-or with an unknown health value is counted in `counters["bad_lines"]`, logged, and
-ignored (it does not refresh the health timer). Whatever parsing a line raises (a
-RecursionError for `[` nested thousands deep, a ValueError for an integer of thousands
-of digits) is such a bad line too; a line longer than `LINE_LIMIT` is skipped up to its
-newline. The connection stays up and the next good line counts.
+or with an unknown health value is counted in `counters["bad_lines"]` and ignored (it
+does not refresh the health timer); the log says so once, then at most once every 10 s
+with the count (`CountedLog`: "bad lines from the robot: 523 in the last 10 s").
+The robot link never starves the protocol: a connection handles at most
+`LINES_PER_TURN` lines or `BYTES_PER_TURN` bytes per turn of the event loop, and stops
+reading its socket until it has handled what it holds, so a robot writing a megabyte of
+short garbage lines delays the daemon's timers by one turn's budget (about a
+millisecond), not seconds; the kernel's socket buffer then holds the robot back.
 
-Each connection is an `asyncio.Protocol` (`_Connection`) whose lines are handled in
-`data_received`, as they arrive. A robot that writes its health and closes without
-reading what we sent (the assignment, sent on connect) resets the connection, or makes
-our write fail first; a `StreamReader` raised that before returning the line it had
-buffered, and a failed write closes the transport without reading again. Either way
-the health was lost (about 180 of 200 such clients, tests/test_link.py) and the robot
-timed out to FAULTY. Now the lines still queued on the socket are read in
+Whatever parsing a line raises (a RecursionError for `[` nested thousands deep, a
+ValueError for an integer of thousands of digits) is such a bad line too; a line longer
+than `LINE_LIMIT` is skipped up to its newline. The connection stays up and the next
+good line counts.
+
+Each connection is an `asyncio.Protocol` (`_Connection`) whose lines are handled as they
+arrive (`data_received`, a turn's share at a time). A robot that writes its health and
+closes without reading what we sent (the assignment, sent on connect) resets the
+connection, or makes our write fail first; a `StreamReader` raised that before returning
+the line it had buffered, and a failed write closes the transport without reading again.
+Either way the health was lost (about 180 of 200 such clients, tests/test_link.py) and
+the robot timed out to FAULTY. Now the lines still queued on the socket are read in
 `connection_lost` (`_Connection._drain`).
 """
 
@@ -43,13 +51,17 @@ from pathlib import Path
 from typing import Any
 
 from swarmd.core.roles import Health
-from swarmd.link.base import HealthCallback
+from swarmd.link.base import CountedLog, HealthCallback
 
 log = logging.getLogger(__name__)
 
 HEALTH_NAMES = {"ok": Health.OK, "degraded": Health.DEGRADED, "faulty": Health.FAULTY}
 LINE_LIMIT = 64 * 1024
 """bytes. A longer line is garbage: counted as one bad line and skipped to its newline."""
+LINES_PER_TURN = 64
+"""Lines one connection handles per turn of the event loop (module docstring)."""
+BYTES_PER_TURN = 64 * 1024
+"""bytes of lines one connection handles per turn of the event loop (at least one line)."""
 WRITE_BUFFER_LIMIT = 256 * 1024
 """bytes. A robot that stops reading is disconnected rather than growing our memory."""
 
@@ -74,6 +86,7 @@ class SocketLink:
         self._timer: asyncio.TimerHandle | None = None
         self._timed_out = False
         self._current: dict[str, Any] | None = None
+        self._bad_log = CountedLog(log, "bad lines from the robot")
 
     async def start(self, on_health: HealthCallback) -> None:
         """Listen on the socket path and arm the health timer."""
@@ -131,7 +144,9 @@ class SocketLink:
 
     def _bad(self, why: str) -> None:
         self.counters["bad_lines"] += 1
-        log.warning("bad line from robot", extra={"link": "socket", "reason": why})
+        loop = asyncio.get_running_loop()
+        if self._bad_log.hit(why, loop.time(), link="socket"):
+            loop.call_at(self._bad_log.due, lambda: self._bad_log.tick(loop.time()))
 
     def _line(self, line: bytes) -> None:
         text = line.strip()
@@ -216,13 +231,16 @@ class _Connection(asyncio.Protocol):
 
     def __init__(self, link: SocketLink) -> None:
         self.link = link
-        self.transport: asyncio.WriteTransport | None = None
+        self.transport: asyncio.Transport | None = None
         self._buffer = bytearray()
         self._skipping = False
         self._fd = -1
+        self._paused = False
+        self._lost = False
+        self._later: asyncio.Handle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.WriteTransport)
+        assert isinstance(transport, asyncio.Transport)
         self.transport = transport
         sock = transport.get_extra_info("socket")
         self._fd = sock.fileno() if sock is not None else -1
@@ -236,28 +254,51 @@ class _Connection(asyncio.Protocol):
             self._skipping = False
             data = data[end + 1:]
         self._buffer += data
-        start = 0
+        self._handle()
+
+    def _handle(self) -> None:
+        """Handle this turn's share of the complete lines held; if more remain, stop
+        reading and come back next turn (module docstring: the loop is never starved)."""
+        self._later = None
+        start = lines = 0
         while (end := self._buffer.find(b"\n", start)) >= 0:
+            if lines >= LINES_PER_TURN or start >= BYTES_PER_TURN:
+                break
             if end - start > LINE_LIMIT:
                 self.link._bad(f"line longer than {LINE_LIMIT} bytes; skipped")
             else:
                 self.link._line(bytes(self._buffer[start : end + 1]))
-            start = end + 1
+            start, lines = end + 1, lines + 1
         del self._buffer[:start]
+        transport = self.transport
+        if self._buffer.find(b"\n") >= 0:  # more next turn
+            if transport is not None and not self._paused:
+                transport.pause_reading()
+                self._paused = True
+            self._later = asyncio.get_running_loop().call_soon(self._handle)
+            return
+        if self._paused and transport is not None and not transport.is_closing():
+            transport.resume_reading()
+        self._paused = False
         if len(self._buffer) > LINE_LIMIT:
             self.link._bad(f"line longer than {LINE_LIMIT} bytes; skipped")
             self._buffer.clear()
             self._skipping = True
+        if self._lost:
+            self._rest()
 
     def eof_received(self) -> bool:
-        self._rest()
-        return False  # close our side too
+        # Close our side too; `connection_lost` follows and handles what is left (lines
+        # still waiting for their turn, then a last one without a newline).
+        return False
 
     def connection_lost(self, exc: Exception | None) -> None:
+        self.transport = None
+        self._lost = True
         if exc is not None:
             self._drain()
-        self._rest()  # a last line without a newline, also after a reset
-        self.transport = None
+        if self._later is None:
+            self._handle()  # then a last line without a newline, also after a reset
         self.link._disconnected(self, exc)
 
     def _drain(self) -> None:
@@ -272,7 +313,13 @@ class _Connection(asyncio.Protocol):
                 return
             if not data:
                 return
-            self.data_received(data)
+            if self._skipping:
+                end = data.find(b"\n")
+                if end < 0:
+                    continue
+                self._skipping = False
+                data = data[end + 1:]
+            self._buffer += data  # handled a turn's share at a time (`_handle`)
 
     def _rest(self) -> None:
         if self._buffer:

@@ -15,7 +15,8 @@ Layout of one fragment (big-endian, 6 bytes of header)::
   so a fragment is told from a frame by its first byte, and a daemon that does not
   reassemble drops it as a counted `version` drop.
 - sender: the robot id from the frame's own header (bytes 3-4, `wire.HEADER`).
-- msg id: the sending transport's counter (16 bits, wraps); (sender, msg id) names one
+- msg id: 16 random bits the sending transport draws for each message (`secrets`), so a
+  listener cannot tell the next message's id from the last; (sender, msg id) names one
   message while its fragments are in flight.
 - byte 5: the fragment's index (high nibble) and the message's fragment count (low
   nibble), 2..`MAX_FRAGMENTS`.
@@ -24,7 +25,8 @@ The pieces are of near-equal size (their lengths differ by at most one byte).
 
 Hostile input is the design constraint (DESIGN: bad input never takes the daemon down):
 `Reassembler.feed` never raises; memory is bounded (at most `MAX_PARTIAL` messages in
-flight, the oldest evicted first; at most `MAX_FRAGMENTS` pieces of a message; a whole
+flight, the oldest evicted first, and at most `MAX_PER_SENDER` of one sender, that
+sender's oldest evicted first; at most `MAX_FRAGMENTS` pieces of a message; a whole
 message at most `MAX_FRAME` bytes); a partial message expires `EXPIRY` s after its first
 fragment; a duplicate, an out-of-range index, a count that contradicts the message's
 first fragment, or a message whose sender differs from the frame inside it is dropped
@@ -34,13 +36,17 @@ Reassembly is not authentication. The reassembled frame goes to the core, which 
 its signature as it checks any frame. Anyone who can transmit can forge fragments, and a
 forged fragment can at most spoil the one message whose (sender, msg id) it names: taken
 in first, it makes that message fail its signature check or never complete, and the
-genuine piece is then dropped as a duplicate. Flooding fragments of made-up messages
-evicts partial messages in flight (a loss, like jamming), never lets a frame through that
-the core would not accept whole.
+genuine piece is then dropped as a duplicate. Since ids are random, a forger spoils only
+a message it has seen a fragment of (its id), not the sender's next ones; a guess hits
+one message in 65,536. Flooding fragments of made-up messages in one robot's name evicts
+only that robot's partial messages (`MAX_PER_SENDER`), in many names the oldest of all
+(a loss, like jamming); it never lets a frame through that the core would not accept
+whole.
 """
 
 from __future__ import annotations
 
+import secrets
 import struct
 from collections import Counter, OrderedDict
 from dataclasses import dataclass
@@ -58,11 +64,23 @@ MIN_LIMIT = 24
 92-byte CERT takes 6 fragments."""
 MAX_PARTIAL = 32
 """Messages in reassembly at once; one more evicts the oldest."""
+MAX_PER_SENDER = 4
+"""Messages of one sender in reassembly at once; one more evicts that sender's oldest.
+A daemon has at most one message in flight at a time (its fragments leave back to back);
+4 leaves room for a retry and a reordering radio."""
 EXPIRY = 2.0
 """s. A message not complete this long after its first fragment is dropped."""
 MSG_ID_MASK = 0xFFFF
 _SENDER = slice(3, 5)
 """Where a swarmd frame carries its sender (wire.HEADER: version|type, swarm, sender)."""
+
+
+def new_msg_id() -> int:
+    """A message id no listener can predict from the ones it heard (16 random bits). A
+    counter would let anyone who heard one message spoil the sender's next ones with a
+    forged fragment each; a random id also never repeats a restarted sender's last ids
+    but by chance."""
+    return secrets.randbits(16)
 
 
 class FragmentError(ValueError):
@@ -124,10 +142,12 @@ class Reassembler:
     whole frame when this fragment completes one, and None otherwise; `now` is any
     monotonic clock in seconds. `drops` counts what was thrown away, by reason: short,
     bad_count, bad_index, inconsistent, duplicate, too_large, sender_mismatch, expired,
-    evicted."""
+    evicted, evicted_sender."""
 
-    def __init__(self, *, max_partial: int = MAX_PARTIAL, expiry: float = EXPIRY) -> None:
+    def __init__(self, *, max_partial: int = MAX_PARTIAL, expiry: float = EXPIRY,
+                 max_per_sender: int = MAX_PER_SENDER) -> None:
         self.max_partial = max_partial
+        self.max_per_sender = max_per_sender
         self.expiry = expiry
         self._partial: OrderedDict[tuple[int, int], _Partial] = OrderedDict()
         self._done: OrderedDict[tuple[int, int], float] = OrderedDict()
@@ -160,6 +180,10 @@ class Reassembler:
             return None
         part = self._partial.get(key)
         if part is None:
+            mine = [k for k in self._partial if k[0] == sender]
+            if len(mine) >= self.max_per_sender:
+                del self._partial[mine[0]]  # arrival order: that sender's oldest
+                self.drops["evicted_sender"] += 1
             while len(self._partial) >= self.max_partial:
                 self._partial.popitem(last=False)
                 self.drops["evicted"] += 1

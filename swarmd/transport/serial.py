@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import os
 import time
 from collections import Counter
 from typing import Any
@@ -79,9 +78,6 @@ class SerialTransport:
         self._closing = False
         self._reopener: Reopener | None = None
         self._reassembler = fragment.Reassembler()
-        self._msg_id = int.from_bytes(os.urandom(2), "big")
-        """Fragment message ids start anywhere: a restarted sender does not reuse the
-        ids receivers still remember (`fragment.EXPIRY`)."""
 
     @classmethod
     def from_config(cls, cfg: Any) -> SerialTransport:
@@ -136,7 +132,7 @@ class SerialTransport:
         """Write one framed broadcast (in fragments if it exceeds `max_payload`); never
         blocks and never raises (base.py)."""
         try:
-            datagrams = fragment.split(frame, self._max_payload, self._msg_id)
+            datagrams = fragment.split(frame, self._max_payload, fragment.new_msg_id())
         except fragment.FragmentError:
             self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
             return
@@ -150,7 +146,6 @@ class SerialTransport:
             self._events.send_error("write buffer full")
             return
         if len(datagrams) > 1:
-            self._msg_id = (self._msg_id + 1) & fragment.MSG_ID_MASK
             self.counters["fragmented"] += 1
         try:
             # One write: the fragments of a frame leave back to back.

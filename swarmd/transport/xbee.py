@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import os
 import time
 from collections import Counter
 from typing import Any
@@ -131,9 +130,6 @@ class XBeeTransport:
         self._status_timer: asyncio.TimerHandle | None = None
         self._reassembler = fragment.Reassembler()
         self._on_frame: FrameCallback | None = None
-        self._msg_id = int.from_bytes(os.urandom(2), "big")
-        """Fragment message ids start anywhere, so a restarted sender does not reuse the
-        ids its last fragments carried (receivers remember them `fragment.EXPIRY` s)."""
 
     @classmethod
     def from_config(cls, cfg: Any) -> XBeeTransport:
@@ -254,7 +250,7 @@ class XBeeTransport:
         """Queue one broadcast (in fragments if it exceeds the payload limit); never
         blocks and never raises (base.py)."""
         try:
-            datagrams = fragment.split(frame, self._max_payload, self._msg_id)
+            datagrams = fragment.split(frame, self._max_payload, fragment.new_msg_id())
         except fragment.FragmentError:
             self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
             return
@@ -262,7 +258,6 @@ class XBeeTransport:
             self._events.send_error("radio down")
             return
         if len(datagrams) > 1:
-            self._msg_id = (self._msg_id + 1) & fragment.MSG_ID_MASK
             self.counters["fragmented"] += 1
         for datagram in datagrams:
             if self._window.offer(datagram):
