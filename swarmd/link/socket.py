@@ -46,6 +46,7 @@ import json
 import logging
 import os
 import stat
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -144,9 +145,14 @@ class SocketLink:
 
     def _bad(self, why: str) -> None:
         self.counters["bad_lines"] += 1
-        loop = asyncio.get_running_loop()
-        if self._bad_log.hit(why, loop.time(), link="socket"):
-            loop.call_at(self._bad_log.due, lambda: self._bad_log.tick(loop.time()))
+        try:
+            loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
+        except RuntimeError:  # the line parser driven on its own (fuzzing, tests)
+            loop = None
+        now = loop.time() if loop is not None else time.monotonic()
+        if self._bad_log.hit(why, now, link="socket") and loop is not None:
+            running = loop
+            running.call_at(self._bad_log.due, lambda: self._bad_log.tick(running.time()))
 
     def _line(self, line: bytes) -> None:
         text = line.strip()
