@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 
 import pytest
+from harness import Net
 
 from sim.shared.fakeid import fake_identities
 from swarmd.core import wire
@@ -19,7 +20,6 @@ from swarmd.core.auth import Identity
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from tests.harness import Net
 
 Paper = tuple[SwarmPlan, Params]
 KEY = b"s" * 32
@@ -44,7 +44,7 @@ def settled(n: Net) -> None:
         views = {rid: n.nodes[rid].snapshot().known[f] for rid in sorted(n.alive)
                  if slot in n.plan.relevant(rid).slots or n.nodes[rid].snapshot().function == f}
         assert len(set(views.values())) == 1, (f, views)
-        holder = next(iter(views.values())).robot
+        holder = next(iter(views.values()))[0]
         doers = sorted(r for r, g in executing.items() if g == f)
         assert doers == [holder], (f, doers, views, executing)
 

@@ -18,13 +18,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from swarms import unsigned_paper
 
 from sim.realtime.orchestrator import RealtimeResult, run_realtime_async
 from sim.realtime.view import SwarmView
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import check_events
 from swarmd.config import load_swarm
-from tests.swarms import unsigned_paper
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
