@@ -123,6 +123,11 @@ def default_params(flavour: Flavour, sysid: int) -> dict[str, Param]:
             "FRAME_CLASS": Param(1, INT8), "FRAME_TYPE": Param(1, INT8)}
 
 
+def _int(x: float) -> int:
+    """A command parameter as the integer it encodes; -1 for NaN (MAVLink's "unset")."""
+    return round(x) if math.isfinite(x) else -1
+
+
 def geodetic(origin: Vec3, east: float, north: float, up: float) -> Vec3:
     """(lat, lon, alt) of the point (east, north, up) m from `origin` (flat earth, the
     inverse of swarmd.link.mavlink_pilot.geodetic_offset)."""
@@ -386,9 +391,9 @@ class AutopilotCore:
         if c.command == 400:  # MAV_CMD_COMPONENT_ARM_DISARM
             return self._arm(p[0], p[1], t), []
         if c.command == 176:  # MAV_CMD_DO_SET_MODE
-            if not int(p[0]) & CUSTOM:
+            if _int(p[0]) < 0 or not _int(p[0]) & CUSTOM:
                 return UNSUPPORTED, []
-            main, sub = int(p[1]), int(p[2])
+            main, sub = _int(p[1]) & 0xFF, _int(p[2]) & 0xFF
             number = main if self.flavour == "ardupilot" else (main << 16) | (sub << 24)
             return self._set_mode_number(number, t), []
         if c.command == 22:  # MAV_CMD_NAV_TAKEOFF
@@ -402,14 +407,14 @@ class AutopilotCore:
         if c.command == 511:  # SET_MESSAGE_INTERVAL: accepted, the rates here are fixed
             return ACCEPTED, []
         if c.command in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
-            name = "AUTOPILOT_VERSION" if c.command == 520 else MESSAGE_IDS.get(int(p[0]))
+            name = "AUTOPILOT_VERSION" if c.command == 520 else MESSAGE_IDS.get(_int(p[0]))
             if name is None:
                 return self._refused(), []
             return ACCEPTED, [self._message(name, t)]
         return UNSUPPORTED, []
 
     def _arm(self, action: float, magic: float, t: float) -> int:
-        r, forced = self.robot, round(magic) == 21196
+        r, forced = self.robot, _int(magic) == 21196
         if action not in (0.0, 1.0):
             return UNSUPPORTED
         if action == 0.0:
@@ -493,7 +498,7 @@ class AutopilotCore:
 
     def _reposition(self, c: Command, t: float) -> int:
         p, r = c.params, self.robot
-        flags = int(p[1]) if math.isfinite(p[1]) else 0
+        flags = max(_int(p[1]), 0)
         if self.flavour == "px4" and flags != 1:
             return UNSUPPORTED  # Commander: only with the change-mode flag, alone
         if self.flavour == "ardupilot" and self.mode != "guided" and not flags & 1:
@@ -556,9 +561,8 @@ class AutopilotCore:
             return [self._param_value(name)] if name in self.params else []
         if kind == "PARAM_SET" and name in self.params:
             p = self.params[name]
-            value = self._unwire(msg.param_value, p.kind)
-            if math.isfinite(value):
-                p.value = value
+            if math.isfinite(msg.param_value):
+                p.value = self._unwire(msg.param_value, p.kind)
             return [self._param_value(name)]
         return []  # an unknown name: neither firmware answers
 
@@ -695,7 +699,14 @@ class MavlinkAutopilot:
                 self.counters["bad"] += 1
                 continue
             self.counters["received"] += 1
-            self._flush(self.core.handle(msg, t))
+            try:
+                replies = self.core.handle(msg, t)
+            except Exception as exc:  # one odd message must not stop the autopilot
+                self.counters["bad"] += 1
+                log.warning("autopilot %d: %s from %s:%d not handled: %r", self.core.sysid,
+                            msg.get_type(), addr[0], addr[1], exc)
+                continue
+            self._flush(replies)
 
     def _flush(self, msgs: list[Any]) -> None:
         if self._transport is None or not msgs:
