@@ -105,7 +105,7 @@ async def fly(system: System, flavour: str, steps: Steps) -> None:
     assert abs(home.latitude_deg) > 1.0  # a real place, not 0, 0
 
     async def climbed(height: float) -> bool:
-        return (await tel.position()).relative_altitude_m >= height
+        return bool((await tel.position()).relative_altitude_m >= height)
 
     await steps.run("arm", action.arm())
     # PX4: NAV_TAKEOFF with NaN altitude -> MIS_TAKEOFF_ALT (2.5 m); ArduPilot: GUIDED,
@@ -117,8 +117,8 @@ async def fly(system: System, flavour: str, steps: Steps) -> None:
 
     async def arrived() -> bool:
         p = await tel.position()
-        return abs(p.latitude_deg - north) * math.radians(1) * EARTH_RADIUS < 0.3 and (
-            abs(p.relative_altitude_m - 3.0) < 0.3)
+        return bool(abs(p.latitude_deg - north) * math.radians(1) * EARTH_RADIUS < 0.3
+                    and abs(p.relative_altitude_m - 3.0) < 0.3)
 
     await steps.run("goto", _both(action.goto_location(north, home.longitude_deg,
                                                        home.absolute_altitude_m + 3.0, 0.0),
@@ -133,7 +133,7 @@ async def fly(system: System, flavour: str, steps: Steps) -> None:
 
     async def at_offboard_point() -> bool:
         p = (await tel.position_velocity_ned()).position
-        return abs(p.north_m - 4.0) < 0.3 and abs(p.east_m - 3.0) < 0.3
+        return bool(abs(p.north_m - 4.0) < 0.3 and abs(p.east_m - 3.0) < 0.3)
 
     async def offboard_flight() -> None:
         await offboard.set_position_ned(PositionNedYaw(4.0, 3.0, -3.0, 0.0))

@@ -294,7 +294,9 @@ class AutopilotCore:
         if name == "SYS_STATUS":
             # PX4 keeps the pre-arm check enabled; ArduPilot only while disarmed.
             enabled = ALL_SENSORS | (PREARM if self.flavour == "px4" or not self.armed else 0)
-            health = self.sensors_health() | (PREARM if self.armable() else 0)
+            # (MAVLink: the pre-arm bit is healthy whenever armed.)
+            ready = self.armed or self.armable()
+            health = self.sensors_health() | (PREARM if ready else 0)
             return mav.sys_status_encode(ALL_SENSORS | PREARM, enabled, health, 200,
                                          int(11100 + 1500 * r.battery), -1, battery,
                                          0, 0, 0, 0, 0, 0)
@@ -382,8 +384,11 @@ class AutopilotCore:
                 msg.mission_type), msg.mission_type)]
         elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
             return self._mission_item(msg, src, comp)
-        elif kind == "PING" and msg.target_system == 0 and msg.target_component == 0:
+        elif (kind == "PING" and self.flavour == "px4" and msg.target_system == 0
+              and msg.target_component == 0):  # ArduPilot answers TIMESYNC, not PING
             return [self.mav.ping_encode(msg.time_usec, msg.seq, src, comp)]
+        elif kind == "TIMESYNC" and msg.tc1 == 0:  # a request: our clock, their stamp
+            return [self.mav.timesync_encode(int(t * 1e9), msg.ts1)]
         return []
 
     def _command(self, c: Command, t: float) -> tuple[int, list[Any]]:
@@ -408,8 +413,8 @@ class AutopilotCore:
             return ACCEPTED, []
         if c.command in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
             name = "AUTOPILOT_VERSION" if c.command == 520 else MESSAGE_IDS.get(_int(p[0]))
-            if name is None:
-                return self._refused(), []
+            if name is None:  # a message this autopilot does not send
+                return (DENIED if self.flavour == "px4" else FAILED), []
             return ACCEPTED, [self._message(name, t)]
         return UNSUPPORTED, []
 
