@@ -111,6 +111,18 @@ def test_px4_takeoff_follows_mis_takeoff_alt_and_waits_for_arming() -> None:
     assert v.height() == pytest.approx(4.0, abs=0.1)
 
 
+def test_px4_takeoff_altitude_is_amsl_and_never_down() -> None:
+    v = Vehicle("px4")
+    amsl = v.core.home_geo()[2]
+    assert v.arm() == ACCEPTED
+    assert v.command(22, 0, 0, 0, NAN, NAN, NAN, amsl + 3.0) == ACCEPTED
+    v.run(6.0)
+    assert v.height() == pytest.approx(3.0, abs=0.1)
+    assert v.command(22, 0, 0, 0, NAN, NAN, NAN, amsl + 1.0) == ACCEPTED
+    v.run(3.0)
+    assert v.height() == pytest.approx(3.0, abs=0.1)  # lower than it is: it stays
+
+
 def test_ardupilot_takeoff_needs_guided_armed_and_a_height() -> None:
     v = Vehicle("ardupilot")
     assert v.command(22, 0, 0, 0, 0, 0, 0, 2.0) == FAILED  # not GUIDED
@@ -184,7 +196,8 @@ def test_refusals_carry_the_firmwares_mav_result(flavour: str) -> None:
     refused = REFUSED[flavour]
     v.core.refuse_arm = True
     assert v.arm() == refused  # a failing arming check
-    assert v.command(400, 1, 21196) == ACCEPTED  # forced: checks skipped
+    # Forced: ArduPilot skips its checks, PX4 runs them for a command over MAVLink.
+    assert v.command(400, 1, 21196) == (refused if flavour == "px4" else ACCEPTED)
     v.core.refuse_arm = False
     assert v.command(400, 0) == ACCEPTED
     assert v.command(400, 0.5) == UNSUPPORTED

@@ -1,30 +1,35 @@
-"""A simulated flight controller that speaks MAVLink over a MuJoCo quadrotor.
+"""A simulated flight controller that speaks MAVLink over a MuJoCo quadrotor (or, without
+physics, a point mass: sim/physics/point.py).
 
 As PX4 SITL does, each simulated robot's autopilot listens on its own UDP port on
 loopback (one MAVLink system id per robot) and sends its telemetry to every peer it has
 heard from in the last `PEER_TIMEOUT` s (and to fixed `peers`, e.g. a ground station's
 14550), so the daemon's `mavlink` link and any ground station or SDK can talk to it at
-once. `flavour` is `px4` or `ardupilot`: the HEARTBEAT's autopilot field and the mode
-encodings differ (swarmd/link/mavlink_modes.py), and so does the way to take off.
+once. `flavour` is `px4` or `ardupilot`: the autopilot answers as that firmware answers
+(its HEARTBEAT fields, mode encodings, MAV_RESULT codes, parameters, take-off rules).
+docs/mavlink.md tabulates each answer with the firmware source it follows.
 
 Sent: HEARTBEAT 1 Hz, SYS_STATUS 2 Hz, BATTERY_STATUS 1 Hz, LOCAL_POSITION_NED and
-ATTITUDE 10 Hz, EXTENDED_SYS_STATE 1 Hz, HOME_POSITION 0.5 Hz, EKF_STATUS_REPORT
-(ArduPilot) or ESTIMATOR_STATUS (PX4) 1 Hz, COMMAND_ACK for every COMMAND_LONG. A change
-of system_status or sensor health sends HEARTBEAT and SYS_STATUS at once.
+ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, GPS_RAW_INT 2 Hz, EXTENDED_SYS_STATE 1 Hz,
+HOME_POSITION 0.5 Hz, EKF_STATUS_REPORT (ArduPilot) or ESTIMATOR_STATUS (PX4) 1 Hz. A
+change of system_status or sensor health sends HEARTBEAT and SYS_STATUS at once.
+Latitude, longitude and altitude are the swarm frame's position around `geo_origin`
+(default: each firmware's SITL home), flat earth.
 
-Understood: MAV_CMD_COMPONENT_ARM_DISARM, MAV_CMD_DO_SET_MODE (and the SET_MODE
-message), MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_LAND, MAV_CMD_NAV_RETURN_TO_LAUNCH,
-MAV_CMD_SET_MESSAGE_INTERVAL and MAV_CMD_REQUEST_MESSAGE (accepted), and
-SET_POSITION_TARGET_LOCAL_NED in GUIDED / OFFBOARD. Modes: `guided` follows the
-setpoints (PX4 OFFBOARD needs a setpoint in the last `OFFBOARD_TIMEOUT` s to enter, and
-falls back to HOLD when they stop; ArduPilot needs NAV_TAKEOFF before it leaves the
-ground), `hold` holds where it is, `land` lands where it is, `rtl` flies home and lands;
-a craft that touches down disarms.
+Answered: COMMAND_LONG and COMMAND_INT (arm / disarm, DO_SET_MODE, NAV_TAKEOFF, NAV_LAND,
+RETURN_TO_LAUNCH, DO_REPOSITION, SET_MESSAGE_INTERVAL, REQUEST_MESSAGE,
+REQUEST_AUTOPILOT_CAPABILITIES), SET_MODE, the parameter protocol, the mission list
+(empty), PING (PX4) and TIMESYNC, and SET_POSITION_TARGET_LOCAL_NED in GUIDED / OFFBOARD.
+Modes: `guided` follows the setpoints (PX4 OFFBOARD needs a setpoint stream to enter and
+falls back to HOLD when it stops for COM_OF_LOSS_T; ArduCopter needs NAV_TAKEOFF before
+it leaves the ground), `hold` (and ArduPilot's `brake`) stops where it is, `land` lands
+where it is, `rtl` flies home and lands, PX4's `takeoff` climbs. On the ground it
+disarms by itself as each firmware does.
 
 Faults: a failed motor (`fail_motor`, the simulator's `motor` fault) clears the motor
 outputs' health bit in SYS_STATUS and the HEARTBEAT says EMERGENCY while the craft falls
-(and after it crashed), as a real autopilot shows a lost motor; `refuse_arm` makes it
-deny every arm command (a pre-arm check failing).
+(and after it crashed), as a real autopilot shows a lost motor; `refuse_arm` fails the
+arming checks (the SYS_STATUS pre-arm bit clears, arming is refused).
 
 The local NED frame's origin is the robot's home (where the craft powered up); the
 simulator's world frame is the swarm frame (x east, y north, z up).
@@ -196,7 +201,7 @@ class AutopilotCore:
         self.flew = False
         """Left the ground since arming (decides which auto-disarm delay applies)."""
         self.takeoff_alt: float | None = None
-        """PX4: the height above home of a take-off accepted while disarmed."""
+        """PX4: param7 (m AMSL, or NaN) of a take-off accepted while disarmed."""
         self.last_setpoint = -math.inf
         self.target = _Target(robot.position)
         self._due: dict[str, float] = {}
@@ -292,12 +297,11 @@ class AutopilotCore:
         if name == "HEARTBEAT":
             return self.heartbeat()
         if name == "SYS_STATUS":
-            # PX4 keeps the pre-arm check enabled; ArduPilot only while disarmed.
-            enabled = ALL_SENSORS | (PREARM if self.flavour == "px4" or not self.armed else 0)
-            # (MAVLink: the pre-arm bit is healthy whenever armed.)
+            # The pre-arm bit: present and enabled (the checks run), healthy while they
+            # pass and whenever armed (both firmwares, and MAVLink's definition).
             ready = self.armed or self.armable()
             health = self.sensors_health() | (PREARM if ready else 0)
-            return mav.sys_status_encode(ALL_SENSORS | PREARM, enabled, health, 200,
+            return mav.sys_status_encode(ALL_SENSORS | PREARM, ALL_SENSORS | PREARM, health, 200,
                                          int(11100 + 1500 * r.battery), -1, battery,
                                          0, 0, 0, 0, 0, 0)
         if name == "BATTERY_STATUS":
@@ -432,12 +436,15 @@ class AutopilotCore:
             return ACCEPTED
         if self.armed:
             return ACCEPTED
-        if r.failed_motors or r.mode is Mode.CRASHED or (self.refuse_arm and not forced):
+        # ArduPilot skips its arming checks for param2 21196; PX4 runs them anyway for a
+        # command that came over MAVLink (Commander: checks when from_external).
+        skip_checks = forced and self.flavour == "ardupilot"
+        if r.failed_motors or r.mode is Mode.CRASHED or (self.refuse_arm and not skip_checks):
             return self._refused()
         self.armed, self.flew, self.took_off = True, False, False
         self._ground_since = None
         if self.mode == "takeoff" and self.takeoff_alt is not None:
-            self._climb(self.takeoff_alt)  # PX4: armed in Takeoff mode, it takes off
+            self._climb(self._px4_takeoff_z(self.takeoff_alt))  # armed in Takeoff: it climbs
         return ACCEPTED
 
     def _set_mode_number(self, number: int, t: float) -> int:
@@ -473,33 +480,40 @@ class AutopilotCore:
         self.target.velocity = (0.0, 0.0, 0.0)
         return self.robot.fly(self.label, self.target)
 
-    def _climb(self, height: float) -> bool:
+    def _climb(self, z: float) -> bool:
+        """Straight up to `z` (world frame), at least 0.5 m above the ground."""
         x, y, _ = self.robot.position
         self.took_off = True
-        return self._go((x, y, self.robot.home[2] + max(height, 0.5)))
+        return self._go((x, y, max(z, self.robot.home[2] + 0.5)))
+
+    def _px4_takeoff_z(self, alt: float) -> float:
+        """PX4 Navigator's take-off altitude: param7 (m AMSL), or when NaN MIS_TAKEOFF_ALT
+        above where the craft is; never below where it is."""
+        here = self.robot.position[2]
+        z = alt - self.geo_origin[2] if math.isfinite(alt) else (
+            here + self.param("MIS_TAKEOFF_ALT"))
+        return max(z, here)
 
     def _takeoff(self, c: Command, t: float) -> int:
         r, alt = self.robot, c.params[6]
         if r.failed_motors or r.mode is Mode.CRASHED:
             return self._refused()
         if self.flavour == "px4":
-            # Commander: a mode change to AUTO.TAKEOFF; Navigator climbs to param7 (m
-            # AMSL) or, when NaN, MIS_TAKEOFF_ALT above home. Disarmed, it waits for arming.
-            height = (alt - self.home_geo()[2] if math.isfinite(alt)
-                      else self.param("MIS_TAKEOFF_ALT"))
+            # Commander: a mode change to AUTO.TAKEOFF (disarmed, it waits for arming);
+            # Navigator: the altitude as `_px4_takeoff_z`.
             self.mode = "takeoff"
             if not self.armed:
-                self.takeoff_alt = height
+                self.takeoff_alt = alt
                 return ACCEPTED
             self.takeoff_alt = None
-            return ACCEPTED if self._climb(height) else FAILED
+            return ACCEPTED if self._climb(self._px4_takeoff_z(alt)) else FAILED
         if c.frame is not None and c.frame not in (FRAME_GLOBAL_RELATIVE_ALT,
                                                    FRAME_GLOBAL_RELATIVE_ALT_INT):
             return DENIED  # ArduCopter takes param7 as m above home only
         if (self.mode != "guided" or not self.armed or r.mode is not Mode.PARKED
                 or not math.isfinite(alt) or alt <= 0):
             return FAILED  # ArduCopter: GUIDED, armed, landed and a height above it
-        return ACCEPTED if self._climb(alt) else FAILED
+        return ACCEPTED if self._climb(r.home[2] + alt) else FAILED
 
     def _reposition(self, c: Command, t: float) -> int:
         p, r = c.params, self.robot
