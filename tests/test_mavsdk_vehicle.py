@@ -174,6 +174,11 @@ async def test_mavsdk_flies_the_simulated_vehicle(flavour: str) -> None:
     finally:
         print("\n" + steps.table())
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=15)
+        try:
+            out, err = proc.communicate(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise
     assert proc.returncode == 0, err[-2000:]
     assert f"udpout://127.0.0.1:{port}" in out and "vehicle: stopped" in out

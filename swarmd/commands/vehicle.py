@@ -38,18 +38,24 @@ def register(sim_app: typer.Typer) -> None:
         ArduPilot answer for the messages and commands in docs/mavlink.md.
 
         Exit codes: 0 stopped by Ctrl-C or SIGTERM, 1 the port cannot be opened, 2 bad
-        input.
+        input or the simulation extra missing.
 
         Example: swarmd sim vehicle --autopilot ardupilot --port 14580 --no-physics
         """
         import asyncio
 
-        from sim.physics.vehicle import run_vehicle
+        from sim.run import EXTRA_HINT, PHYSICS_MODULES, installed
         from swarmd.link.mavlink_modes import Flavour
 
         if autopilot not in ("px4", "ardupilot"):
             typer.echo(f"--autopilot: {autopilot!r} is not one of px4, ardupilot", err=True)
             raise typer.Exit(2)
+        missing = [m for m in PHYSICS_MODULES if not installed(m)]
+        if missing:  # the autopilot's craft models import them, also the point mass
+            typer.echo(f"swarmd sim vehicle: needs the simulation extra ({', '.join(missing)} "
+                       f"not installed): {EXTRA_HINT}", err=True)
+            raise typer.Exit(2)
+        from sim.physics.vehicle import run_vehicle
         flavour: Flavour = "px4" if autopilot == "px4" else "ardupilot"
         try:
             asyncio.run(run_vehicle(flavour, port, sysid, physics=not no_physics,
