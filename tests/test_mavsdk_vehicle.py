@@ -118,10 +118,10 @@ async def fly(system: System, flavour: str, steps: Steps) -> None:
     async def arrived() -> bool:
         p = await tel.position()
         return bool(abs(p.latitude_deg - north) * math.radians(1) * EARTH_RADIUS < 0.3
-                    and abs(p.relative_altitude_m - 3.0) < 0.3)
+                    and abs(p.relative_altitude_m - 2.0) < 0.3)
 
     await steps.run("goto", _both(action.goto_location(north, home.longitude_deg,
-                                                       home.absolute_altitude_m + 3.0, 0.0),
+                                                       home.absolute_altitude_m + 2.0, 0.0),
                                   until(arrived, 15.0, "the goto position")))
 
     async def holding() -> bool:
@@ -136,7 +136,7 @@ async def fly(system: System, flavour: str, steps: Steps) -> None:
         return bool(abs(p.north_m - 4.0) < 0.3 and abs(p.east_m - 3.0) < 0.3)
 
     async def offboard_flight() -> None:
-        await offboard.set_position_ned(PositionNedYaw(4.0, 3.0, -3.0, 0.0))
+        await offboard.set_position_ned(PositionNedYaw(4.0, 3.0, -2.0, 0.0))
         await offboard.start()
         await until(at_offboard_point, 10.0, "the offboard setpoint")
         await offboard.stop()
