@@ -388,3 +388,11 @@ def test_nan_and_out_of_range_parameters_are_answered_not_raised(flavour: str) -
     for command in (400, 176, 22, 21, 20, 192, 511, 512, 520):
         assert v.command(command, NAN, NAN, NAN, NAN, NAN, NAN, NAN) in range(5)
         assert v.command(command, 1e30, -1e30, 1e30, 1e30, 1e30, 1e30, 1e30) in range(5)
+    # A setpoint of NaNs is not flown: the craft stays where it was told to be.
+    v.take_off()
+    if flavour == "px4":
+        v.run(0.5, setpoint=(1.0, 1.0, -2.0))
+        assert v.mode("guided") == ACCEPTED
+    v.run(3.0, setpoint=(1.0, 1.0, -2.0))
+    v.run(1.0, setpoint=(NAN, NAN, NAN))
+    assert math.dist(v.core.robot.position, (HOME[0] + 1.0, HOME[1] + 1.0, 2.0)) < 0.2

@@ -547,10 +547,11 @@ class AutopilotCore:
             return
         hx, hy, hz = self.robot.home
         mask = msg.type_mask
-        if not mask & 7:  # position used
+        finite = all(map(math.isfinite, (msg.x, msg.y, msg.z)))
+        if not mask & 7 and finite:  # position used (a NaN one is ignored, not flown)
             self.target.position = (hx + msg.y, hy + msg.x, hz - msg.z)
-        self.target.velocity = ((msg.vy, msg.vx, -msg.vz) if not mask & 56
-                                else (0.0, 0.0, 0.0))
+        use_velocity = not mask & 56 and all(map(math.isfinite, (msg.vx, msg.vy, msg.vz)))
+        self.target.velocity = (msg.vy, msg.vx, -msg.vz) if use_velocity else (0.0, 0.0, 0.0)
         r = self.robot
         on_ground = r.mode is Mode.PARKED
         if self.flavour == "ardupilot" and on_ground and not self.took_off:
