@@ -14,22 +14,23 @@ def register(sim_app: typer.Typer) -> None:
     @sim_app.command("vehicle")
     def vehicle(
         autopilot: Annotated[str, typer.Option(
-            "--autopilot", help="Firmware the simulated autopilot answers as: px4 or "
-            "ardupilot. Default: px4.")] = "px4",
+            "--autopilot", metavar="NAME", help="Firmware the simulated autopilot answers "
+            "as: px4 or ardupilot. Default: px4.")] = "px4",
         port: Annotated[int, typer.Option(
-            "--port", min=1, max=65535, help="UDP port on 127.0.0.1 the vehicle listens "
-            "on; clients send to it first (MAVSDK udpout://127.0.0.1:PORT). Default: 14580 "
-            "(PX4 SITL's).")] = 14580,
+            "--port", metavar="PORT", min=1, max=65535, help="UDP port on 127.0.0.1 the "
+            "vehicle listens on; clients send to it first (MAVSDK "
+            "udpout://127.0.0.1:PORT). Default: 14580 (PX4 SITL's).")] = 14580,
         sysid: Annotated[int, typer.Option(
-            "--sysid", min=1, max=250, help="MAVLink system id of the vehicle. Default: 1.")]
-        = 1,
+            "--sysid", metavar="N", min=1, max=250,
+            help="MAVLink system id of the vehicle. Default: 1.")] = 1,
         gcs_port: Annotated[int, typer.Option(
-            "--gcs-port", min=0, max=65535, help="Also send telemetry from the start to this "
-            "UDP port on 127.0.0.1, where a ground station listens (QGroundControl: 14550); "
-            "0: only to peers heard from. Default: 14550.")] = 14550,
+            "--gcs-port", metavar="PORT", min=0, max=65535, help="Also send telemetry from "
+            "the start to this UDP port on 127.0.0.1, where a ground station listens "
+            "(QGroundControl: 14550); 0: only to peers heard from. Default: 14550.")]
+        = 14550,
         no_physics: Annotated[bool, typer.Option(
-            "--no-physics", help="Fly a point mass instead of the MuJoCo quadrotor: same "
-            "MAVLink, far less CPU.")] = False,
+            "--no-physics", metavar="", help="Fly a point mass instead of the MuJoCo "
+            "quadrotor: same MAVLink, far less CPU.")] = False,
     ) -> None:
         """Run one simulated vehicle (quadrotor and autopilot) until Ctrl-C or SIGTERM.
 
