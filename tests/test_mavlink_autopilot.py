@@ -6,9 +6,14 @@ Real time over UDP loopback (a MuJoCo craft in this process), short and bounded.
 from __future__ import annotations
 
 import asyncio
+import select
+import signal
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -23,6 +28,7 @@ from sim.physics.robot import QuadRobot
 from swarmd.core.roles import Health
 
 pytestmark = pytest.mark.slow
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def free_port() -> int:
@@ -62,9 +68,10 @@ def ground_station(port: int, arm: bool) -> dict[str, Any]:
         conn.close()
 
 
-@pytest.mark.parametrize(("flavour", "mode"), [("px4", "LOITER"), ("ardupilot", "LOITER")])
+@pytest.mark.parametrize(("flavour", "mode", "refused"), [("px4", "LOITER", 1),
+                                                           ("ardupilot", "LOITER", 4)])
 async def test_a_ground_station_sees_the_vehicle_its_position_and_mode(
-        flavour: str, mode: str) -> None:
+        flavour: str, mode: str, refused: int) -> None:
     quad = QuadLink(3, (2.0, -1.0, 0.0))
     port = free_port()
     ap = await start_autopilot(quad, flavour, port)  # type: ignore[arg-type]
@@ -81,7 +88,9 @@ async def test_a_ground_station_sees_the_vehicle_its_position_and_mode(
     pos = seen["LOCAL_POSITION_NED"]
     assert abs(pos.x) < 0.1 and abs(pos.y) < 0.1  # parked on its home: the NED origin
     assert seen["ack"] is not None and seen["ack"].command == 400
-    assert seen["ack"].result == 2  # DENIED: the refuse-arm switch
+    # The refuse-arm switch, answered as the firmware answers a failed arming check:
+    # PX4 TEMPORARILY_REJECTED, ArduPilot FAILED.
+    assert seen["ack"].result == refused
 
 
 def test_a_failed_motor_shows_in_health_bits_and_emergency() -> None:
@@ -147,3 +156,40 @@ async def test_a_refused_arm_is_reported_as_a_health_problem() -> None:
         assert link.quad.robot.position[2] < 0.2  # it never left the ground
     finally:
         await link.close()
+
+
+def _vehicle(port: int) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", "ardupilot",
+         "--port", str(port), "--sysid", "7", "--gcs-port", "0", "--no-physics"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_sim_vehicle_says_where_to_connect_and_ends_cleanly_on_ctrl_c() -> None:
+    port = free_port()
+    proc = _vehicle(port)
+    try:
+        assert proc.stdout is not None
+        # Its first lines come once it listens (bounded: a silent process fails here).
+        ready, _, _ = select.select([proc.stdout], [], [], 30.0)
+        assert ready, "the vehicle printed nothing in 30 s"
+        first = [proc.stdout.readline() for _ in range(2)]
+        assert any(f"udpout://127.0.0.1:{port}" in line for line in first), first
+        seen = ground_station(port, arm=False)
+        assert seen["system"] == 7 and seen["HEARTBEAT"].autopilot == 3
+        # A second vehicle on the same port: one line, exit 1.
+        busy = subprocess.run(_vehicle(port).args, cwd=ROOT, capture_output=True, text=True,
+                              timeout=60)
+        assert busy.returncode == 1 and busy.stderr.strip().startswith(
+            f"--port: cannot listen on 127.0.0.1:{port}"), busy.stderr
+        assert len(busy.stderr.strip().splitlines()) == 1
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, err = proc.communicate(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise
+    assert proc.returncode == 0, err[-2000:]
+    assert out.rstrip().endswith("vehicle: stopped")

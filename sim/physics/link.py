@@ -122,6 +122,11 @@ class QuadLink:
         traj = Path(cfg.state_dir) / f"traj-{rid}.jsonl"
         return cls(rid, home, craft=chosen, traj_path=traj, restart_of=restart_of)
 
+    @property
+    def running(self) -> bool:
+        """Started and stepping in real time."""
+        return self._task is not None
+
     # -- RobotLink -----------------------------------------------------------------------
     async def start(self, on_health: HealthCallback) -> None:
         """Start stepping in real time; report health at once."""

@@ -138,6 +138,12 @@ class QuadRobot:
         v = self.data.qvel
         return (float(v[0]), float(v[1]), float(v[2]))
 
+    @property
+    def attitude(self) -> tuple[float, float, float, float]:
+        """Orientation quaternion (w, x, y, z), world frame (x east, y north, z up)."""
+        q = self.data.qpos
+        return (float(q[3]), float(q[4]), float(q[5]), float(q[6]))
+
     def health(self) -> Health:
         """What the robot reports to its daemon (DESIGN rule 7)."""
         if self.failed_motors or self.mode is Mode.CRASHED or self.battery < 0.05:

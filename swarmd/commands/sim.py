@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from typer.core import TyperArgument, TyperGroup
 
 from swarmd.commands.numbers import finite, probability
 
@@ -33,10 +34,58 @@ def _fault_kinds() -> str:
     return escape(help_table())
 
 
-def register(app: typer.Typer) -> None:
-    """Add the `sim` command to the CLI."""
+# Typer may vend its own copy of click: take its Command class from the group's bases.
+_COMMAND: Any = next(c for c in TyperGroup.__mro__ if c.__name__ == "Command")
 
-    @app.command("sim", epilog=_fault_kinds())
+
+class _SimGroup(TyperGroup):
+    """`swarmd sim SWARM [options]` runs a swarm, as a plain command would; a first word
+    naming a subcommand (`swarmd sim vehicle ...`) runs that instead. A group whose own
+    parameters are the run's, so both forms parse and `--help` lists both."""
+
+    _SUB = "swarmd.sim.subcommand"
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.allow_interspersed_args = True  # options after SWARM, as before
+        self.allow_extra_args = False
+        self.no_args_is_help = False
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        if args and args[0] in self.commands:
+            ctx.meta[self._SUB] = (args[0], list(args[1:]))
+            return []
+        return super().parse_args(ctx, args)
+
+    def get_params(self, ctx: Any) -> Any:
+        params = super().get_params(ctx)
+        if self._SUB in ctx.meta:  # `swarmd sim vehicle`, not `swarmd sim SWARM vehicle`
+            return [p for p in params if not isinstance(p, TyperArgument)]
+        return params
+
+    def collect_usage_pieces(self, ctx: Any) -> Any:
+        return _COMMAND.collect_usage_pieces(self, ctx)
+
+    def invoke(self, ctx: Any) -> Any:
+        if self._SUB not in ctx.meta:
+            return _COMMAND.invoke(self, ctx)
+        name, args = ctx.meta[self._SUB]
+        ctx.invoked_subcommand = name
+        with ctx:
+            sub = self.commands[name].make_context(name, args, parent=ctx)
+            with sub:
+                return sub.command.invoke(sub)
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `sim` command (and its `vehicle` subcommand) to the CLI."""
+    sim_app = typer.Typer(cls=_SimGroup, invoke_without_command=True)
+    app.add_typer(sim_app, name="sim")
+    from swarmd.commands import vehicle
+
+    vehicle.register(sim_app)
+
+    @sim_app.callback(epilog=_fault_kinds())
     def sim(
         swarm: Annotated[Path, typer.Argument(help="Swarm file, e.g. configs/paper.yaml.")],
         virtual: Annotated[bool, typer.Option(
@@ -103,7 +152,8 @@ def register(app: typer.Typer) -> None:
         flying a MuJoCo quadrotor, over UDP multicast on loopback. --link mavlink: each
         daemon flies its quadrotor through a simulated PX4 or ArduPilot autopilot over
         MAVLink. --no-physics: the same without quadrotors. --virtual: one process on a
-        virtual clock.
+        virtual clock. `swarmd sim vehicle` runs one simulated vehicle instead (its own
+        --help).
 
         Exit codes: 0 no invariant violated, 1 an invariant was violated or a robot
         process failed, 2 bad input (swarm file, --fault, --craft, --link, --report; nothing was
