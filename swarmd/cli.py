@@ -75,6 +75,13 @@ def _unwrap_all(group: typer.Typer) -> None:
             sub_info = sub.typer_instance.info
             if isinstance(sub_info.help, str):
                 sub_info.help = unwrap(sub_info.help)
+            # A group whose callback runs a command of its own (`swarmd sim SWARM`):
+            # its help is the callback's docstring.
+            cb = sub.typer_instance.registered_callback
+            if cb is not None and cb.callback is not None:
+                doc = cb.help if isinstance(cb.help, str) else cb.callback.__doc__
+                if doc:
+                    cb.help = unwrap(doc)
             _unwrap_all(sub.typer_instance)
 
 
