@@ -22,6 +22,8 @@ from __future__ import annotations
 
 from enum import Enum, IntEnum
 
+from swarmd.core.errors import TransitionError as TransitionError
+
 
 class Role(IntEnum):
     ACTIVE = 1
@@ -48,9 +50,6 @@ class Trigger(Enum):
     FAULT = "the robot reported itself faulty (rule 7)"
     REJOIN = "restarted holder heard no newer holder during rejoin_hold"
 
-
-class TransitionError(RuntimeError):
-    """The node tried a transition the table does not allow (a bug, not peer input)."""
 
 
 TRANSITIONS: dict[Role, dict[Trigger, Role]] = {
