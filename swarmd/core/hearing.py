@@ -99,11 +99,7 @@ class Hearing(NodeBase):
                     and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
                 self._relay_cert(f, now)  # a watcher that missed our takeover
         if w.suspect == self._robot_id:
-            # Rule 4: a warning about ourselves is answered with a heartbeat at once.
-            if self._role == Role.ACTIVE and f == self._function:
-                self._refute(f, sender, w.epoch, seq, now)
-                if self._heartbeat_now(now):
-                    self._emit(ev.Refute(subject=self._robot_id, function=f))
+            self._warned_about_us(f, sender, w.epoch, seq, now)
             return
         holder, epoch = self._known[f]
         if self._rejoin is not None and self._rejoin.function == f:
@@ -130,6 +126,14 @@ class Hearing(NodeBase):
         if count >= self._params.quorum and not self._ears.heard_lately(
                 f, w.suspect, w.epoch, now, self._params.t_max / 2):
             self._start_claim(f, w.suspect, w.epoch, now)
+
+    def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
+        """Rule 4: a warning about ourselves is answered with a heartbeat at once (and,
+        per robot, a signed REFUTE)."""
+        if self._role == Role.ACTIVE and f == self._function:
+            self._refute(f, sender, epoch, seq, now)
+            if self._heartbeat_now(now):
+                self._emit(ev.Refute(subject=self._robot_id, function=f))
 
     def _count_vote(self, f: str, sender: int, w: wire.Warn, now: float) -> int:
         """Fig. 9: count `sender`'s warning; returns the distinct witnesses now."""
