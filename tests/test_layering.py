@@ -167,3 +167,40 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
         "sim.xbee_emu.radio (sim.xbee_emu)"]
     assert wrong_way("sim.virtual.simulator", ["sim.physics.robot"]) != []
     assert wrong_way("sim.realtime.orchestrator", ["sim.physics.link", "swarmd.core"]) == []
+
+
+def _core_cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle among the modules of `graph` (name -> names it imports), or []."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> list[str]:
+        state[m] = 1
+        stack.append(m)
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == 1:
+                return [*stack[stack.index(n):], n]
+            if n not in state and (found := visit(n)):
+                return found
+        stack.pop()
+        state[m] = 2
+        return []
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m)):
+            return found
+    return []
+
+
+def test_core_imports_form_no_cycle() -> None:
+    """Inside swarmd.core every import points one way, lazy ones included: a module that
+    needs another's name imports it, never the other way round at run time."""
+    graph = {module_name(p): {n for n in imported_modules(p)
+                              if n.startswith("swarmd.core.") and n != module_name(p)}
+             for p in CORE_FILES if p.name != "__init__.py"}
+    assert _core_cycle(graph) == []
+
+
+def test_the_cycle_finder_finds_one() -> None:
+    assert _core_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _core_cycle({"a": {"b"}, "b": set()}) == []

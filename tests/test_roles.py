@@ -20,8 +20,10 @@ from swarmd.core.roles import (
 EXPECTED = {
     (Role.STANDBY, Trigger.QUORUM): Role.CLAIMING,
     (Role.STANDBY, Trigger.LEAVE_HEARD): Role.CLAIMING,
-    (Role.STANDBY, Trigger.REJOIN): Role.ACTIVE,
     (Role.STANDBY, Trigger.FAULT): Role.STANDBY,
+    (Role.REJOINING, Trigger.REJOIN): Role.ACTIVE,
+    (Role.REJOINING, Trigger.OUTDATED): Role.STANDBY,
+    (Role.REJOINING, Trigger.FAULT): Role.STANDBY,
     (Role.CLAIMING, Trigger.CLAIM_HELD): Role.ACTIVE,
     (Role.CLAIMING, Trigger.BACKOFF): Role.STANDBY,
     (Role.CLAIMING, Trigger.REFUTED): Role.STANDBY,

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
+from swarmd.core.claims import CLAIMS_REMEMBERED
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
@@ -44,9 +45,6 @@ EVIDENCE_REMEMBERED = 16
 of warnings about invented epochs pushes out the oldest, it cannot grow the node."""
 
 
-CLAIMS_REMEMBERED = 16
-"""Claims remembered per slot (rule 10); a flood of invented (claimant, epoch) pairs
-pushes out the oldest, it cannot grow the node."""
 
 
 _LEAVE_BACKED = -1

@@ -13,10 +13,11 @@ Sans-IO and pure, like the rest of `swarmd.core`.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Protocol
 
-from swarmd.core.wire import SEQ_MAX
+from swarmd.core.errors import NodeError
+from swarmd.core.wire import KEY_LEN, SEQ_MAX
 
 EPOCH_MAX = 0xFFFF
 """Epochs travel as 16-bit fields (HEARTBEAT, WARN, CLAIM, LEAVE bodies)."""
@@ -58,7 +59,7 @@ def restored_problems(
 
 
 class _RestoredLike(Protocol):
-    # `swarmd.core.node.Restored`, without importing the module that calls us.
+    # `swarmd.core.records.Restored`.
     @property
     def known(self) -> Mapping[str, tuple[int, int]]: ...
 
@@ -73,7 +74,24 @@ def check_restored(restored: _RestoredLike | None, seq_start: int = 0) -> None:
     held = restored.held if restored is not None else None
     problems = restored_problems(known, held, seq_start)
     if problems:
-        # Imported here: swarmd.core.node imports this module to call check_restored.
-        from swarmd.core.node import NodeError
-
         raise NodeError("restored state out of range: " + "; ".join(problems))
+
+
+def check_keys(keys: Sequence[bytes], *, signing: bool) -> tuple[bytes, ...]:
+    """The swarm keys for a live reload (`Node.set_keys`), checked: each exactly
+    `KEY_LEN` bytes, and not none at all while frames are signed (`signing`) — a config
+    that lost its key lines would otherwise turn authentication off on a running robot,
+    which then sends frames every keyed robot drops and accepts forged ones (DESIGN
+    section 2); turning signing off takes a restart. Going from unsigned to signed is
+    allowed: that cut-over has no window whichever way it is done. Raises `NodeError`."""
+    new = tuple(keys)
+    for i, key in enumerate(new):
+        if not isinstance(key, bytes):
+            raise NodeError(f"swarm key {i} is a {type(key).__name__}, not bytes")
+        if len(key) != KEY_LEN:
+            raise NodeError(f"swarm key {i} is {len(key)} bytes; a swarm key is "
+                            f"exactly {KEY_LEN} bytes")
+    if not new and signing:
+        raise NodeError("no swarm key given while frames are signed; turning signing "
+                        "off needs a restart, not a key reload")
+    return new

@@ -15,9 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
-
-class ParamsError(ValueError):
-    """Parameters that cannot work together (misuse of the API, not peer garbage)."""
+from swarmd.core.errors import ParamsError as ParamsError
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,12 +21,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from swarmd.core.errors import PlanError as PlanError
+
 MAX_FUNCTIONS = 0xFFFF
 """Slots 1..65535 (wire.py's slot field; 0 means "no function")."""
 
-
-class PlanError(ValueError):
-    """A plan that is not self-consistent (misuse of the API)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,7 +12,9 @@ id claiming the same slot, or the suspect heard alive, sends it back to STANDBY;
 becomes ACTIVE and tells the robot to execute the slot. An ACTIVE robot that hears its
 slot held at a higher epoch (or at the same epoch by a lower id) is FENCED: it stops
 the function at once, and after one heartbeat period rejoins as STANDBY (DESIGN rule 2).
-A robot that reports itself faulty sends LEAVE and drops to STANDBY (rule 7).
+A robot that reports itself faulty sends LEAVE and drops to STANDBY (rule 7). A holder
+that restarts is REJOINING: it listens for `rejoin_hold`, then resumes its slot (ACTIVE)
+or, having heard it held by another robot or at a newer epoch, becomes a STANDBY.
 
 Every transition the node makes goes through `transition()`, so this table is the whole
 state machine; `docs/roles.md` is generated from it by `python -m swarmd.core.roles`.
@@ -22,12 +24,17 @@ from __future__ import annotations
 
 from enum import Enum, IntEnum
 
+from swarmd.core.errors import TransitionError as TransitionError
+
 
 class Role(IntEnum):
     ACTIVE = 1
     STANDBY = 2
     CLAIMING = 3
     FENCED = 4
+    REJOINING = 5
+    """A restarted holder listening for `rejoin_hold` before it resumes (rule 2 across
+    a reboot). On the wire it heartbeats as a STANDBY."""
 
 
 class Health(IntEnum):
@@ -47,17 +54,19 @@ class Trigger(Enum):
     FENCE_DONE = "fenced robot rejoins as standby"
     FAULT = "the robot reported itself faulty (rule 7)"
     REJOIN = "restarted holder heard no newer holder during rejoin_hold"
+    OUTDATED = "restarted holder heard its slot held by another robot or at a newer epoch"
 
-
-class TransitionError(RuntimeError):
-    """The node tried a transition the table does not allow (a bug, not peer input)."""
 
 
 TRANSITIONS: dict[Role, dict[Trigger, Role]] = {
     Role.STANDBY: {
         Trigger.QUORUM: Role.CLAIMING,
         Trigger.LEAVE_HEARD: Role.CLAIMING,
+        Trigger.FAULT: Role.STANDBY,
+    },
+    Role.REJOINING: {
         Trigger.REJOIN: Role.ACTIVE,
+        Trigger.OUTDATED: Role.STANDBY,
         Trigger.FAULT: Role.STANDBY,
     },
     Role.CLAIMING: {
@@ -88,7 +97,8 @@ def transition(role: Role, trigger: Trigger) -> Role:
 def mermaid() -> str:
     """The state diagram drawn from the table (Mermaid syntax)."""
     lines = ["stateDiagram-v2", "    [*] --> ACTIVE: configured with a function",
-             "    [*] --> STANDBY: configured as substitute"]
+             "    [*] --> STANDBY: configured as substitute",
+             "    [*] --> REJOINING: restarted holding a function"]
     for src, edges in TRANSITIONS.items():
         for trig, dst in edges.items():
             lines.append(f"    {src.name} --> {dst.name}: {trig.name.lower()}")
@@ -109,8 +119,8 @@ def markdown() -> str:
         "A robot's role (paper Fig. 5, with the wait state as `CLAIMING`) changes only "
         "through this table: the node (`swarmd/core/node.py`) raises `TransitionError` on "
         "any other change. A robot starts `ACTIVE` when the swarm file gives it a "
-        "function, `STANDBY` otherwise (a restarted holder first listens for "
-        "`rejoin_hold`, DESIGN rule 2).",
+        "function, `STANDBY` otherwise; a restarted holder starts `REJOINING` and "
+        "listens for `rejoin_hold` first (DESIGN rule 2).",
         "",
         "| from | trigger | to | when |",
         "|---|---|---|---|",

@@ -42,6 +42,7 @@ from enum import IntEnum
 from typing import NamedTuple
 
 from swarmd.core.auth import SIGNATURE_LEN, Signer, Verifier
+from swarmd.core.errors import CodecError as CodecError
 
 VERSION = 1
 TAG_LEN = 8
@@ -68,14 +69,6 @@ class LeaveReason(IntEnum):
     SHUTDOWN = 0  # graceful stop (handover_on_stop)
     FAULT = 1  # the robot reported itself faulty (DESIGN rule 7)
     FENCED = 2  # it learnt its slot was taken over
-
-
-class CodecError(ValueError):
-    """A frame that cannot be decoded or verified. `reason` names the drop counter."""
-
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,44 @@
+"""The core's exceptions under one root (`CoreError`), so a driver can tell a core
+refusal from anything else with one `except`.
+
+- `CodecError` (a `ValueError`): bytes that are no valid frame; `receive` turns it into
+  a counted drop and never lets it out (DESIGN section 2).
+- `ParamsError`, `PlanError` (`ValueError`s): timing or a swarm plan that cannot work;
+  raised when they are built, before any robot runs.
+- `NodeError`, `TransitionError` (`RuntimeError`s): misuse of the node by its driver
+  (a bug there), never caused by a peer's frame.
+"""
+
+from __future__ import annotations
+
+
+class CoreError(Exception):
+    """Root of every exception `swarmd.core` raises on purpose."""
+
+
+class CodecError(CoreError, ValueError):
+    """A frame that cannot be decoded or verified. `reason` names the drop counter."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+class ParamsError(CoreError, ValueError):
+    """Timing parameters that cannot work together."""
+
+
+class PlanError(CoreError, ValueError):
+    """A swarm plan the protocol cannot run."""
+
+
+class NodeError(CoreError, RuntimeError):
+    """Misuse of the node API (a bug in the driver), never caused by peer frames."""
+
+
+class TransitionError(CoreError, RuntimeError):
+    """The node tried a transition the table does not allow (a bug, not peer input)."""
+
+
+__all__ = ["CodecError", "CoreError", "NodeError", "ParamsError", "PlanError",
+           "TransitionError"]

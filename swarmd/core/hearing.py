@@ -1,0 +1,223 @@
+"""What a robot does with each message it accepts (paper Figs. 7-9, DESIGN rules 1-10).
+
+`Hearing` is the part of `Node` that reacts to HEARTBEAT, WARN, CLAIM and LEAVE frames
+once they passed the receive filters (`node.py`); per-robot evidence (CERT, REFUTE) is
+`signed.py`'s, role changes are `moves.py`'s. Every method changes the node's state
+and queues actions; none does I/O.
+"""
+
+from __future__ import annotations
+
+from swarmd.core import events as ev
+from swarmd.core import wire
+from swarmd.core.drops import DropReason
+from swarmd.core.nodebase import NodeBase
+from swarmd.core.records import Holder
+from swarmd.core.roles import Health, Role, Trigger
+from swarmd.core.witness import witnesses
+
+
+class Hearing(NodeBase):
+    # ------------------------------------------------------------------ HEARTBEAT
+    def _on_heartbeat(self, sender: int, hb: wire.Heartbeat, now: float) -> None:
+        if hb.function == 0:
+            if hb.role in (Role.STANDBY, Role.CLAIMING) and hb.health != Health.FAULTY:
+                self._ears.standby_beat(sender, now)
+            return
+        f = self._slot(hb.function)
+        if f is None:
+            return
+        holder, epoch = self._known[f]
+        newer = hb.epoch > epoch or (hb.epoch == epoch and (sender == holder or sender < holder))
+        if newer and self._identity is not None and (sender, hb.epoch) != (holder, epoch) \
+                and not self._ev.is_certified(f, sender, hb.epoch):
+            self._uncertified_beat(f, hb, now)
+            return
+        if not newer:
+            # A stale holder (e.g. back from a pause): if it is our slot, answer at once
+            # so it hears the newer epoch and fences itself (rule 2) within a frame.
+            if f == self._function and self._role == Role.ACTIVE:
+                self._relay_cert(f, now)
+                self._heartbeat_now(now)
+            return
+        self._known[f] = Holder(sender, hb.epoch)
+        self._ears.slot_beat(f, sender, hb.epoch, now)
+        self._claims_seen.forget(f)
+        # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
+        if f == self._function and self._role == Role.ACTIVE and sender != self._robot_id:
+            self._fence(hb.epoch, now)
+            return
+        self._holder_heard(f, sender, hb.epoch, Holder(holder, epoch), now)
+
+    def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
+        """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
+        epoch or a holder by itself; only the certified new holder's does."""
+        self._drops[DropReason.UNCERTIFIED] += 1
+        if f == self._function and self._role == Role.ACTIVE:
+            self._relay_cert(f, now)
+        self._relay_refutes(f, now)  # it may act on a claim they void
+        if self._rejoin is not None and self._rejoin.function == f:
+            # Not believed, but enough to stay a standby rather than resume: the
+            # cautious side of rule 2 across a reboot (the slot's watchers and
+            # standbys take it over if nobody really holds it).
+            self._rejoin_superseded(f, hb.epoch)
+
+    def _holder_heard(self, f: str, sender: int, epoch: int, before: Holder,
+                      now: float) -> None:
+        """f's holder (`sender` at `epoch`; `before`: the view until now) heartbeated:
+        watchdog, votes, our claim and our rejoin learn it."""
+        watch = self._watches.get(f)
+        if watch is not None:
+            suspected = watch.suspecting
+            if watch.heard(now) and suspected and (sender, epoch) == before:
+                self._emit(ev.Refute(subject=sender, function=f))
+        votes = self._votes.get(f)
+        if votes is not None and votes.witnesses:
+            votes.clear()  # rule 4: the suspect is alive, or a new holder is
+        claim = self._claim
+        if claim is not None and claim.function == f:
+            if epoch >= claim.epoch:
+                self._emit(ev.Backoff(subject=claim.failed, function=f, winner=sender))
+                self._claim = None
+                self._to(Trigger.SUPERSEDED)
+            elif sender == claim.failed:
+                self._emit(ev.Refute(subject=sender, function=f))
+                self._claim = None
+                self._to(Trigger.REFUTED)
+        if self._rejoin is not None and self._rejoin.function == f and sender != self._robot_id:
+            self._rejoin_superseded(f, self._known[f].epoch)
+
+    # ------------------------------------------------------------------ WARN
+    def _on_warn(self, sender: int, w: wire.Warn, now: float, raw: bytes = b"",
+                 seq: int = 0) -> None:
+        f = self._slot(w.function)
+        if f is None:
+            return
+        if self._identity is not None:
+            self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
+            if f == self._function and self._role == Role.ACTIVE \
+                    and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
+                self._relay_cert(f, now)  # a watcher that missed our takeover
+        if w.suspect == self._robot_id:
+            self._warned_about_us(f, sender, w.epoch, seq, now)
+            return
+        holder, epoch = self._known[f]
+        if self._rejoin is not None and self._rejoin.function == f:
+            self._rejoin_superseded(f, w.epoch)
+        if f not in self._covers or not self._standing_by():
+            return
+        if w.epoch < epoch or (w.epoch == epoch and w.suspect != holder):
+            return  # about an older holder: stale
+        # A warning at a newer epoch than we know means we missed a takeover (we were
+        # partitioned, or lost its heartbeats) and the new holder may be dead already:
+        # count it, keyed by (suspect, epoch), without believing it into `known` — a
+        # single liar cannot reach the quorum, and the holder's heartbeat refutes it.
+        # Rule 3: only the holders of the slots that watch f are witnesses; never the
+        # suspect itself.
+        if sender == w.suspect or sender not in witnesses(self._plan, self._known, f):
+            self._drops[DropReason.NOT_WITNESS] += 1
+            return
+        count = self._count_vote(f, sender, w, now)
+        # Rule 4 from our own ears: the channel is a broadcast, so the standby hears the
+        # suspect too. Heard within T_max/2, the suspect is alive whatever the witnesses
+        # missed (loss); after a real crash this is silent by the time warnings come
+        # (they come T_max after the last heartbeat), so it costs no latency. The next
+        # warning re-checks.
+        if count >= self._params.quorum and not self._ears.heard_lately(
+                f, w.suspect, w.epoch, now, self._params.t_max / 2):
+            self._start_claim(f, w.suspect, w.epoch, now)
+
+    def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
+        """Rule 4: a warning about ourselves is answered with a heartbeat at once (and,
+        per robot, a signed REFUTE)."""
+        if self._role == Role.ACTIVE and f == self._function:
+            self._refute(f, sender, epoch, seq, now)
+            if self._heartbeat_now(now):
+                self._emit(ev.Refute(subject=self._robot_id, function=f))
+
+    def _count_vote(self, f: str, sender: int, w: wire.Warn, now: float) -> int:
+        """Fig. 9: count `sender`'s warning; returns the distinct witnesses now."""
+        votes = self._votes[f]
+        fresh = sender not in votes.witnesses or (w.suspect, w.epoch) != (votes.subject,
+                                                                          votes.epoch)
+        count = votes.add(sender, w.suspect, w.epoch, now)
+        if fresh:  # repeated warnings refresh a vote; only a new witness is an event
+            self._emit(ev.Vote(subject=w.suspect, function=f, from_=sender, count=count))
+        if count < self._params.quorum and self._ears.own_ears(f, self._known, now):
+            # Rule 9: correlated failures took watchers of f with the suspect; this
+            # standby's own ears stand in for them, as one witness.
+            mine = self._robot_id in votes.witnesses
+            if not mine and self._identity is not None:
+                # Its own "warning" is a signed one, so the certificate can carry it.
+                self._record_evidence(f, self._robot_id, w.suspect, w.epoch,
+                                      self._sign_only(wire.Warn(w.suspect, w.function,
+                                                                w.epoch)))
+            count = votes.add(self._robot_id, w.suspect, w.epoch, now)
+            if not mine:
+                self._emit(ev.Vote(subject=w.suspect, function=f, from_=self._robot_id,
+                                   count=count))
+        return count
+
+    # ------------------------------------------------------------------ CLAIM
+    def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
+        f = self._slot(c.function)
+        if f is None:
+            return
+        if self._identity is not None:
+            if (sender, c.epoch) == tuple(self._known[f]):
+                return  # the holder re-announcing its certificate (`_relay_cert`)
+            if not self._ev.certify(f, sender, c, self._known[f].epoch):
+                # Per-robot mode: a claim without a certificate this robot verified
+                # silences nobody and makes nobody back off (one robot alone cannot
+                # start a takeover); kept a while in case its certificate comes later.
+                self._ev.hold_pending(f, sender, c, now)
+                self._drops[DropReason.UNCERTIFIED] += 1
+                self._relay_refutes(f, now)
+                return
+        if not self._claims_seen.believed(f, sender, c.epoch, now):
+            self._drops[DropReason.STALE_CLAIM] += 1
+            return
+        if self._claim is not None and self._claim.function == f:
+            # The paper's wait state: the lower id wins; a claim at a higher epoch
+            # knows more than we do.
+            mine = self._claim.epoch
+            if c.epoch > mine or (c.epoch == mine and sender < self._robot_id):
+                self._emit(ev.Backoff(subject=self._claim.failed, function=f, winner=sender))
+                self._claim = None
+                self._to(Trigger.BACKOFF)
+            return
+        if self._role == Role.ACTIVE and f == self._function:
+            if c.failed == self._robot_id and c.epoch > self._epoch and self._heartbeat_now(now):
+                self._emit(ev.Refute(subject=self._robot_id, function=f))
+            return
+        watch = self._watches.get(f)
+        if watch is not None and c.epoch > self._known[f].epoch:
+            watch.claim_heard(now)  # paper: a claim tells the neighbours to stop warning
+        votes = self._votes.get(f)
+        if votes is not None:
+            votes.clear()
+        if self._rejoin is not None and self._rejoin.function == f:
+            self._rejoin_superseded(f, c.epoch)
+
+    # ------------------------------------------------------------------ LEAVE
+    def _on_leave(self, sender: int, lv: wire.Leave, now: float, raw: bytes = b"") -> None:
+        f = self._slot(lv.function)
+        if f is None:
+            return
+        if self._identity is not None:
+            # A signed LEAVE from the holder itself is evidence enough for its own slot.
+            self._record_evidence(f, sender, sender, lv.epoch, raw, now)
+        holder, epoch = self._known[f]
+        if (sender, lv.epoch) != (holder, epoch):
+            return  # not the current holder: stale
+        watch = self._watches.get(f)
+        if watch is not None:
+            watch.claim_heard(now)
+            if not self._ears.live_standby(f, sender, now):
+                watch.mark_alerted()
+                self._emit(ev.Alert(function=f, reason="no standby left"))
+        if f in self._covers and self._standing_by():
+            self._start_claim(f, sender, epoch, now, trigger=Trigger.LEAVE_HEARD)
+
+
+__all__ = ["Hearing"]

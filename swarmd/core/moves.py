@@ -1,0 +1,176 @@
+"""How a robot changes what it does (paper Fig. 5 with the wait state; DESIGN rules 2, 5,
+8, 10): start, claim, take over, fence, rejoin after a restart, watch the neighbours'
+slots, heartbeat. `Moves` is that part of `Node`; every role change goes through the
+table in `roles.py` (`NodeBase._to`).
+"""
+
+from __future__ import annotations
+
+from swarmd.core import events as ev
+from swarmd.core import wire
+from swarmd.core.actions import Assign, Release
+from swarmd.core.claims import WaitState
+from swarmd.core.limits import EPOCH_MAX
+from swarmd.core.nodebase import NodeBase
+from swarmd.core.records import Holder
+from swarmd.core.roles import Role, Trigger
+from swarmd.core.watchdog import SlotWatch
+
+
+class Moves(NodeBase):
+    # ------------------------------------------------------------------ start
+    def _start(self, now: float) -> None:
+        self._started = True
+        if self._rejoin is not None:
+            return  # `started` tells the outcome once the rejoin hold is over
+        self._emit(ev.Started(role=self._role.name.lower(), function=self._function))
+        if self._role == Role.ACTIVE and self._function is not None:
+            self._pending.append(Assign(self._function, self._epoch))
+
+    # ------------------------------------------------------------------ the wait state
+    def _start_claim(self, f: str, failed: int, epoch: int, now: float,
+                     trigger: Trigger = Trigger.QUORUM) -> None:
+        self._to(trigger)
+        # 65535 takeovers of one slot: saturate rather than wrap.
+        new_epoch = min(epoch + 1, EPOCH_MAX)
+        self._claim = WaitState(f, failed, epoch, new_epoch, now + self._params.claim_hold,
+                                now + self._params.warn_interval)
+        self._clear_votes()
+        self._emit(ev.Claim(subject=failed, function=f, epoch=new_epoch))
+        self._send_claim()
+
+    def _send_claim(self) -> None:
+        assert self._claim is not None
+        c = self._claim
+        if self._identity is not None:
+            for raw in self._ev.cert_frames(c.function, c.failed, c.old_epoch):
+                self._send_cert(c.function, raw)
+        self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
+
+    def _claim_due(self, now: float) -> None:
+        """The wait state's deadlines: take over at the end of the hold, else repeat the
+        claim every warn interval."""
+        c = self._claim
+        if c is None:
+            return
+        if now >= c.until:
+            self._take_over(now)
+        elif now >= c.resend:
+            c.resend = now + self._params.warn_interval
+            self._send_claim()
+
+    def _take_over(self, now: float) -> None:
+        assert self._claim is not None
+        c = self._claim
+        if self._identity is not None and not self._ev.certify(
+                c.function, self._robot_id,
+                wire.Claim(c.failed, self._plan.slot(c.function), c.epoch),
+                self._known[c.function].epoch):
+            # Its certificate was refuted during the hold (or never complete): a takeover
+            # no other robot would believe is none (DESIGN, "Convergence").
+            self._emit(ev.Refute(subject=c.failed, function=c.function))
+            self._claim = None
+            self._to(Trigger.REFUTED)
+            return
+        self._claim = None
+        self._to(Trigger.CLAIM_HELD)
+        if self._identity is not None:
+            self._ev.took_over(c.function, c.failed, c.old_epoch, c.epoch)
+        self._emit(ev.Takeover(function=c.function, epoch=c.epoch, replaced=c.failed))
+        self._become_holder(c.function, c.epoch, now)
+
+    def _become_holder(self, f: str, epoch: int, now: float) -> None:
+        """Execute f at `epoch` from now: tell the robot, watch f's neighbours, heartbeat."""
+        self._function, self._epoch = f, epoch
+        self._known[f] = Holder(self._robot_id, epoch)
+        self._pending.append(Assign(f, epoch))
+        self._watch_neighbours(now)
+        self._restart_heartbeats(now)
+
+    # ------------------------------------------------------------------ fencing (rule 2)
+    def _fence(self, epoch: int, now: float) -> None:
+        f = self._function
+        assert f is not None
+        self._emit(ev.Fenced(function=f, epoch=epoch))
+        self._release()
+        self._to(Trigger.FENCE)
+        self._fenced_until = now + self._params.heartbeat_interval
+
+    def _release(self) -> None:
+        if self._function is not None:
+            self._pending.append(Release(self._function))
+        self._function = None
+        self._epoch = 0
+        self._watches = {}
+
+    # ------------------------------------------------------------------ rejoin (rule 2)
+    def _finish_rejoin(self, now: float) -> None:
+        assert self._rejoin is not None
+        rejoin, self._rejoin = self._rejoin, None
+        if not rejoin.resumes(self._known[rejoin.function]):
+            self._to(Trigger.OUTDATED)
+            self._emit(ev.Started(role="standby", function=None))
+            return
+        self._to(Trigger.REJOIN)
+        self._emit(ev.Started(role="active", function=rejoin.function))
+        self._become_holder(rejoin.function, rejoin.epoch, now)
+
+    def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
+        """Someone holds, warns about or claims our old slot at `seen_epoch`: newer than
+        the one we held (or held by another robot), we stay a standby."""
+        assert self._rejoin is not None
+        if self._rejoin.superseded(self._known[f], seen_epoch):
+            self._rejoin = None
+            self._to(Trigger.OUTDATED)
+            self._emit(ev.Started(role="standby", function=None))
+
+    # ------------------------------------------------------------------ watchdogs
+    def _watch_neighbours(self, now: float) -> None:
+        assert self._function is not None
+        self._watches = {}
+        for g in self._plan.watched(self._function):
+            holder = self._known[g].robot
+            self._watches[g] = SlotWatch(g, self._params, now, self._heard_at.get(holder))
+
+    def _watch_fired(self, g: str, watch: SlotWatch, now: float) -> None:
+        subject, epoch = self._known[g]
+        fired = watch.fire(now)
+        if fired.first:
+            self._emit(ev.Suspect(subject=subject, function=g))
+            self._emit(ev.Warn(subject=subject, function=g))
+        elif fired.alert:
+            self._emit(ev.Alert(function=g, reason="no claim"))
+        elif (not watch.alerted and watch.since is not None
+              and now - watch.since >= self._params.t_max
+              and not self._ears.live_standby(g, subject, now)):
+            # Rule 8, without waiting for alert_after: nobody can take over. Not on the
+            # first fire: one more T_max of silence first, so loss alone rarely alerts.
+            watch.mark_alerted()
+            self._emit(ev.Alert(function=g, reason="no standby left"))
+        self._send(wire.Warn(subject, self._plan.slot(g), epoch))
+
+    # ------------------------------------------------------------------ heartbeats
+    def _send_heartbeat(self, now: float) -> None:
+        slot = self._plan.slot(self._function) if self._function is not None else 0
+        # A rejoining robot is a standby to the others until it resumes (rule 6).
+        role = Role.STANDBY if self._role == Role.REJOINING else self._role
+        self._send(wire.Heartbeat(slot, self._epoch if slot else 0, int(role),
+                                  int(self._health)))
+        self._beat.sent(now)
+
+    def _restart_heartbeats(self, now: float) -> None:
+        """Became ACTIVE: heartbeat now and every heartbeat_interval from now on."""
+        if self._heartbeating():
+            self._send_heartbeat(now)
+            self._beat.restart(now)
+
+    def _heartbeat_now(self, now: float) -> bool:
+        """An extra heartbeat out of schedule (refutation, fencing a stale holder),
+        at most four per heartbeat period so a flood of warnings cannot amplify."""
+        if not self._heartbeating() or not self._beat.extra_allowed(now):
+            return False
+        self._send_heartbeat(now)
+        return True
+
+
+__all__ = ["Moves"]

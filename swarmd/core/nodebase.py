@@ -1,0 +1,157 @@
+"""The state of one robot's node and the plumbing every rule uses (DESIGN section 2).
+
+`Node` (`node.py`) is assembled from this base and three rule modules: `hearing.py`
+(what a robot does with each message), `moves.py` (how its role changes) and `signed.py`
+(per-robot evidence). They share the state declared here, set up once by
+`Node.__init__`; drivers see it only through `Node.snapshot()`. The methods a rule
+module calls in another are declared here and defined there.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from swarmd.core import wire
+from swarmd.core.actions import Action, Broadcast
+from swarmd.core.auth import Identity, Signer, Verifier
+from swarmd.core.claims import ClaimMemory, WaitState
+from swarmd.core.drops import DropReason
+from swarmd.core.events import Event
+from swarmd.core.evidence import EvidenceStore
+from swarmd.core.heartbeat import HeartbeatClock
+from swarmd.core.params import Params
+from swarmd.core.plan import Relevant, SwarmPlan
+from swarmd.core.records import Holder
+from swarmd.core.rejoin import Rejoin
+from swarmd.core.replay import ReplayFilter
+from swarmd.core.roles import Health, Role, Trigger, transition
+from swarmd.core.votes import VoteCounter
+from swarmd.core.watchdog import SlotWatch
+from swarmd.core.witness import Ears
+
+
+class NodeBase:
+    _robot_id: int
+    _plan: SwarmPlan
+    _params: Params
+    _keys: tuple[bytes, ...]
+    _identity: Identity | None
+    _signer: Signer | None
+    _verifier: Verifier | None
+    _seq: int
+    """Our own sequence counter (a clock: DESIGN, "Sequence numbers")."""
+    _seq_start: int
+    _health: Health
+    _drops: Counter[str]
+    _frames_in: int
+    _frames_out: int
+    _known: dict[str, Holder]
+    """function -> (holder, epoch): whoever executes each slot, as far as we know."""
+    _covers: frozenset[str]
+    _relevant: Relevant
+    _role: Role
+    _function: str | None
+    _epoch: int
+    _watches: dict[str, SlotWatch]
+    _votes: dict[str, VoteCounter]
+    _claim: WaitState | None
+    _fenced_until: float | None
+    _rejoin: Rejoin | None
+    _heard_at: dict[int, float]
+    """robot -> last frame accepted from it."""
+    _ears: Ears
+    _claims_seen: ClaimMemory
+    _replay: ReplayFilter
+    _ev: EvidenceStore
+    _start_time: float
+    _stalled_at: float
+    _beat: HeartbeatClock
+    _armed: float | None
+    """The deadline the driver was last given: a call far past it is our own stall,
+    not the neighbours' silence (`Node._advance`)."""
+    _stopped: bool
+    _started: bool
+    _pending: list[Action]
+
+    # ------------------------------------------------------------------ plumbing
+    def _send(self, msg: wire.Message, *, evidence: bool = False) -> bytes:
+        self._seq = min(self._seq + 1, wire.SEQ_MAX)
+        frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
+        data = wire.encode(frame, self._keys[0] if self._keys else None, self._signer)
+        if evidence and self._identity is not None and isinstance(msg, wire.Leave):
+            f = self._plan.function_at(msg.function)
+            if f is not None:
+                self._record_evidence(f, self._robot_id, self._robot_id, msg.epoch, data)
+        self._pending.append(Broadcast(data))
+        self._frames_out += 1
+        return data
+
+    def _emit(self, event: Event) -> None:
+        self._pending.append(event)
+
+    def _slot(self, index: int) -> str | None:
+        """The function at wire slot `index`; None (and a `bad_function` drop) if the
+        plan has none there."""
+        f = self._plan.function_at(index)
+        if f is None:
+            self._drops[DropReason.BAD_FUNCTION] += 1
+        return f
+
+    def _to(self, trigger: Trigger) -> None:
+        self._role = transition(self._role, trigger)
+
+    def _clear_votes(self) -> None:
+        for v in self._votes.values():
+            v.clear()
+
+    def _standing_by(self) -> bool:
+        """A standby that may vote and claim (Fig. 9): not faulty. A rejoining robot is
+        not one: it still means to resume its own slot (rule 2 across a reboot) and must
+        not take another one meanwhile."""
+        return self._role == Role.STANDBY and self._health != Health.FAULTY
+
+    def _heartbeating(self) -> bool:
+        return not self._stopped and self._health != Health.FAULTY
+
+    # ------------------------------------------------------------------ across modules
+    # Defined in `hearing.py`, `moves.py` and `signed.py`.
+    def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
+        raise NotImplementedError
+
+    def _fence(self, epoch: int, now: float) -> None:
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        raise NotImplementedError
+
+    def _start_claim(self, f: str, failed: int, epoch: int, now: float,
+                     trigger: Trigger = Trigger.QUORUM) -> None:
+        raise NotImplementedError
+
+    def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
+        raise NotImplementedError
+
+    def _heartbeat_now(self, now: float) -> bool:
+        raise NotImplementedError
+
+    def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
+                         raw: bytes, now: float | None = None) -> None:
+        raise NotImplementedError
+
+    def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
+        raise NotImplementedError
+
+    def _relay_refutes(self, f: str, now: float) -> None:
+        raise NotImplementedError
+
+    def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
+        raise NotImplementedError
+
+    def _sign_only(self, msg: wire.Message) -> bytes:
+        raise NotImplementedError
+
+    def _send_cert(self, f: str, raw: bytes) -> None:
+        raise NotImplementedError
+
+
+__all__ = ["NodeBase"]

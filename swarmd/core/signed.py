@@ -1,0 +1,156 @@
+"""Per-robot mode's part of the node (DESIGN section 2, "Who may say what" and
+"Convergence"): recording signed evidence, relaying certificates and refutes, signing
+refutes, undoing a takeover the refutes void, verifying a restored hold. The evidence
+itself — which claim a certificate backs — is `evidence.py`'s; `Signed` turns its
+answers into frames, events and role changes.
+"""
+
+from __future__ import annotations
+
+from swarmd.core import events as ev
+from swarmd.core import wire
+from swarmd.core.drops import DropReason
+from swarmd.core.evidence import cert_says, seq_of
+from swarmd.core.nodebase import NodeBase
+from swarmd.core.records import Holder, Restored
+from swarmd.core.roles import Role, Trigger
+
+_NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
+"""The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
+
+RELAY_EVERY = 8
+"""Per-robot mode: a holder that took its slot over relays its certificate at least
+once per this many T_max even unasked (4 s at udp, 16 s at radio), so every robot that
+hears the slot holds the certificate of its holder within that bound."""
+
+
+class Signed(NodeBase):
+    def _verified_hold(self, f: str, epoch: int,
+                       restored: Restored) -> tuple[str, int] | None:
+        """The hold of f at `epoch` a restarted robot read from its state file, if it is
+        provable as a received one would be — the plan's own holder at epoch 0, or a
+        certificate that verifies and backs it; otherwise None (it rejoins as a standby,
+        and the slot's watchers take it over if nobody holds it)."""
+        assert self._verifier is not None
+        if epoch == 0:
+            return (f, 0) if self._plan.initial_holder(f) == self._robot_id else None
+        if self._ev.restore(f, epoch, tuple(restored.certificate), self._verifier):
+            self._known[f] = Holder(self._robot_id, epoch)
+            return (f, epoch)
+        return None
+
+    def _sign_only(self, msg: wire.Message) -> bytes:
+        """A frame signed by this robot, for a certificate, not broadcast by itself."""
+        assert self._signer is not None
+        self._seq = min(self._seq + 1, wire.SEQ_MAX)
+        frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
+        return wire.encode(frame, None, self._signer)
+
+    def _send_cert(self, f: str, raw: bytes) -> None:
+        # It has a seq of its own, but receivers do not replay-filter it: the wrapper is
+        # unauthenticated, what it relays is signed and judged on its own.
+        self._send(wire.Cert(self._plan.slot(f), _NO_FRAME, raw))
+
+    def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
+                         raw: bytes, now: float | None = None) -> None:
+        if suspect == self._robot_id and witness != suspect and now is not None:
+            # Evidence against us, relayed in a certificate (we may have missed the
+            # warning itself): while we hold the slot, we refute it (rule 4).
+            self._refute(f, witness, epoch, seq_of(raw), now)
+        ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
+        if ready is None:
+            if suspect != self._robot_id:  # what we refuted ourselves is no news
+                self._drops[DropReason.STALE_EVIDENCE] += 1
+            return
+        for claimant, claim in ready:
+            assert now is not None  # `record` readies a claim only with a `now`
+            self._on_claim(claimant, claim, now)
+
+    def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
+        """Someone still believes an older holder of our slot: relay the certificate of
+        our hold and re-announce the claim it backs, at most once per T_max (`every`)."""
+        if f is None:
+            return
+        mine = self._ev.relay(f, now, every)
+        if mine is None:
+            return
+        failed, frames = mine
+        for raw in frames:
+            self._send_cert(f, raw)
+        self._send(wire.Claim(failed, self._plan.slot(f), self._epoch))
+
+    def _relay_unasked(self, now: float) -> None:
+        """Anti-entropy: a robot that restarted, or missed the takeover and heard nothing
+        since that would make us relay, learns it within RELAY_EVERY T_max
+        (DESIGN, "Convergence")."""
+        if self._identity is not None and self._role == Role.ACTIVE and self._epoch:
+            self._relay_cert(self._function, now, RELAY_EVERY * self._params.t_max)
+
+    def _on_cert(self, cert: wire.Cert, now: float) -> None:
+        f = self._slot(cert.function)
+        if f is None:
+            return
+        if isinstance(cert.inner.msg, wire.Refute):
+            self._on_refute(cert.inner.sender, cert.inner.msg, now, cert.raw)
+            return
+        said = cert_says(cert)
+        if said is not None:
+            self._record_evidence(f, *said, cert.raw, now)
+
+    # ------------------------------------------------------------------ refutes
+    # A holder's signed word that it was alive after a warning voids that warning
+    # everywhere the word reaches (DESIGN, "Convergence").
+
+    def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
+        """We hold f at `epoch` and hear `witness`'s warning number `seq` about us: sign
+        and broadcast that we are alive after it. Not out of a buffer read after our own
+        stall: then the warning was right (we were silent), and the takeover it backs
+        fences us (rule 2)."""
+        if self._identity is None or self._role != Role.ACTIVE or f != self._function \
+                or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
+            return
+        if witness not in self._ev.may_watch(f, claimants=True) \
+                or seq <= self._ev.refuted_up_to(f, self._robot_id, epoch, witness):
+            return
+        msg = wire.Refute(witness, self._plan.slot(f), epoch, seq)
+        self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
+
+    def _on_refute(self, holder: int, r: wire.Refute, now: float, raw: bytes) -> None:
+        f = self._slot(r.function)
+        if f is None or holder == self._robot_id:
+            return  # a bad slot (counted), or our own refute relayed back
+        if self._ev.add_refute(f, holder, r, raw):
+            self._rejudge(f, now)
+
+    def _rejudge(self, f: str, now: float) -> None:
+        """New refutes of f came: a takeover of f they void is undone here as
+        everywhere they reach — our own hold or claim ends, and the view of f goes back
+        to the robot that refuted (DESIGN, "Convergence")."""
+        me = self._robot_id
+        c = self._claim
+        if c is not None and c.function == f and not self._ev.certify(
+                f, me, wire.Claim(c.failed, self._plan.slot(f), c.epoch), 0):
+            self._emit(ev.Refute(subject=c.failed, function=f))
+            self._claim = None
+            self._to(Trigger.REFUTED)
+        for _ in range(len(self._plan.robots)):  # each step lowers the epoch
+            holder, epoch = self._known[f]
+            failed = self._ev.replaced(f, holder, epoch)
+            if failed is None or epoch == 0 or self._ev.is_certified(f, holder, epoch):
+                return
+            self._known[f] = Holder(failed, epoch - 1)
+            if holder == me and self._function == f and self._role == Role.ACTIVE:
+                self._fence(epoch - 1, now)
+
+    def _relay_refutes(self, f: str, now: float) -> None:
+        """Someone acts on a takeover of f that refutes we hold void (an uncertified
+        heartbeat or claim): relay them, inside CERTs (they may be older than its replay
+        window), at most once per T_max."""
+        if self._identity is None:
+            return
+        holder, epoch = self._known[f]
+        for raw in self._ev.refute_frames(f, holder, epoch, now):
+            self._send_cert(f, raw)
+
+
+__all__ = ["RELAY_EVERY", "Signed"]

@@ -1,0 +1,92 @@
+"""Who may speak about a slot, and what this robot heard itself (DESIGN rules 3, 6, 8, 9).
+
+- Rule 3: the witnesses of slot f are the holders of the slots that watch f; never the
+  suspect itself (`witnesses`).
+- Rules 6 and 8: is anyone left who may take a slot over (`Ears.live_standby`)?
+- Rule 9: the standby's own ears stand in for watchers lost with the suspect
+  (`Ears.own_ears`), and rule 4 from its own ears: a suspect heard lately is alive
+  (`Ears.heard_lately`).
+
+`Ears` keeps, per slot, the last heartbeat heard *for that slot* (a robot that stopped
+heartbeating but still sends other frames, a faulty liar, must not look alive to the
+standby that would replace it), and per robot its last standby heartbeat. Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+from swarmd.core.records import Holder, SlotBeat
+
+
+def witnesses(plan: SwarmPlan, known: Mapping[str, Holder], f: str) -> set[int]:
+    """Rule 3: the robots whose warnings about f's holder count — the holders of the
+    slots that watch f, as this robot knows them."""
+    return {known[g].robot for g in plan.watched_by(f)}
+
+
+class Ears:
+    __slots__ = ("_params", "_plan", "_robot_id", "_slot_heard", "_standby_at", "_start")
+
+    def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, start: float) -> None:
+        self._robot_id = robot_id
+        self._plan = plan
+        self._params = params
+        self._start = start
+        self._slot_heard: dict[str, SlotBeat] = {}
+        self._standby_at: dict[int, float] = {}
+
+    def slot_beat(self, f: str, holder: int, epoch: int, now: float) -> None:
+        """A heartbeat of f's holder at `epoch` was accepted at `now`."""
+        self._slot_heard[f] = SlotBeat(holder, epoch, now)
+
+    def standby_beat(self, robot: int, now: float) -> None:
+        """A healthy standby (or claimant) heartbeat of `robot` was heard at `now`."""
+        self._standby_at[robot] = now
+
+    def heard_lately(self, f: str, holder: int, epoch: int, now: float, within: float) -> bool:
+        """Was f heard from `holder` at `epoch` less than `within` ago?"""
+        heard = self._slot_heard.get(f)
+        return heard is not None and (heard.holder, heard.epoch) == (holder, epoch) \
+            and now - heard.at < within
+
+    def own_ears(self, f: str, known: Mapping[str, Holder], now: float) -> bool:
+        """Rule 9: is this standby a witness of f's holder's silence itself?
+
+        Only when (a) it has heard no heartbeat for slot f for T_max — on a broadcast
+        medium a live suspect is heard by the standby as well as by its watchers, so a
+        liar's warning about a live robot finds the standby's ears against it — and
+        (b) fewer than a quorum of f's watchers are alive by their own heartbeats, so
+        the quorum can no longer be met by watchers alone. Never during the start-up
+        grace, when silence means nothing yet."""
+        p = self._params
+        if now - self._start < p.startup_grace:
+            return False
+        heard = self._slot_heard.get(f)
+        if heard is not None and now - heard.at < p.t_max:
+            return False
+        live = 0
+        for g in self._plan.watched_by(f):
+            beat = self._slot_heard.get(g)
+            if beat is not None and beat.holder == known[g].robot and now - beat.at < p.t_max:
+                live += 1
+        return live < p.quorum
+
+    def live_standby(self, f: str, subject: int, now: float) -> bool:
+        """Is any robot that may take `f` over plausibly alive (rules 6, 8)? A standby
+        never heard counts as alive during the start-up grace time only."""
+        in_grace = now - self._start < self._params.startup_grace
+        for r in self._plan.covered_by(f):
+            if r in (subject, self._robot_id):
+                continue
+            seen = self._standby_at.get(r)
+            if seen is None and in_grace:
+                return True
+            if seen is not None and now - seen <= self._params.standby_timeout:
+                return True
+        return False
+
+
+__all__ = ["Ears", "witnesses"]
