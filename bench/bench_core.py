@@ -11,6 +11,7 @@ Goals: p99 <= 1.0 s at 0% loss and <= 1.5 s at 20%; zero false takeovers;
 
     python bench/bench_core.py            # CI-sized: ~1 minute
     python bench/bench_core.py --seeds 2000 --robot-seconds 1e6   # thorough
+    python bench/bench_core.py --auth none   # unsigned (default: per-robot, as shipped)
 """
 
 from __future__ import annotations
@@ -41,6 +42,10 @@ def percentile(xs: list[float], q: float) -> float:
     return s[min(len(s) - 1, round(q * (len(s) - 1)))]
 
 
+AUTH = "per-robot"
+"""The authentication mode of every run (`--auth`): the shipped default unless told."""
+
+
 def takeover_latencies(plan: SwarmPlan, params: Params, *, seeds: int, loss: float
                        ) -> tuple[list[float], int, int]:
     """Crash one random ACTIVE robot (that a standby covers) per seed at a random time;
@@ -54,7 +59,7 @@ def takeover_latencies(plan: SwarmPlan, params: Params, *, seeds: int, loss: flo
         victim = rng.choice(actives)
         at = rng.uniform(3.0, 4.0)
         res = run_virtual(plan, params, duration=at + 5.0, loss=loss, seed=seed,
-                          faults=[Fault("crash", at, (victim,))])
+                          faults=[Fault("crash", at, (victim,))], auth=AUTH)
         violations += len(res.violations)
         t = next((e["t"] for e in res.events
                   if e["event"] == "takeover" and e.get("replaced") == victim), None)
@@ -75,7 +80,8 @@ def false_takeovers(plan: SwarmPlan, params: Params, *, robot_seconds: float, lo
     count = 0
     t0 = time.perf_counter()
     for seed in range(runs):
-        res = run_virtual(plan, params, duration=duration, loss=loss, seed=10_000 + seed)
+        res = run_virtual(plan, params, duration=duration, loss=loss, seed=10_000 + seed,
+                          auth=AUTH)
         count += sum(1 for e in res.events if e["event"] == "takeover")
     wall = time.perf_counter() - t0
     simulated = runs * duration * n
@@ -87,11 +93,16 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=200, help="crash runs per case")
     ap.add_argument("--robot-seconds", type=float, default=1e5,
                     help="fault-free robot-seconds per swarm for the false-takeover rate")
+    ap.add_argument("--auth", choices=("per-robot", "shared", "none"), default="per-robot",
+                    help="authentication mode of the runs (default: per-robot, as shipped)")
     args = ap.parse_args()
+    global AUTH
+    AUTH = args.auth
     console = Console(highlight=False)
     swarms = {"paper (6)": ROOT / "configs/paper.yaml", "grid (100)": ROOT / "configs/grid100.yaml"}
 
-    lat_table = Table(title="crash -> takeover latency, udp() preset", title_justify="left")
+    lat_table = Table(title=f"crash -> takeover latency, udp() preset, auth {AUTH}",
+                      title_justify="left")
     for col in ("swarm", "loss", "runs", "p50 s", "p99 s", "max s", "no takeover",
                 "violations"):
         lat_table.add_column(col, justify="right")
