@@ -144,3 +144,22 @@ def test_a_restored_hold_needs_a_certificate_that_backs_it(paper: Paper) -> None
     keyed.tick(0.0)
     keyed.tick(params.rejoin_hold + 0.1)
     assert keyed.snapshot().function == "f2"
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize("who", [2, 6])
+def test_a_robot_that_left_and_restarts_is_heard_again(paper: Paper, auth: str,
+                                                       who: int) -> None:
+    """`leave:R@3` then `restart:R@6`: the robot that left comes back above its last
+    sequence number (what its daemon persisted on the way out), so nobody drops its
+    frames as replays and the checker finds it muted nowhere; a holder that left is
+    not the holder when it comes back."""
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+
+    plan, params = paper
+    res = run_virtual(plan, params, duration=15.0, auth=auth,
+                      faults=[parse_fault(f"leave:{who}@3"), parse_fault(f"restart:{who}@6")])
+    assert res.violations == []
+    assert sum(d.get("replay", 0) for d in res.drops.values()) == 0
+    assert res.holders()["f2"] == [6 if who == 2 else 2]
