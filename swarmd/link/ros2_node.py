@@ -103,13 +103,18 @@ class RosThread:
         self._thread = threading.Thread(target=self._spin, name=f"ros2-{self.name}",
                                         daemon=True)
         self._thread.start()
+        self._guard.trigger()  # what was queued before the start
 
     def call(self, fn: Callable[[Any], None]) -> None:
-        """Run `fn(node)` on the executor thread, soon; thread-safe, never blocks."""
-        if self._stopping or self._guard is None:
+        """Run `fn(node)` on the executor thread, soon; thread-safe, never blocks. Calls
+        made before `start` finished (the daemon may assign while the link still starts)
+        wait in the queue and run first."""
+        if self._stopping:
             return
         self._queue.append(fn)
-        self._guard.trigger()
+        guard = self._guard
+        if guard is not None:
+            guard.trigger()
 
     def _drain(self) -> None:
         while self._queue:
