@@ -242,5 +242,7 @@ def import_launch_file(
     UnicodeDecodeError."""
     text = read_regular_file(path, MAX_LAUNCH_BYTES).decode("utf-8")
     robots = parse_launch(text, str(path))
-    data = launch_to_swarm(robots, swarm_id=swarm_id, name=name or path.stem)
+    # ROS 2 names its launch files `x.launch.xml` / `x.launch.yaml`: the swarm is `x`.
+    data = launch_to_swarm(robots, swarm_id=swarm_id,
+                           name=name or path.stem.removesuffix(".launch"))
     return swarm_yaml(data, path.name)
