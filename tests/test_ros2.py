@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -167,6 +170,12 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     domain = yaml.safe_load(robot_file.read_text())["link"]["domain_id"]
     listener = Listener(domain)
     await asyncio.to_thread(listener.start)
+    # The base station: `swarmd monitor --ros2` on the run's channel and domain.
+    monitor = subprocess.Popen(
+        [sys.executable, "-m", "swarmd.cli", "monitor", "--config", str(robot_file), "--once",
+         "--json", "--duration", "7", "--ros2"], stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, cwd=ROOT,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONPATH": str(ROOT)})
     try:
         # Join late, once robot 6 has taken f2 over (as its neighbours show it).
         end = time.monotonic() + 60
@@ -176,8 +185,15 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
         listener.join_late(6)
         listener.join_late(1)
         result = await asyncio.wait_for(run, 90)
+        out, err = await asyncio.to_thread(monitor.communicate, timeout=60)
     finally:
+        if monitor.poll() is None:
+            monitor.kill()
+            monitor.wait()
         await asyncio.to_thread(listener.ros.stop)
+    assert monitor.returncode == 0, err[-2000:]
+    rows = {r["robot"]: r for r in json.loads(out)["robots"]}
+    assert rows[6]["function"] == "f2"  # the table it printed agrees with what it published
     assert not result.problems, result.problems
     events = result.events
 
@@ -206,7 +222,7 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     assert listener.late["/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
     assert listener.late["/robot1/swarmd/function"][:1] == ["f1"]
     # The swarm on /diagnostics: f2's holder goes 2 -> 6, as robots 1, 3 and 6 show it.
-    for publisher in ("robot1", "robot3", "robot6"):
+    for publisher in ("robot1", "robot3", "robot6", "base_station"):
         assert listener.holders("f2", publisher) == ["2", "6"], publisher
     first_6 = min(t for t, name, _, _, v in listener.statuses
                   if name == "swarmd/paper/f2" and v["holder"] == "6")
