@@ -232,3 +232,21 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     assert {OK, WARN} <= levels  # suspected before the takeover
     own = [v for _, name, _, _, v in listener.statuses if name == "swarmd/paper/robot6"]
     assert own and own[-1]["role"] == "active" and own[-1]["function"] == "f2"
+
+
+def test_a_robot_file_with_the_ros2_link_fills_in_the_robots_names(tmp_path: Path) -> None:
+    from swarms import unsigned_paper
+
+    from swarmd.config import parse_robot
+    from swarmd.config.robot import Ros2LinkConfig
+    from swarmd.link.factory import make_link
+
+    swarm = unsigned_paper(tmp_path)
+    cfg = parse_robot(f"robot: 2\nswarm: {swarm}\nlink: {{kind: ros2, domain_id: 7}}\n",
+                      "robot.yaml", tmp_path / "robot.yaml")
+    link = cfg.link
+    assert isinstance(link, Ros2LinkConfig)
+    assert (link.node_name, link.hardware_id, link.domain_id, link.frame_id, link.release) == (
+        "swarmd_robot2", "robot2", 7, "map", "hold")
+    pytest.importorskip("rclpy", reason="needs the ros2 extra: pip install 'swarmd[ros2]'")
+    assert type(make_link(link)).__name__ == "Ros2Link"
