@@ -112,7 +112,6 @@ class Ros2Link:
         swarm = cfg.swarm
         self._status = SwarmStatus(swarm.to_plan(), cfg.robot, swarm.swarm.name or
                                    str(swarm.swarm.id), swarm.params().t_max)
-        self.health.prefix = self._status.prefix
         return self._on_event
 
     def _on_event(self, record: Mapping[str, Any]) -> None:
