@@ -94,6 +94,37 @@ def test_ros2_options() -> None:
         SimOptions(swarm=PAPER, link="ros2", virtual=True)
 
 
+async def test_a_blocked_ros_thread_never_blocks_the_loop() -> None:
+    pytest.importorskip("rclpy", reason="needs the ros2 extra: pip install 'swarmd[ros2]'")
+    import threading
+
+    from sim.realtime.ros2_robot import DomainLease
+    from swarmd.link.ros2_node import RosThread
+
+    lease = DomainLease()
+    ros = RosThread("blocked", domain_id=lease.domain_id)
+    gate, done = threading.Event(), threading.Event()
+
+    def stuck(_node: Any) -> None:  # a callback stuck in the executor thread
+        gate.wait(30)
+
+    try:
+        await asyncio.to_thread(ros.start, lambda node: None)
+        ros.call(stuck)
+        ros.call(lambda node: done.set())
+        turns = 0
+        for _ in range(5):  # the loop keeps turning while rclpy is stuck
+            await asyncio.sleep(0.01)
+            turns += 1
+        assert turns == 5 and not done.is_set()
+        gate.set()
+        assert await asyncio.to_thread(done.wait, 30)  # the queue runs on once unstuck
+    finally:
+        gate.set()
+        await asyncio.to_thread(ros.stop)
+        lease.release()
+
+
 # -- real processes --------------------------------------------------------------------------
 class Listener:
     """A real rclpy node on the run's domain: every swarm status on /diagnostics, and
