@@ -142,3 +142,9 @@ def test_ros2_options_without_the_extra_say_what_to_install(venv: Path, tmp_path
     assert done.returncode == 2
     message = done.stderr.strip().splitlines()
     assert len(message) == 1 and ROS2_HINT in message[0], done.stderr
+    config = tmp_path / "robot.yaml"
+    config.write_text(f"robot: 1\nswarm: {swarm}\nlink: {{kind: ros2}}\n"
+                      f"state_dir: {tmp_path / 'state'}\n")
+    done = run([venv / "swarmd", "start", "--config", config], timeout=60, env=clean_env(),
+               cwd="/")
+    assert done.returncode == 1 and ROS2_HINT in done.stdout + done.stderr, done
