@@ -10,7 +10,7 @@ $(STAMP)/system: scripts/system-deps.sh
 	mkdir -p $(STAMP) && touch $@
 
 $(STAMP)/python: pyproject.toml
-	$(PIP) install -q -e '.[sim,dev]'
+	$(PIP) install -q -e '.[sim,ros2,dev]'
 	mkdir -p $(STAMP) && touch $@
 
 setup: $(STAMP)/system $(STAMP)/python

@@ -32,10 +32,12 @@ from sim.shared.summary import Summary, counted_drops, summarize
 
 TRANSPORTS = ("udp", "xbee", "serial")
 """Channels of the real-time mode (sim.realtime.orchestrator)."""
-LINKS = ("direct", "mavlink")
+LINKS = ("direct", "mavlink", "ros2")
 """How a flying robot's daemon reaches its craft: `direct` (the daemon's link drives the
 MuJoCo quadrotor) or `mavlink` (the daemon's MAVLink link talks over loopback UDP to a
-simulated autopilot that flies the quadrotor; docs/mavlink.md)."""
+simulated autopilot that flies the quadrotor; docs/mavlink.md) or `ros2` (the daemon's
+ROS 2 link and a small rclpy robot stack flying the quadrotor, or bare with --no-physics;
+docs/ros2.md)."""
 AUTOPILOTS = ("px4", "ardupilot")
 """Flavours of the simulated autopilot of `--link mavlink` (swarmd.link.mavlink_modes)."""
 
@@ -115,6 +117,8 @@ class SimOptions:
         elif self.link == "mavlink" and not self.flies:
             problems.append("--link: mavlink needs physics (the simulated autopilot flies a "
                             "MuJoCo quadrotor): not with --virtual or --no-physics")
+        if self.link == "ros2" and self.virtual:
+            problems.append("--link: ros2 runs real processes: not with --virtual")
         if self.autopilot is not None and self.autopilot not in AUTOPILOTS:
             problems.append(f"--autopilot: {self.autopilot!r} is not one of "
                             f"{', '.join(AUTOPILOTS)}")
@@ -147,6 +151,8 @@ class SimOptions:
     @property
     def robot_link(self) -> str:
         """The robot processes' link (sim.realtime.robot_proc.LINK_FACTORIES)."""
+        if self.link == "ros2":
+            return "ros2-quad" if self.flies else "ros2-bare"
         if not self.flies:
             return "none"
         if self.link == "mavlink":
@@ -190,6 +196,12 @@ def missing_extra(options: SimOptions) -> str | None:
             return (f"swarmd sim: flying MuJoCo quadrotors needs the simulation extra "
                     f"({', '.join(missing)} not installed): {EXTRA_HINT} (or run with "
                     "--virtual / --no-physics)")
+    if options.link == "ros2":
+        from swarmd.link.ros2_node import ROS2_HINT, rclpy_missing
+
+        if rclpy_missing():
+            return ("swarmd sim: --link ros2 needs the ROS 2 wheels (rclpy not installed): "
+                    f"{ROS2_HINT}")
     if options.report is not None:
         needed = PLOT_MODULES + (VIDEO_MODULES if options.flies else ())
         missing = [m for m in dict.fromkeys(needed) if not installed(m)]

@@ -144,6 +144,8 @@ class Daemon:
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
         self._waiting: asyncio.Task[None] | None = None
+        self._link_events: Callable[[dict[str, Any]], None] | None = None
+        """A link that shows the swarm (ros2) gets every event record too."""
         self.signer: Ed25519Signer | None = None
         self.keyring: Keyring | None = None
         """Per-robot auth: this robot's key and every robot's public keys, the objects
@@ -175,6 +177,8 @@ class Daemon:
             self.event_log.write(record)
         if self.extra_sink is not None:
             self.extra_sink(record)
+        if self._link_events is not None:
+            self._link_events(record)
         fields = {k: v for k, v in record.items() if k not in ("t", "robot", "event")}
         log.info("event %s", record.get("event"), extra={"event": record.get("event"),
                                                          "fields": fields})
@@ -260,6 +264,11 @@ class Daemon:
             time_origin=self.time_origin,
         )
         self.runtime.seq_write_at = write_at
+        # A link that publishes the swarm's view (ros2) reads the node only through its
+        # snapshot and the event records (DESIGN section 3), on this loop.
+        watch = getattr(link, "watch", None)
+        if watch is not None:
+            self._link_events = watch(self.runtime.node.snapshot, cfg)
         log.info("starting", extra={
             "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,

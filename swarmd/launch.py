@@ -2,7 +2,11 @@
 
 The launch file has one `<node>` per robot with `<param>`s `robot_id`, `state`
 (`active` / `inactive`), `neighbors` (active robots, e.g. " [2,4]") and `subs`
-(inactive robots, the active robots they may substitute). DESIGN.md section 3: active
+(inactive robots, the active robots they may substitute). The same swarm written as a
+ROS 2 launch file reads the same way: ROS 2 XML (`<node pkg= exec=>`, nodes possibly in
+`<group>`s) through the one XML path, ROS 2 YAML (`launch: [- node: {param: [{name:,
+value:}]}]`, `group: {children: [...]}`) through `parse_yaml_launch`. Python launch
+files run code and are not read. DESIGN.md section 3: active
 robot R gets the function `fR`, a formation slot; neighbours and subs carry over; the
 timing is the `udp()` preset. Slots are laid out on a circle (radius 2 m at 1.5 m,
 so the paper's four robots sit 2.8 m apart) and homes in a row on the ground beside
@@ -51,7 +55,13 @@ class LaunchRobot:
 
 
 def parse_launch(text: str, name: str = "<launch>") -> list[LaunchRobot]:
-    """The robots of a launch file, in file order. Raises LaunchError."""
+    """The robots of a launch file (ROS 1 or ROS 2 XML, ROS 2 YAML), in file order.
+    Raises LaunchError."""
+    if name.endswith(".py"):
+        raise LaunchError(f"{name}: a Python launch file runs code and is not read; write "
+                          "the swarm as a ROS 2 XML or YAML launch file")
+    if not text.lstrip().startswith("<"):
+        return parse_yaml_launch(text, name)
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
@@ -80,6 +90,69 @@ def parse_launch(text: str, name: str = "<launch>") -> list[LaunchRobot]:
     if not robots:
         raise LaunchError(f"{name}: no <node> elements: nothing to import")
     return robots
+
+
+def parse_yaml_launch(text: str, name: str = "<launch>") -> list[LaunchRobot]:
+    """The robots of a ROS 2 YAML launch file, in file order. Raises LaunchError."""
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise LaunchError(f"{name}: {where}malformed launch file (neither XML nor YAML): "
+                          f"{getattr(exc, 'problem', None) or exc}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("launch"), list):
+        raise LaunchError(f"{name}: a YAML launch file is a mapping with a `launch:` list")
+    nodes: list[Any] = []
+    _yaml_nodes(doc["launch"], nodes, name)
+    robots: list[LaunchRobot] = []
+    for index, node in enumerate(nodes):
+        label = f"{name}: node[{index}]" + (
+            f" (name={node.get('name')!r})" if node.get("name") else "")
+        params: dict[str, str] = {}
+        entries = node.get("param", [])
+        if not isinstance(entries, list):
+            raise LaunchError(f"{label}: param must be a list of {{name, value}}")
+        for p in entries:
+            if not isinstance(p, dict) or "name" not in p or "value" not in p:
+                raise LaunchError(f"{label}: each param needs a name and a value")
+            key, value = str(p["name"]), _yaml_value(p["value"], label, str(p["name"]))
+            if "$(" in value:
+                raise LaunchError(f"{label}: param {key}: substitutions ({value!r}) are "
+                                  "not supported; write the value out")
+            if key in params:
+                raise LaunchError(f"{label}: param {key} is given twice "
+                                  f"({params[key]!r} and {value!r})")
+            params[key] = value
+        robots.append(_robot(params, label))
+    if not robots:
+        raise LaunchError(f"{name}: no `node` entries: nothing to import")
+    return robots
+
+
+def _yaml_nodes(entries: list[Any], out: list[Any], name: str) -> None:
+    """The `node` mappings of a YAML launch list, groups opened, in file order."""
+    for entry in entries:
+        if not isinstance(entry, dict):
+            continue
+        node = entry.get("node")
+        if isinstance(node, dict):
+            out.append(node)
+        group = entry.get("group")
+        if isinstance(group, dict) and isinstance(group.get("children"), list):
+            _yaml_nodes(group["children"], out, name)
+
+
+def _yaml_value(value: Any, label: str, key: str) -> str:
+    """A typed YAML param value in the launch XML's text form (`[2,4]`, `1`)."""
+    if isinstance(value, bool) or value is None or isinstance(value, dict | float):
+        raise LaunchError(f"{label}: param {key}: {value!r} is not a robot id, a list of "
+                          "robot ids or a state")
+    if isinstance(value, list):
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+            raise LaunchError(f"{label}: param {key}: {value!r} is not a list of robot ids")
+        return "[" + ",".join(str(v) for v in value) + "]"
+    return str(value)
 
 
 def _robot(params: dict[str, str], label: str) -> LaunchRobot:
@@ -169,5 +242,7 @@ def import_launch_file(
     UnicodeDecodeError."""
     text = read_regular_file(path, MAX_LAUNCH_BYTES).decode("utf-8")
     robots = parse_launch(text, str(path))
-    data = launch_to_swarm(robots, swarm_id=swarm_id, name=name or path.stem)
+    # ROS 2 names its launch files `x.launch.xml` / `x.launch.yaml`: the swarm is `x`.
+    data = launch_to_swarm(robots, swarm_id=swarm_id,
+                           name=name or path.stem.removesuffix(".launch"))
     return swarm_yaml(data, path.name)

@@ -107,3 +107,34 @@ def test_layout_spacing() -> None:
     xs = [f["position"] for f in data["functions"].values()]
     assert xs[0] == [2.0, 0.0, 1.5] and xs[2] == [-2.0, 0.0, 1.5]
     assert "functions:" in swarm_yaml(data, "t")
+
+
+@pytest.mark.parametrize("fixture", ["paper.launch.xml", "paper.launch.yaml"])
+def test_ros2_launch_files_import_as_the_paper_swarm(tmp_path: Path, fixture: str) -> None:
+    source = ROOT / "tests" / "fixtures" / fixture
+    assert parse_launch(source.read_text(), fixture) == parse_launch(FIXTURE.read_text())
+    out = tmp_path / "swarm.yaml"
+    result = runner.invoke(app, ["import-launch", str(source), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    paper = load_swarm(ROOT / "configs" / "paper.yaml")
+    assert load_swarm(out).to_plan() == paper.to_plan()
+
+
+@pytest.mark.parametrize(("text", "says"), [
+    ("launch: [{node: {param: [{name: robot_id, value: [1, x]}]}}]", "not a list of robot ids"),
+    ("launch: [{node: {param: [{name: robot_id}]}}]", "needs a name and a value"),
+    ("launch: [{node: {param: [{name: robot_id, value: 1}, {name: robot_id, value: 2}]}}]",
+     "given twice"),
+    ("launch: [{node: {param: [{name: robot_id, value: '$(var id)'}]}}]", "substitutions"),
+    ("launch: []", "nothing to import"),
+    ("nodes: []", "a `launch:` list"),
+    ("launch: [a: b: c]", "malformed launch file"),
+])
+def test_bad_ros2_yaml_launch_files_say_what_is_wrong(text: str, says: str) -> None:
+    with pytest.raises(LaunchError, match=says):
+        parse_launch(text, "swarm.launch.yaml")
+
+
+def test_a_python_launch_file_is_not_run() -> None:
+    with pytest.raises(LaunchError, match="runs code"):
+        parse_launch("from launch import LaunchDescription", "swarm.launch.py")

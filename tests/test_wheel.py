@@ -27,6 +27,7 @@ from sim.realtime.robotfiles import free_udp_port
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
 SIM_HINT = "pip install 'swarmd[sim]'"
+ROS2_HINT = "pip install 'swarmd[ros2]'"
 
 pytestmark = pytest.mark.slow
 
@@ -124,3 +125,26 @@ def test_sim_without_the_extra_says_what_to_install(venv: Path) -> None:
     assert done.returncode == 2
     message = done.stderr.strip().splitlines()
     assert len(message) == 1 and SIM_HINT in message[0], done.stderr
+
+
+def test_ros2_options_without_the_extra_say_what_to_install(venv: Path, tmp_path: Path) -> None:
+    done = run([venv / "python", "-c", "import rclpy"], timeout=60, env=clean_env(), cwd="/")
+    assert done.returncode != 0  # the lean install has no ROS 2
+    done = run([venv / "swarmd", "sim", PAPER, "--link", "ros2", "--no-physics",
+                "--duration", "1"], timeout=120, env=clean_env(), cwd="/")
+    assert done.returncode == 2
+    message = done.stderr.strip().splitlines()
+    assert len(message) == 1 and ROS2_HINT in message[0], done.stderr
+    swarm = tmp_path / "swarm.yaml"
+    swarm.write_text(paper_text("none", PAPER))
+    done = run([venv / "swarmd", "monitor", "--swarm", swarm, "--once", "--ros2"],
+               timeout=120, env=clean_env(), cwd="/")
+    assert done.returncode == 2
+    message = done.stderr.strip().splitlines()
+    assert len(message) == 1 and ROS2_HINT in message[0], done.stderr
+    config = tmp_path / "robot.yaml"
+    config.write_text(f"robot: 1\nswarm: {swarm}\nlink: {{kind: ros2}}\n"
+                      f"state_dir: {tmp_path / 'state'}\n")
+    done = run([venv / "swarmd", "start", "--config", config], timeout=60, env=clean_env(),
+               cwd="/")
+    assert done.returncode == 1 and ROS2_HINT in done.stdout + done.stderr, done

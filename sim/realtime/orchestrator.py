@@ -119,7 +119,7 @@ class Orchestrator:
         # The robots' link (robot_proc.LINK_FACTORIES): `quad` drives the MuJoCo craft
         # directly, `mavlink-px4` / `mavlink-ardupilot` through a simulated autopilot.
         self.link = link or ("quad" if physics else "none")
-        if self.link != "none" and not physics:
+        if self.link not in ("none", "ros2-bare") and not physics:
             raise ValueError(f"robot link {self.link!r} flies a craft: it needs physics")
         self.refuse_arm = frozenset(refuse_arm)
         self.live = live
@@ -156,6 +156,12 @@ class Orchestrator:
         self._stop = asyncio.Event()
         self.interrupted: str | None = None
         self._ctx = forkserver_context(physics)
+        # `--link ros2`: the run's own ROS 2 domain (sim.realtime.ros2_robot).
+        self.ros_domain: Any = None
+        if self.link.startswith("ros2"):
+            from sim.realtime.ros2_robot import DomainLease
+
+            self.ros_domain = DomainLease()
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
         # same radios in transparent mode, AP=0, under the serial transport).
@@ -189,7 +195,9 @@ class Orchestrator:
 
         cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
                                port=self.port, transport=self._transport_doc(robot),
-                               identity_file=self.identity_files.get(robot))
+                               identity_file=self.identity_files.get(robot),
+                               link=self.ros_domain.link_doc(robot) if self.ros_domain
+                               else None)
         spec = RobotSpec(
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
@@ -491,6 +499,9 @@ class Orchestrator:
         return log_errors(self._log(robot), robot)
 
     def cleanup(self) -> None:
+        if self.ros_domain is not None:
+            self.ros_domain.release()
+            self.ros_domain = None
         if self.medium is not None:
             self.medium.stop()
             self.medium = None

@@ -124,11 +124,24 @@ def _mavlink_link(flavour: str) -> Callable[[RobotSpec, Any], RobotLink]:
     return build
 
 
+def _ros2_link(physics: bool) -> Callable[[RobotSpec, Any], RobotLink]:
+    def build(spec: RobotSpec, cfg: Any) -> RobotLink:
+        from sim.realtime.ros2_robot import SimRos2Link
+
+        # The daemon's ros2 link and a small rclpy robot stack beside it, flying the
+        # MuJoCo craft (or nothing: --no-physics) from the link's topics only.
+        return SimRos2Link(cfg, _quad_link(spec, cfg) if physics else None)
+
+    return build
+
+
 LINK_FACTORIES: dict[str, Callable[[RobotSpec, Any], RobotLink]] = {
     "none": _none_link,
     "quad": _quad_link,
     "mavlink-px4": _mavlink_link("px4"),
     "mavlink-ardupilot": _mavlink_link("ardupilot"),
+    "ros2-quad": _ros2_link(True),
+    "ros2-bare": _ros2_link(False),
 }
 """Robot links by name: the orchestrator picks one; add a robot model here."""
 

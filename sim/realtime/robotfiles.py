@@ -35,17 +35,18 @@ def robot_ids(swarm_path: Path) -> tuple[int, ...]:
 def write_robot_file(
     run_dir: Path, swarm_path: Path, robot: int, *, group: str, port: int,
     interface: str = DEFAULT_INTERFACE, transport: dict[str, Any] | None = None,
-    identity_file: Path | None = None,
+    identity_file: Path | None = None, link: dict[str, Any] | None = None,
 ) -> Path:
     """The robot file of one simulated robot: literally what `swarmd start` would take.
-    `transport` replaces the default UDP multicast section (emulated radios)."""
+    `transport` replaces the default UDP multicast section (emulated radios), `link` the
+    `none` link (`--link ros2`)."""
     doc = {
         "robot": robot,
         "swarm": str(swarm_path.resolve()),
         "transport": transport or {"kind": "udp", "group": group, "port": port,
                                    "interface": interface, "ttl": DEFAULT_TTL,
                                    "loopback": True},
-        "link": {"kind": "none"},
+        "link": link or {"kind": "none"},
         "event_log": None,
         "state_dir": str(run_dir / "state" / str(robot)),
         "handover_on_stop": True,

@@ -15,8 +15,8 @@ def register(app: typer.Typer) -> None:
     @app.command("import-launch")
     def import_launch(
         file: Annotated[Path, typer.Argument(
-            help="ROS launch XML, one <node> per robot with params robot_id, state, "
-            "neighbors, subs (the paper's appendix).")],
+            help="ROS launch XML (ROS 1 or ROS 2) or ROS 2 launch YAML, one node per robot "
+            "with params robot_id, state, neighbors, subs (the paper's appendix).")],
         output: Annotated[
             Path | None, typer.Option("-o", "--output", help="Write the swarm file here "
                                       "(replaced if it exists). Default: stdout.")
@@ -30,7 +30,8 @@ def register(app: typer.Typer) -> None:
                                      "file's name without its extension.")
         ] = None,
     ) -> None:
-        """Convert the paper's ROS launch file into a swarm file.
+        """Convert the paper's ROS launch file (ROS 1 XML, ROS 2 XML or YAML) into a
+        swarm file.
 
         Active robot R gets the function fR, a slot on a circle of radius 2 m at 1.5 m;
         neighbors and subs carry over; timing is the udp preset. The result is validated

@@ -49,6 +49,12 @@ def register(app: typer.Typer) -> None:
             "--duration", callback=positive,
             help="Seconds to listen, more than 0. Default: 2 with --once or --json, else until "
             "Ctrl-C.")] = None,
+        ros2: Annotated[bool, typer.Option(
+            "--ros2", help="Also publish the swarm on ROS 2 /diagnostics (one status per "
+            "function, at every change and at least once a second) for rqt_robot_monitor; "
+            "domain $ROS_DOMAIN_ID, this machine only unless "
+            "$ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise. Needs swarmd[ros2] "
+            "(docs/ros2.md).")] = False,
     ) -> None:
         """Watch the swarm channel, like the paper's base station; sends nothing.
 
@@ -114,17 +120,34 @@ def register(app: typer.Typer) -> None:
                           "verified and are not shown")
         state = MonitorState(swarm_cfg.to_plan(), swarm_cfg.params(), keys, verifier=keyring)
         listen_for = duration if duration is not None else (2.0 if once else None)
+        publisher = None
+        if ros2:
+            from swarmd.link.ros2_node import Ros2Unavailable, require_rclpy
+            from swarmd.monitor_ros2 import MonitorPublisher
+
+            try:
+                require_rclpy("swarmd monitor --ros2")
+            except Ros2Unavailable as exc:
+                err.print(str(exc))
+                raise typer.Exit(2) from None
+            publisher = MonitorPublisher(state, swarm_cfg.swarm.name or str(swarm_cfg.swarm.id))
+            publisher.start()
 
         async def run_once() -> float:
-            return await listen(state, transport, duration=listen_for)
+            return await listen(state, transport, duration=listen_for,
+                                on_refresh=publisher.refresh if publisher else None)
 
         async def run_live() -> float:
             from rich.live import Live
 
             loop = asyncio.get_running_loop()
             with Live(state.table(loop.time()), console=console, refresh_per_second=4) as live:
-                return await listen(state, transport, duration=listen_for,
-                                    on_refresh=lambda now: live.update(state.table(now)))
+                def refresh(now: float) -> None:
+                    live.update(state.table(now))
+                    if publisher is not None:
+                        publisher.refresh(now)
+
+                return await listen(state, transport, duration=listen_for, on_refresh=refresh)
 
         try:
             listened = asyncio.run(run_once() if once or as_json else run_live())
@@ -133,6 +156,9 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(1) from None
         except KeyboardInterrupt:
             raise typer.Exit(130) from None
+        finally:
+            if publisher is not None:
+                publisher.stop()
         # asyncio's loop clock is time.monotonic, so this continues the listener's clock.
         t = time.monotonic()
         if as_json:

@@ -134,8 +134,10 @@ def register(app: typer.Typer) -> None:
             help="How each daemon reaches its quadrotor (physics only): direct "
             "(the daemon's link drives the MuJoCo craft) or mavlink (the daemon's MAVLink "
             "link over loopback UDP to a simulated autopilot, one system id and UDP port per "
-            "robot, that flies the craft; faults reach the daemon only as MAVLink health). "
-            "Default: direct.")] = "direct",
+            "robot, that flies the craft; faults reach the daemon only as MAVLink health) "
+            "or ros2 (the daemon's ROS 2 link and a small rclpy robot stack per robot, in "
+            "the run's own ROS domain; also with --no-physics; needs swarmd[ros2], "
+            "docs/ros2.md). Default: direct.")] = "direct",
         autopilot: Annotated[str | None, typer.Option(
             "--autopilot", metavar="NAME",
             help="Flavour of the simulated autopilot of --link mavlink: px4 "

@@ -3,7 +3,7 @@
     robot: 2
     swarm: paper.yaml                 # relative to this file
     transport: {kind: udp}            # udp | serial | xbee
-    link: {kind: none}                # none | socket | exec | mavlink
+    link: {kind: none}                # none | socket | exec | mavlink | ros2
     event_log: null
     state_dir: /var/lib/swarmd
     handover_on_stop: true
@@ -185,8 +185,39 @@ class MavlinkLinkConfig(_Model):
     health: MavlinkHealthConfig = Field(default_factory=MavlinkHealthConfig)
 
 
+class Ros2LinkConfig(_Model):
+    """The robot is a ROS 2 stack (docs/ros2.md): health from its DiagnosticStatus entries
+    on /diagnostics, the function out as topics, the swarm's view on /diagnostics."""
+
+    kind: Literal["ros2"]
+    node_name: str | None = Field(default=None, min_length=1)
+    """The daemon's ROS 2 node; None: swarmd_robot<id>."""
+    namespace: str = ""
+    domain_id: int | None = Field(default=None, ge=0, le=232)
+    """None: $ROS_DOMAIN_ID (else 0), as any ROS 2 node."""
+    localhost_only: bool = True
+    """Discovery on this machine only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) unless
+    $ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise: the robot's stack runs beside the
+    daemon (DESIGN section 4: nothing leaves loopback unless asked)."""
+    health_names: list[str] = Field(default_factory=list)
+    """The DiagnosticStatus names that are this robot's health; empty: every status with
+    `hardware_id`."""
+    hardware_id: str | None = None
+    """None: robot<id>."""
+    health_timeout: float = Field(default=2.0, gt=0, description="s")
+    """No status of this robot for this long: faulty (STALE)."""
+    goal_topic: str = Field(default="swarmd/goal_pose", min_length=1)
+    function_topic: str = Field(default="swarmd/function", min_length=1)
+    release_topic: str = Field(default="swarmd/release", min_length=1)
+    frame_id: str = "map"
+    release: Literal["hold", "land"] = "hold"
+    republish_interval: float = Field(default=1.0, gt=0, description="s")
+    status_interval: float = Field(default=1.0, gt=0, le=1.0, description="s")
+    """The swarm's statuses on /diagnostics at least this often (and at every change)."""
+
+
 LinkConfig = Annotated[
-    NoneLinkConfig | SocketLinkConfig | ExecLinkConfig | MavlinkLinkConfig,
+    NoneLinkConfig | SocketLinkConfig | ExecLinkConfig | MavlinkLinkConfig | Ros2LinkConfig,
     Field(discriminator="kind"),
 ]
 
@@ -231,7 +262,7 @@ class RobotConfig:
     swarm: SwarmConfig
     swarm_path: Path
     transport: UdpTransportConfig | SerialTransportConfig | XBeeTransportConfig
-    link: NoneLinkConfig | SocketLinkConfig | ExecLinkConfig | MavlinkLinkConfig
+    link: NoneLinkConfig | SocketLinkConfig | ExecLinkConfig | MavlinkLinkConfig | Ros2LinkConfig
     event_log: Path | None
     state_dir: Path
     handover_on_stop: bool
@@ -339,6 +370,10 @@ def from_source(src: Source) -> RobotConfig:
     link = f.link
     if isinstance(link, SocketLinkConfig):
         link = link.model_copy(update={"path": str(src.resolve(link.path))})
+    elif isinstance(link, Ros2LinkConfig):
+        link = link.model_copy(update={
+            "node_name": link.node_name or f"swarmd_robot{f.robot}",
+            "hardware_id": link.hardware_id or f"robot{f.robot}"})
     if swarm is None or any(p.severity == "error" for p in problems):
         raise ConfigError(problems)
     return RobotConfig(

@@ -1,4 +1,5 @@
-"""Build the robot link the robot file asks for (`link: {kind: none | socket | exec | mavlink}`).
+"""Build the robot link the robot file asks for (`link: {kind: none | socket | exec | mavlink |
+ros2}`).
 
 The simulator injects its own link (the MuJoCo quadrotor) into `run_daemon` instead of
 calling this.
@@ -41,4 +42,15 @@ def make_link(cfg: Any) -> RobotLink:
 
         return MavlinkLink(cfg.url, baud=cfg.baud, source_system=cfg.source_system,
                            source_component=cfg.source_component, pilot=pilot_config(cfg))
-    raise LinkConfigError(f"unknown robot link kind {kind!r} (none, socket, exec, mavlink)")
+    if kind == "ros2":
+        from swarmd.link.ros2_node import Ros2Unavailable, require_rclpy
+
+        try:
+            require_rclpy("link kind ros2")
+        except Ros2Unavailable as exc:
+            raise LinkConfigError(str(exc)) from None
+        from swarmd.link.ros2 import Ros2Link
+
+        return Ros2Link(cfg)
+    raise LinkConfigError(f"unknown robot link kind {kind!r} (none, socket, exec, mavlink, "
+                          "ros2)")

@@ -1,0 +1,241 @@
+"""The `ros2` robot link: the robot is a ROS 2 stack (docs/ros2.md).
+
+Paper Fig. 4's one input and one output, as ROS 2 users expect them:
+- health in: the robot's own diagnostic_msgs/DiagnosticStatus entries on /diagnostics
+  (by `health_names`, else by `hardware_id`); the worst level of those heard within
+  `health_timeout` decides (OK -> ok, WARN -> degraded, ERROR / STALE -> faulty), and
+  none within it is a fault (STALE; DESIGN rule 7);
+- the function out: its name as std_msgs/String on `function_topic`; for a slot function
+  a geometry_msgs/PoseStamped goal on `goal_topic` (frame `frame_id`), re-published every
+  `republish_interval` while held; a release publishes the empty name and the release
+  action (`hold` / `land`) on `release_topic`. These three topics are reliable and
+  transient-local (depth 1): a stack that starts late still gets the current assignment.
+- the swarm out: the daemon's view of its neighbourhood as DiagnosticStatus entries on
+  /diagnostics (`ros2_status`), every `status_interval` and at every event.
+
+rclpy runs in its own thread (`ros2_node.RosThread`): nothing here blocks the loop, and a
+robot stack that hangs or floods only costs its own callbacks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from swarmd.core.records import Snapshot
+from swarmd.core.roles import Health
+from swarmd.link.base import HealthCallback
+from swarmd.link.ros2_node import RosThread
+from swarmd.link.ros2_status import OK, STALE, WARN, SwarmStatus, to_message
+
+log = logging.getLogger("swarmd.link.ros2")
+
+DIAGNOSTICS = "/diagnostics"
+HEALTH_OF_LEVEL = {OK: Health.OK, WARN: Health.DEGRADED}
+"""Every other level (ERROR, STALE, anything unknown) is a fault."""
+
+
+def latched_qos() -> Any:
+    """Reliable, transient-local, depth 1: a late subscriber gets the last message."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def level_of(status: Any) -> int:
+    """A DiagnosticStatus level as an int (rclpy gives a one-byte `bytes`)."""
+    raw = status.level
+    return raw[0] if isinstance(raw, bytes | bytearray) and raw else int(raw)
+
+
+class HealthFold:
+    """The worst level among the robot's statuses heard within `timeout` (pure; the
+    executor thread owns it). `None` before anything was heard and before `timeout`."""
+
+    def __init__(self, names: tuple[str, ...], hardware_id: str, timeout: float,
+                 prefix: str = "swarmd/") -> None:
+        self.names = frozenset(names)
+        self.hardware_id = hardware_id
+        self.timeout = timeout
+        self.prefix = prefix
+        self.latest: dict[str, tuple[int, float]] = {}
+
+    def mine(self, name: str, hardware_id: str) -> bool:
+        if name.startswith(self.prefix):
+            return False  # a daemon's view of the swarm, not a robot's health
+        return name in self.names if self.names else hardware_id == self.hardware_id
+
+    def hear(self, name: str, hardware_id: str, level: int, now: float) -> bool:
+        if not self.mine(name, hardware_id):
+            return False
+        self.latest[name] = (level, now)
+        return True
+
+    def level(self, now: float) -> int:
+        fresh = [lv for lv, at in self.latest.values() if now - at <= self.timeout]
+        return max(fresh) if fresh else STALE
+
+
+class Ros2Link:
+    """`RobotLink` over ROS 2 topics; `cfg` is the robot file's `Ros2LinkConfig`."""
+
+    def __init__(self, cfg: Any, *, wall: Callable[[], float] = time.monotonic) -> None:
+        self.cfg = cfg
+        self.wall = wall
+        self.ros = RosThread(cfg.node_name or "swarmd", namespace=cfg.namespace,
+                             domain_id=cfg.domain_id, localhost_only=cfg.localhost_only)
+        self.health = HealthFold(tuple(cfg.health_names), cfg.hardware_id or "",
+                                 cfg.health_timeout)
+        self.counters: dict[str, int] = {"statuses_in": 0, "published": 0, "status_out": 0}
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._on_health: HealthCallback | None = None
+        self._reported: int | None = None
+        self._started_at = 0.0
+        self._pubs: dict[str, Any] = {}
+        self._goal: Any = None
+        self._snapshot: Callable[[], Snapshot] | None = None
+        self._status: SwarmStatus | None = None
+        self._status_timer: asyncio.TimerHandle | None = None
+        self._closed = False
+
+    # -- the swarm's view (daemon.py calls this before `start`) ---------------------------
+    def watch(self, snapshot: Callable[[], Snapshot], cfg: Any) -> Callable[[Mapping[str, Any]],
+                                                                            None]:
+        """Publish the daemon's view of the swarm from `snapshot()` (the node's, read on
+        the loop thread only); returns the daemon's event callback."""
+        self._snapshot = snapshot
+        swarm = cfg.swarm
+        self._status = SwarmStatus(swarm.to_plan(), cfg.robot, swarm.swarm.name or
+                                   str(swarm.swarm.id), swarm.params().t_max)
+        return self._on_event
+
+    def _on_event(self, record: Mapping[str, Any]) -> None:
+        if self._status is not None and self._status.on_event(record) and self._loop:
+            self._loop.call_soon(self._publish_status, False)
+
+    def _publish_status(self, rearm: bool = True) -> None:
+        if self._closed or self._snapshot is None or self._status is None:
+            return
+        assert self._loop is not None
+        if rearm:
+            self._status_timer = self._loop.call_later(self.cfg.status_interval,
+                                                       self._publish_status)
+        statuses = self._status.statuses(self._snapshot(), self._loop.time())
+
+        def publish(node: Any) -> None:
+            self._pubs["diagnostics"].publish(to_message(statuses,
+                                                         node.get_clock().now().to_msg()))
+            self.counters["status_out"] += 1
+
+        self.ros.call(publish)
+
+    # -- RobotLink ------------------------------------------------------------------------
+    async def start(self, on_health: HealthCallback) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped
+        from std_msgs.msg import String
+
+        self._loop = asyncio.get_running_loop()
+        self._on_health = on_health
+        self._started_at = self.wall()
+        cfg = self.cfg
+
+        def setup(node: Any) -> None:
+            latched = latched_qos()
+            self._pubs["goal"] = node.create_publisher(PoseStamped, cfg.goal_topic, latched)
+            self._pubs["function"] = node.create_publisher(String, cfg.function_topic,
+                                                           latched)
+            self._pubs["release"] = node.create_publisher(String, cfg.release_topic, latched)
+            # /diagnostics as diagnostic_updater publishes it (reliable, volatile, 10).
+            self._pubs["diagnostics"] = node.create_publisher(DiagnosticArray, DIAGNOSTICS,
+                                                              10)
+            node.create_subscription(DiagnosticArray, DIAGNOSTICS, self._on_diagnostics, 50)
+            node.create_timer(cfg.republish_interval, self._republish)
+            node.create_timer(min(0.25, cfg.health_timeout / 4), self._check_health)
+
+        await asyncio.to_thread(self.ros.start, setup)
+        if self._snapshot is not None:
+            self._loop.call_soon(self._publish_status)
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        now = self.wall()
+        heard = False
+        for s in msg.status:
+            heard |= self.health.hear(s.name, s.hardware_id, level_of(s), now)
+        if heard:
+            self.counters["statuses_in"] += 1
+            self._check_health()
+
+    def _check_health(self) -> None:
+        now = self.wall()
+        if not self.health.latest and now - self._started_at < self.health.timeout:
+            return  # the stack may still be starting
+        level = self.health.level(now)
+        if level == self._reported:
+            return
+        if level == STALE:
+            log.warning("no robot health on %s for %g s: reporting faulty", DIAGNOSTICS,
+                        self.health.timeout, extra={"link": "ros2"})
+        self._reported = level
+        health = HEALTH_OF_LEVEL.get(level, Health.FAULTY)
+        loop, on_health = self._loop, self._on_health
+        if loop is not None and on_health is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(on_health, health)
+
+    def _republish(self) -> None:
+        if self._goal is not None:
+            self._publish_goal(self.ros.node)
+
+    def _publish_goal(self, node: Any) -> None:
+        self._goal.header.stamp = node.get_clock().now().to_msg()
+        self._pubs["goal"].publish(self._goal)
+        self.counters["published"] += 1
+
+    def assign(self, function: str, epoch: int, params: Mapping[str, Any]) -> None:
+        from geometry_msgs.msg import PoseStamped
+        from std_msgs.msg import String
+
+        goal: Any = None
+        position = params.get("position") if params.get("kind") == "slot" else None
+        if isinstance(position, list | tuple) and len(position) == 3:
+            goal = PoseStamped()
+            goal.header.frame_id = self.cfg.frame_id
+            goal.pose.position.x, goal.pose.position.y, goal.pose.position.z = (
+                float(v) for v in position)
+            goal.pose.orientation.w = 1.0
+
+        def send(node: Any) -> None:
+            self._goal = goal
+            if goal is not None:
+                self._publish_goal(node)
+            self._pubs["function"].publish(String(data=function))
+
+        self.ros.call(send)
+
+    def release(self, function: str) -> None:
+        from std_msgs.msg import String
+
+        action = self.cfg.release
+
+        def send(node: Any) -> None:
+            self._goal = None
+            self._pubs["function"].publish(String(data=""))
+            self._pubs["release"].publish(String(data=action))
+
+        self.ros.call(send)
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        if self._snapshot is not None and self._loop is not None:
+            self._publish_status(rearm=False)  # the last view: `stopped`
+        self._closed = True
+        if self._status_timer is not None:
+            self._status_timer.cancel()
+        self._on_health = None
+        await asyncio.to_thread(self.ros.stop)
