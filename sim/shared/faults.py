@@ -25,11 +25,14 @@ from typing import Any
 
 from swarmd.core import events
 
-KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "motor",
-         "collide", "forge")
+KINDS = ("crash", "restart", "pause", "partition", "fade", "deaf", "liar", "leave",
+         "unhealthy", "motor", "collide", "forge")
 ATTACKS = ("epoch", "seq", "claim", "warn", "replay")
 """What a `forge` fault sends (module docstring)."""
-_DURATION_KINDS = {"pause", "partition"}
+_DURATION_KINDS = {"pause", "partition", "fade", "deaf"}
+LINK_KINDS = ("partition", "fade", "deaf")
+"""Faults that lose frames on links rather than stop robots: the checker judges the
+swarm's convergence after they heal (DESIGN, "Convergence")."""
 
 
 class FaultSpecError(ValueError):
@@ -44,7 +47,11 @@ class Fault:
     """The target robots (one or several) — or, for a partition, every robot named."""
     duration: float | None = None
     groups: tuple[tuple[int, ...], ...] = ()
-    """Partition groups; empty for other kinds."""
+    """Partition groups; empty for other kinds. For `deaf`, one group: the senders the
+    target robot does not hear."""
+    oneway: bool = False
+    """A one-way partition (`partition:1,2>3,4`): frames of the first group do not reach
+    the second; the other way works."""
     attack: str = ""
     """For `forge`: one of `ATTACKS`."""
     origin: str | None = field(default=None, compare=False)
@@ -63,21 +70,38 @@ class Fault:
         """One fault a target robot, same kind and times, each remembering this SPEC
         (`origin`) so that the log and the summary show what the user typed. A
         partition acts on all its robots together and stays whole."""
-        if self.kind == "partition" or (len(self.robots) == 1 and self.kind != "collide"):
+        if self.kind in ("partition", "deaf") \
+                or (len(self.robots) == 1 and self.kind != "collide"):
             return (self,)
         spec = self.spec()
         return tuple(replace(self, robots=(r,), origin=spec) for r in self.robots)
 
     @property
     def end(self) -> float | None:
-        """When a pause or partition is over (None for the other kinds)."""
+        """When a pause or a link fault is over (None for the other kinds)."""
         return None if self.duration is None else self.at + self.duration
+
+    def cut(self) -> tuple[frozenset[int] | None, frozenset[int] | None] | None:
+        """A one-way link fault as (senders, receivers): while it lasts, frames from a
+        sender in `senders` do not reach a receiver in `receivers` (None: every robot).
+        None for the kinds that are no such cut (a two-way partition has groups)."""
+        if self.kind == "fade":
+            return frozenset(self.robots), None
+        if self.kind == "deaf":
+            return frozenset(self.groups[0]), frozenset(self.robots)
+        if self.kind == "partition" and self.oneway:
+            return frozenset(self.groups[0]), frozenset(self.groups[1])
+        return None
 
     def spec(self) -> str:
         """The SPEC text: `parse_fault(f.spec()) == f`."""
         if self.kind == "partition":
-            groups = "|".join(",".join(map(str, g)) for g in self.groups)
+            groups = (">" if self.oneway else "|").join(",".join(map(str, g))
+                                                        for g in self.groups)
             return f"partition:{groups}@{_num(self.at)}+{_num(self.duration or 0.0)}"
+        if self.kind == "deaf":
+            senders = ",".join(map(str, self.groups[0]))
+            return f"deaf:{self.robots[0]}:{senders}@{_num(self.at)}+{_num(self.duration)}"
         tail = f"+{_num(self.duration)}" if self.duration is not None else ""
         if self.attack:
             tail += f":{self.attack}"
@@ -122,7 +146,9 @@ _FORMS = {
     "crash": "crash:R@T or crash:R1,R2@T",
     "restart": "restart:R@T or restart:R1,R2@T",
     "pause": "pause:R@T+D or pause:R1,R2@T+D",
-    "partition": "partition:1,2|3,4@T+D",
+    "partition": "partition:1,2|3,4@T+D or partition:1,2>3,4@T+D",
+    "fade": "fade:R@T+D or fade:R1,R2@T+D",
+    "deaf": "deaf:R:S@T+D or deaf:R:S1,S2@T+D",
     "liar": "liar:R@T or liar:R1,R2@T",
     "leave": "leave:R@T or leave:R1,R2@T",
     "unhealthy": "unhealthy:R@T or unhealthy:R1,R2@T",
@@ -137,7 +163,11 @@ WHAT = {
                "usually after a crash",
     "pause": "robot R freezes at T for D seconds (SIGSTOP, then SIGCONT)",
     "partition": "the groups stop hearing each other from T for D seconds; robots named "
-                 "nowhere stay in the first group",
+                 "nowhere stay in the first group; with '>' (partition:1,2>3,4) one way "
+                 "only: 3 and 4 do not hear 1 and 2, who still hear them",
+    "fade": "everything robot R sends is lost from T for D seconds; R still hears "
+            "everyone (a fading transmitter)",
+    "deaf": "robot R hears nothing from robot S from T for D seconds; S still hears R",
     "liar": "robot R sends false warnings about its neighbours from T",
     "leave": "robot R leaves gracefully at T (LEAVE, then stops)",
     "unhealthy": "robot R reports itself faulty at T (DESIGN rule 7: LEAVE, standby)",
@@ -215,6 +245,13 @@ def parse_fault(spec: str) -> Fault:
             raise bad(f"unknown or missing attack {attack!r}")
     elif ":" in when:
         raise bad(f"a {kind} takes no ':' after its time")
+    senders: tuple[int, ...] = ()
+    if kind == "deaf":
+        target, colon3, heard = who.partition(":")
+        if not colon3:
+            raise bad("no ':S' (the robot(s) it does not hear)")
+        who = target
+        senders = tuple(_robot(r, bad) for r in heard.split(","))
     at_text, plus, dur_text = when.partition("+")
     at = _seconds(at_text, "time T", bad)
     dur = _seconds(dur_text, "duration D", bad) if plus else None
@@ -233,15 +270,27 @@ def parse_fault(spec: str) -> Fault:
             raise bad(f"robot {twice[0]} is named twice")
         if kind == "collide" and len(robots) < 2:
             raise bad(f"a collision needs two or more robots, got {who.strip()!r}")
+        if kind == "deaf":
+            if len(robots) != 1:
+                raise bad("a deaf fault names one robot that does not hear")
+            if robots[0] in senders or len(set(senders)) != len(senders):
+                raise bad("a robot hears itself; name each sender once")
+            return Fault(kind, at, robots, dur, (senders,))
         return Fault(kind, at, robots, dur, attack=attack)
-    groups = tuple(tuple(_robot(r, bad) for r in g.split(",")) for g in who.split("|"))
+    oneway = ">" in who
+    if oneway and "|" in who:
+        raise bad("a partition is two-way ('|') or one-way ('>'), not both")
+    groups = tuple(tuple(_robot(r, bad) for r in g.split(","))
+                   for g in who.split(">" if oneway else "|"))
+    if oneway and len(groups) != 2:
+        raise bad("a one-way partition has two groups: senders>receivers")
     if len(groups) < 2:
         raise bad("a partition needs two or more groups separated by '|'")
     named = [r for g in groups for r in g]
     twice = sorted({r for r in named if named.count(r) > 1})
     if twice:
         raise bad(f"robot {twice[0]} is named twice")
-    return Fault(kind, at, tuple(named), dur, groups)
+    return Fault(kind, at, tuple(named), dur, groups, oneway=oneway)
 
 
 _MAX_NUMBER_CHARS = 32

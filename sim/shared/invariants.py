@@ -26,8 +26,9 @@ Invariants (each violation names the time, robot and what went wrong):
    no other failure in the neighbourhood) and `no_takeover_correlated` when other
    robots of the neighbourhood failed with it: the paper handles one failure at a time,
    and its quorum of two distinct witnesses cannot be met when a witness fails too;
-2. single holder: outside partitions, no slot is executed by two running robots for
-   longer than `bounds.dual`; after a partition heals, within `bounds.converge`;
+2. single holder: outside partitions and link faults (`partition`, `fade`, `deaf`), no
+   slot is executed by two running robots for longer than `bounds.dual`; after the
+   fault heals, within `bounds.converge`;
 3. liars: a takeover of a healthy, reachable robot is a false takeover; without loss it
    is a violation (a single liar can never get a healthy robot replaced). A robot is
    healthy only once its node has logged `started`: a process the machine could not
@@ -41,7 +42,12 @@ Invariants (each violation names the time, robot and what went wrong):
    its slot is orphaned (every robot now believes a holder that executes nothing);
 7. nobody is muted (`muted`, virtual simulator: `VirtualSwarm` judges it from the
    nodes, see `sim.virtual.simulator`): a live, healthy robot whose current frames some
-   robot that should hear them has not accepted for ten heartbeat periods.
+   robot that should hear them has not accepted for ten heartbeat periods;
+8. one answer everywhere (virtual simulator, judged from the nodes at the end of a run
+   that ended `Bounds.settle` or more after its last fault; DESIGN, "Convergence"):
+   every live robot that hears a slot holds the same (holder, epoch) for it
+   (`views_disagree`), and a live, healthy holder they all name executes it
+   (`orphaned`).
 """
 
 from __future__ import annotations
@@ -50,10 +56,11 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.shared.faults import Fault
+from sim.shared.faults import LINK_KINDS, Fault
 from sim.shared.holders import HolderFold
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+from swarmd.core.signed import RELAY_EVERY
 
 _STOPPING_FAULTS = ("crash", "collide", "leave", "unhealthy", "motor")
 _SILENT = ("crash", "collide", "pause")
@@ -79,6 +86,9 @@ class Bounds:
     takeover: float
     dual: float
     converge: float
+    settle: float
+    """After the last fault, by when every view of every slot is one (invariant 8): a
+    takeover, then the holders' unasked certificate relay (`RELAY_EVERY` T_max)."""
 
     @classmethod
     def of(cls, p: Params, loss: float) -> Bounds:
@@ -89,7 +99,8 @@ class Bounds:
         # A stale holder heartbeats on resume; the new holder answers at once (rule 2).
         dual = p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
         converge = 2 * p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
-        return cls(takeover, dual, converge)
+        settle = takeover + converge + RELAY_EVERY * p.t_max
+        return cls(takeover, dual, converge, settle)
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,6 +150,8 @@ class Checker:
     faults: list[tuple[float, Fault]] = field(default_factory=list)
     partitions: list[tuple[float, float]] = field(default_factory=list)  # [start, heal)
     in_partition: bool = False
+    _open_links: dict[str, int] = field(default_factory=dict)
+    """SPEC of a link fault in force -> its index in `partitions`."""
     dual_since: dict[str, float] = field(default_factory=dict)
     episodes: dict[tuple[int, str], tuple[float, int]] = field(default_factory=dict)
     held_since: dict[tuple[str, int], float] = field(default_factory=dict)
@@ -184,14 +197,16 @@ class Checker:
                     else float("inf")
                 self.failures.append(_Failure(t, end if end is not None else t, fault.robot,
                                               fault.kind, self.executing.get(fault.robot)))
-        if fault.kind == "partition":
+        if fault.kind in LINK_KINDS:
+            # Partitions and one-way link faults (fade, deaf) may overlap: each is a
+            # window after whose heal the swarm must converge (invariant 2).
+            key = fault.spec()
             if phase == "begin":
-                self.in_partition = True
+                self._open_links[key] = len(self.partitions)
                 self.partitions.append((t, float("inf")))
-            else:
-                self.in_partition = False
-                start, _ = self.partitions[-1]
-                self.partitions[-1] = (start, t)
+            elif (i := self._open_links.pop(key, None)) is not None:
+                self.partitions[i] = (self.partitions[i][0], t)
+            self.in_partition = bool(self._open_links)
             return
         r = fault.robot
         if fault.kind in _SILENT and phase == "begin":
@@ -357,7 +372,7 @@ class Checker:
             return False  # not (yet) running: to the swarm, a dead robot
         window = self.bounds.takeover + self.params.t_max
         for ft, fault in self.faults:
-            if robot not in fault.robots and fault.kind != "partition":
+            if robot not in fault.robots and fault.kind not in LINK_KINDS:
                 continue
             end = fault.end if fault.end is not None else float("inf")
             if fault.kind in ("crash", "leave", "unhealthy", "motor", "restart"):

@@ -22,6 +22,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sim.shared.channel import LOSS_MODELS, GilbertElliott, LinkCut
 from sim.shared.fakeid import fake_identities
 from sim.shared.faults import Fault, fault_record
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
@@ -51,6 +52,11 @@ class Channel:
     delay: float = 0.002  # s, one-way latency
     jitter: float = 0.002  # s, uniform extra delay: reorders frames closer than this
     duplicate: float = 0.0  # probability that a delivery happens twice
+    loss_model: str = "bernoulli"
+    """`bernoulli` (each frame lost with `loss`, independently) or `burst` (Gilbert-Elliott
+    per directed link, sim/shared/channel.py)."""
+    burst_len: float = 4.0
+    """Mean frames of a loss burst (`burst` model)."""
 
 
 @dataclass(slots=True)
@@ -135,6 +141,12 @@ class VirtualSwarm:
         self.frames_sent = 0
         self.deliveries = 0
         self.partition: dict[int, int] | None = None  # robot -> group while partitioned
+        self.cuts: list[LinkCut] = []  # one-way link faults in force (fade, deaf, A>B)
+        self.cuts_seen: list[LinkCut] = []
+        if self.channel.loss_model not in LOSS_MODELS:
+            raise ValueError(f"loss model must be one of {', '.join(LOSS_MODELS)}")
+        self._burst = GilbertElliott(self.channel.loss, self.channel.burst_len, self.rng) \
+            if self.channel.loss_model == "burst" else None
         self._changed: dict[int, float] = {}
         self.checker = Checker(plan, params, loss=self.channel.loss)
         self.robots: dict[int, _Robot] = {}
@@ -223,7 +235,8 @@ class VirtualSwarm:
                     self.deliveries += 1
                     self._call(a, _OP_RAW, b)
         self.now = self.duration
-        violations = self.checker.finish(self.events, self.duration) + self._muted()
+        violations = self.checker.finish(self.events, self.duration) + self._muted() \
+            + self._views()
         violations.sort(key=lambda v: v.t)
         final = {}
         drops = {}
@@ -269,6 +282,9 @@ class VirtualSwarm:
                 sr = snaps.get(r)
                 if sr is None or r == x or (part is not None and part.get(r, 0) != part.get(x, 0)):
                     continue
+                if any(c.cuts(x, r, c.start) and c.end > self.duration - window
+                       for c in self.cuts_seen):
+                    continue  # cut off from x lately: not muted, unheard
                 last = sr.heard.get(x)
                 if last is not None and self.duration - last > window \
                         and self.duration - self.checker_last_change(x) > window:
@@ -276,6 +292,38 @@ class VirtualSwarm:
                                          f"robot {r} has accepted no frame of live robot {x} "
                                          f"since {last:.2f} s"))
                     break
+        return out
+
+    def _views(self) -> list[Violation]:
+        """Invariant 8 (`sim.shared.invariants`): at the end of a run that has been quiet
+        for `Bounds.settle`, every live robot that hears a slot holds one view of it
+        (`views_disagree`), and a live, healthy holder they all name executes it
+        (`orphaned`)."""
+        last = max((f.end if f.end is not None else f.at for f in self.faults), default=0.0)
+        if self.duration - last < self.checker.bounds.settle:
+            return []
+        snaps = {rid: r.node.snapshot() for rid, r in self.robots.items()
+                 if r.alive and not r.paused and r.node is not None}
+        out: list[Violation] = []
+        for f in self.plan.functions:
+            slot = self.plan.slot(f)
+            views = {rid: sx.known[f] for rid, sx in snaps.items()
+                     if slot in self.plan.relevant(rid).slots or sx.function == f}
+            if len(set(views.values())) > 1:
+                shown = ", ".join(f"{r}: {h[0]}@{h[1]}" for r, h in sorted(views.items()))
+                out.append(Violation(self.duration, "views_disagree", None,
+                                     f"{f} is held by different robots in different views "
+                                     f"({shown})"))
+                continue
+            if not views:
+                continue
+            holder = next(iter(views.values()))[0]
+            sh = snaps.get(holder)
+            if sh is not None and sh.health == Health.OK and not (
+                    sh.role == Role.ACTIVE and sh.function == f):
+                out.append(Violation(self.duration, "orphaned", holder,
+                                     f"every view names robot {holder} the holder of {f}, "
+                                     f"which it does not execute"))
         return out
 
     def checker_last_change(self, rid: int) -> float:
@@ -353,12 +401,22 @@ class VirtualSwarm:
                 continue
             if part is not None and part.get(rid, 0) != part.get(sender, 0):
                 continue
-            if ch.loss and rng.random() < ch.loss:
+            if self._lost(sender, rid):
                 continue
             at = self.now + ch.delay + (rng.random() * ch.jitter if ch.jitter else 0.0)
             self._push(at, _DELIVER, rid, frame)
             if ch.duplicate and rng.random() < ch.duplicate:
                 self._push(at + rng.random() * ch.jitter, _DELIVER, rid, frame)
+
+    def _lost(self, sender: int, receiver: int) -> bool:
+        """Is this frame lost on the link sender -> receiver (a cut, or the channel)?
+        Draws from the run's random stream exactly as before when neither link faults
+        nor bursts are in use, so older runs replay byte for byte."""
+        if self.cuts and any(c.cuts(sender, receiver, self.now) for c in self.cuts):
+            return True
+        if self._burst is not None:
+            return self._burst.lost(sender, receiver)
+        return bool(self.channel.loss) and self.rng.random() < self.channel.loss
 
     # ------------------------------------------------------------------ faults
     def _boot(self, rid: int) -> None:
@@ -375,6 +433,15 @@ class VirtualSwarm:
             # pause or partition is `duration` after it, not a record of its own.
             self._record(fault_record(fault, t))
         self.checker.fault(t, fault, phase)
+        cut = fault.cut()
+        if cut is not None:
+            link = LinkCut(fault.at, fault.end or fault.at, *cut)
+            if phase == "begin":
+                self.cuts.append(link)
+                self.cuts_seen.append(link)
+            elif link in self.cuts:
+                self.cuts.remove(link)
+            return
         if fault.kind == "partition":
             self.partition = {r: i for i, g in enumerate(fault.groups) for r in g} \
                 if phase == "begin" else None
@@ -463,13 +530,13 @@ class VirtualSwarm:
                                    x: rr.node.snapshot().seq for x, rr in self.robots.items()
                                    if rr.node is not None},
                                recorded=self._tapes.get(rid, ()))
-        ch, rng, part = self.channel, self.rng, self.partition
+        ch, part = self.channel, self.partition
         for data in frames:
             self.frames_sent += 1
             for target in self._all:
                 if part is not None and part.get(target, 0) != part.get(rid, 0):
                     continue
-                if ch.loss and rng.random() < ch.loss:
+                if self._lost(rid, target):
                     continue
                 self._push(self.now + ch.delay, _DELIVER_RAW, target, data)
         if attack in REPEATING:
@@ -499,8 +566,10 @@ def run_virtual(
     interest: bool = True,
     channel: Channel | None = None,
     on_event: Callable[[dict[str, Any]], None] | None = None,
+    loss_model: str = "bernoulli",
+    burst_len: float = 4.0,
 ) -> VirtualResult:
     """Convenience wrapper: one run, default channel with the given loss."""
-    ch = channel or Channel(loss=loss)
+    ch = channel or Channel(loss=loss, loss_model=loss_model, burst_len=burst_len)
     return VirtualSwarm(plan, params, duration=duration, faults=faults, channel=ch, seed=seed,
                         keys=keys, auth=auth, interest=interest, on_event=on_event).run()
