@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 
 import pytest
 from hypothesis import given
@@ -50,8 +51,8 @@ def test_parse_fault_every_kind(spec: str, fault: Fault) -> None:
 
 
 def test_parse_fault_covers_every_kind_of_the_cli() -> None:
-    assert set(KINDS) == {"crash", "restart", "pause", "partition", "liar", "leave",
-                          "unhealthy", "motor", "collide", "forge"}
+    assert set(KINDS) == {"crash", "restart", "pause", "partition", "fade", "deaf", "liar",
+                          "leave", "unhealthy", "motor", "collide", "forge"}
 
 
 @pytest.mark.parametrize("spec", [
@@ -171,8 +172,13 @@ def _faults(draw: st.DrawFn) -> Fault:
         bounds = [0, *cut, len(named)]
         groups = tuple(tuple(named[a:b]) for a, b in itertools.pairwise(bounds))
         length = draw(_times.filter(lambda d: d > 0))
-        return Fault(kind, at, tuple(named), length, groups)
-    dur = draw(_times.filter(lambda d: d > 0)) if kind == "pause" else None
+        oneway = len(groups) == 2 and draw(st.booleans())
+        return Fault(kind, at, tuple(named), length, groups, oneway=oneway)
+    if kind == "deaf":
+        ids = draw(st.lists(_ids, min_size=2, max_size=4, unique=True))
+        return Fault(kind, at, (ids[0],), draw(_times.filter(lambda d: d > 0)),
+                     (tuple(ids[1:]),))
+    dur = draw(_times.filter(lambda d: d > 0)) if kind in ("pause", "fade") else None
     n = draw(st.integers(2 if kind == "collide" else 1, 4))
     attack = draw(st.sampled_from(ATTACKS)) if kind == "forge" else ""
     return Fault(kind, at, tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True))), dur,
@@ -253,3 +259,30 @@ def test_virtual_collide_is_two_crashes_at_one_instant(
         (1, "collide:1,3@3"), (3, "collide:1,3@3")]
     assert collide.holders() == {"f2": [2], "f4": [4], "f1": [5], "f3": [6]}
     assert 1 not in collide.final and 3 not in collide.final
+
+
+@pytest.mark.parametrize(("spec", "senders", "receivers"), [
+    ("fade:2@5+0.46", {2}, None),
+    ("deaf:6:2@5+0.86", {2}, {6}),
+    ("deaf:6:2,3@1+1", {2, 3}, {6}),
+    ("partition:1,2>3,4@3+2", {1, 2}, {3, 4}),
+])
+def test_link_faults_cut_one_way(spec: str, senders: set[int],
+                                 receivers: set[int] | None) -> None:
+    cut = parse_fault(spec).cut()
+    assert cut is not None
+    assert cut[0] == senders and cut[1] == (None if receivers is None else receivers)
+    assert parse_fault("partition:1,2|3,4@3+2").cut() is None
+
+
+@pytest.mark.parametrize(("spec", "what"), [
+    ("fade:2@5", "missing '+D'"),
+    ("deaf:6@5+1", "no ':S'"),
+    ("deaf:6:6@5+1", "hears itself"),
+    ("deaf:6,5:2@5+1", "one robot"),
+    ("partition:1>2>3@1+1", "two groups"),
+    ("partition:1,2>3|4@1+1", "not both"),
+])
+def test_bad_link_faults_say_what_is_wrong(spec: str, what: str) -> None:
+    with pytest.raises(FaultSpecError, match=re.escape(what)):
+        parse_fault(spec)
