@@ -271,7 +271,7 @@ def test_link_faults_cut_one_way(spec: str, senders: set[int],
                                  receivers: set[int] | None) -> None:
     cut = parse_fault(spec).cut()
     assert cut is not None
-    assert cut[0] == senders and cut[1] == (None if receivers is None else receivers)
+    assert cut[0] == frozenset(senders) and cut[1] == (None if receivers is None else receivers)
     assert parse_fault("partition:1,2|3,4@3+2").cut() is None
 
 
