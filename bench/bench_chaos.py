@@ -4,11 +4,15 @@ Each seed draws a random valid swarm (3-60 robots: a ring of active slots, each 
 by its two ring neighbours plus random extra watchers, so every slot has at least the
 quorum of witnesses, DESIGN rule 3; 1-5 standbys with random subs, rule 6), a random
 schedule of every fault kind (several at once, overlapping, on adjacent robots, several
-robots in one spec, collisions) and a loss of 0-30 %, runs it on sim.virtual and judges
-it with sim.shared.invariants. It prints the violations by kind, each with the command
-that replays it:
+robots in one spec, collisions), link faults that lose frames one way (fades, deafness,
+one-way partitions) and a loss of 0-30 %, independent or in bursts (Gilbert-Elliott),
+runs it on sim.virtual in the mode users run (signed per robot; `--auth` for the others)
+and judges it with sim.shared.invariants, convergence included (invariant 8). It prints
+the fault kinds drawn and the violations by kind, each with the command that replays it:
 
     python bench/bench_chaos.py --seeds 1000              # violations by kind
+    python bench/bench_chaos.py --seeds 1000 --dense      # 4-8 faults within 1.5 s
+    python bench/bench_chaos.py --seeds 1000 --auth none  # unsigned (also: shared)
     python bench/bench_chaos.py --seed 1234 --verbose     # replay one seed
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
@@ -40,7 +44,11 @@ from swarmd.config import load_swarm  # noqa: E402
 from swarmd.core.params import Params, udp  # noqa: E402
 from swarmd.core.plan import RobotPlan, SwarmPlan  # noqa: E402
 
-KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "collide")
+KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "collide",
+         "fade", "deaf", "oneway")
+"""What a schedule draws from; `oneway` is a one-way partition (`partition:A>B`)."""
+AUTH = "per-robot"
+"""The authentication mode of every run (`--auth`): the shipped default unless told."""
 
 
 @dataclass(frozen=True)
@@ -50,10 +58,13 @@ class Case:
     faults: tuple[Fault, ...]
     loss: float
     duration: float
+    loss_model: str = "bernoulli"
+    burst_len: float = 4.0
 
     def describe(self) -> str:
-        lines = [f"seed {self.seed}: {len(self.plan.robots)} robots, loss {self.loss:.0%}, "
-                 f"{self.duration:g} s"]
+        model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
+        lines = [f"seed {self.seed}: {len(self.plan.robots)} robots, loss {self.loss:.0%}"
+                 f"{model}, {self.duration:g} s"]
         for r, p in sorted(self.plan.robots.items()):
             lines.append(f"  robot {r}: " + (f"active {p.function}, watched by "
                          f"{', '.join(self.plan.watched_by(p.function))}" if p.function
@@ -81,7 +92,9 @@ def draw_swarm(rng: random.Random, max_robots: int = 60) -> SwarmPlan:
                      {f: tuple(sorted(w, key=fs.index)) for f, w in watches.items()})
 
 
-def draw_case(seed: int, max_robots: int = 60) -> Case:
+def draw_case(seed: int, max_robots: int = 60, dense: bool = False) -> Case:
+    """The swarm and schedule of one seed. `dense`: 4-8 faults within 1.5 s, mostly on
+    neighbours (clustered failures)."""
     rng = random.Random(seed)
     plan = draw_swarm(rng, max_robots)
     ids = sorted(plan.robots)
@@ -90,31 +103,46 @@ def draw_case(seed: int, max_robots: int = 60) -> Case:
     faults: list[Fault] = []
     base = round(rng.uniform(2.5, 4.0), 3)
     partitioned = False
-    for _ in range(rng.randint(1, 4)):
-        # one partition a run: the virtual medium holds one partition at a time
+    for _ in range(rng.randint(4, 8) if dense else rng.randint(1, 4)):
+        # one two-way partition a run: the virtual medium holds one at a time (one-way
+        # link faults may overlap anything)
         kind = rng.choice([k for k in KINDS if k != "partition" or not partitioned])
         partitioned = partitioned or kind == "partition"
         # overlapping: at the same instant, or T_max/2 .. 2 T_max after another fault
-        at = round(base + rng.choice((0.0, 0.0, t / 2, t, 2 * t, rng.uniform(0, 3))), 3)
-        first = rng.choice(ids)
-        targets = [first]
-        near = _neighbours(plan, first)
-        if kind == "collide" or (kind in ("crash", "pause", "leave", "unhealthy")
-                                 and rng.random() < 0.3):
-            pool = near or [r for r in ids if r != first]
-            targets.append(rng.choice(pool))  # an adjacent robot, when there is one
-        if kind == "partition":
-            group = tuple(sorted(rng.sample(ids, rng.randint(1, len(ids) - 1))))
-            rest = tuple(r for r in ids if r not in group)
-            faults.append(Fault(kind, at, (*group, *rest), round(rng.uniform(0.5, 3.0), 2),
-                                (group, rest)))
-        elif kind == "pause":
-            faults.append(Fault(kind, at, tuple(targets), round(rng.uniform(0.3, 4.0), 2)))
-        else:
-            faults.append(Fault(kind, at, tuple(targets)))
+        spread = rng.uniform(0, 1.5) if dense else rng.uniform(0, 3)
+        at = round(base + rng.choice((0.0, 0.0, t / 2, t, 2 * t, spread)), 3)
+        faults.append(_draw_fault(rng, plan, ids, kind, at, dense))
     loss = rng.choice((0.0, 0.0, round(rng.uniform(0.0, 0.3), 2)))
+    model, burst = "bernoulli", 4.0
+    if loss and rng.random() < 0.4:
+        model, burst = "burst", round(rng.uniform(2.0, 8.0), 1)
     last = max((f.end or f.at) for f in faults)
-    return Case(seed, plan, tuple(faults), loss, round(last + 8.0, 3))
+    return Case(seed, plan, tuple(faults), loss, round(last + 8.0, 3), model, burst)
+
+
+def _draw_fault(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str, at: float,
+                dense: bool) -> Fault:
+    first = rng.choice(ids)
+    targets = [first]
+    near = _neighbours(plan, first)
+    if kind == "collide" or (kind in ("crash", "pause", "leave", "unhealthy")
+                             and rng.random() < (0.6 if dense else 0.3)):
+        pool = near or [r for r in ids if r != first]
+        targets.append(rng.choice(pool))  # an adjacent robot, when there is one
+    if kind in ("partition", "oneway"):
+        group = tuple(sorted(rng.sample(ids, rng.randint(1, len(ids) - 1))))
+        rest = tuple(r for r in ids if r not in group)
+        return Fault("partition", at, (*group, *rest), round(rng.uniform(0.5, 3.0), 2),
+                     (group, rest), oneway=kind == "oneway")
+    if kind == "fade":
+        return Fault(kind, at, (first,), round(rng.uniform(0.2, 3.0), 2))
+    if kind == "deaf":
+        heard = near or [r for r in ids if r != first]
+        senders = tuple(sorted(rng.sample(heard, rng.randint(1, min(2, len(heard))))))
+        return Fault(kind, at, (first,), round(rng.uniform(0.2, 3.0), 2), (senders,))
+    if kind == "pause":
+        return Fault(kind, at, tuple(targets), round(rng.uniform(0.3, 4.0), 2))
+    return Fault(kind, at, tuple(targets))
 
 
 def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
@@ -131,16 +159,25 @@ def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
     return sorted(out)
 
 
-def run_case(case: Case) -> VirtualResult:
+def run_case(case: Case, auth: str | None = None) -> VirtualResult:
     return run_virtual(case.plan, udp(), duration=case.duration, faults=case.faults,
-                       loss=case.loss, seed=case.seed)
+                       loss=case.loss, seed=case.seed, auth=auth or AUTH,
+                       loss_model=case.loss_model, burst_len=case.burst_len)
 
 
-def chaos(seeds: range, max_robots: int, verbose: bool) -> dict[str, list[tuple[int, Violation]]]:
+DRAWN: collections.Counter[str] = collections.Counter()
+"""Fault kinds drawn by `chaos` in this process (one-way partitions as `oneway`)."""
+
+
+def chaos(seeds: range, max_robots: int, verbose: bool, dense: bool = False,
+          auth: str | None = None) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
-        case = draw_case(seed, max_robots)
-        res = run_case(case)
+        case = draw_case(seed, max_robots, dense)
+        DRAWN.update("oneway" if f.oneway else f.kind for f in case.faults)
+        if case.loss_model == "burst":
+            DRAWN["burst loss"] += 1
+        res = run_case(case, auth)
         if verbose:
             print(case.describe())
             for e in res.events:
@@ -158,7 +195,7 @@ def ring8() -> tuple[SwarmPlan, Params]:
 
 
 def ring8_latencies(pairs: Sequence[tuple[int, ...]], phases: int = 20,
-                    loss: float = 0.0) -> tuple[list[float], int, int]:
+                    loss: float = 0.0, auth: str | None = None) -> tuple[list[float], int, int]:
     """Takeover latencies (s, fault -> takeover) of the slots of the crashed actives, the
     count of such slots never taken over, and the count of runs with a violation."""
     plan, params = ring8()
@@ -168,7 +205,7 @@ def ring8_latencies(pairs: Sequence[tuple[int, ...]], phases: int = 20,
         for k in range(phases):
             at = 3.0 + k * params.heartbeat_interval / phases
             res = run_virtual(plan, params, duration=at + 6.0, loss=loss, seed=k,
-                              faults=[Fault("crash", at, robots)])
+                              faults=[Fault("crash", at, robots)], auth=auth or AUTH)
             bad += bool(res.violations)
             for r in robots:
                 f = plan.robots[r].function
@@ -206,21 +243,24 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
-def _chaos_chunk(args: tuple[int, int, int]) -> dict[str, list[tuple[int, Violation]]]:
-    first, last, max_robots = args
-    return chaos(range(first, last), max_robots, False)
+def _chaos_chunk(args: tuple[int, int, int, bool, str]
+                 ) -> tuple[dict[str, list[tuple[int, Violation]]], collections.Counter[str]]:
+    first, last, max_robots, dense, auth = args
+    DRAWN.clear()
+    return chaos(range(first, last), max_robots, False, dense, auth), DRAWN.copy()
 
 
-def _chaos_parallel(seeds: range, max_robots: int,
-                    jobs: int) -> dict[str, list[tuple[int, Violation]]]:
+def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
+                    auth: str) -> dict[str, list[tuple[int, Violation]]]:
     from concurrent.futures import ProcessPoolExecutor
 
     step = 50
-    chunks = [(s, min(s + step, seeds.stop), max_robots)
+    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth)
               for s in range(seeds.start, seeds.stop, step)]
     found: dict[str, list[tuple[int, Violation]]] = {}
     with ProcessPoolExecutor(jobs) as pool:
-        for part in pool.map(_chaos_chunk, chunks):
+        for part, drawn in pool.map(_chaos_chunk, chunks):
+            DRAWN.update(drawn)
             for kind, hits in part.items():
                 found.setdefault(kind, []).extend(hits)
     return found
@@ -236,24 +276,34 @@ def main() -> None:
     ap.add_argument("--phases", type=int, default=20, help="--ring8: heartbeat phases")
     ap.add_argument("--jobs", type=int, default=1,
                     help="processes (seeds are independent: one per core)")
+    ap.add_argument("--dense", action="store_true",
+                    help="4-8 faults a run within 1.5 s, mostly on neighbours")
+    ap.add_argument("--auth", choices=("per-robot", "shared", "none"), default="per-robot",
+                    help="authentication mode (default per-robot, as shipped)")
     a = ap.parse_args()
+    global AUTH
+    AUTH = a.auth
     if a.ring8:
         print_ring8(a.phases)
         return
     seeds = range(a.seed, a.seed + 1) if a.seed is not None else range(a.seeds)
     t0 = time.perf_counter()
     if a.jobs > 1 and len(seeds) > 1:
-        found = _chaos_parallel(seeds, a.max_robots, a.jobs)
+        found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth)
     else:
-        found = chaos(seeds, a.max_robots, a.verbose)
+        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
-    print(f"{len(seeds)} seeds, {total} violation(s) in {wall:.1f} s")
+    print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}, auth {a.auth}, "
+          f"{total} violation(s) in {wall:.1f} s")
+    print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
     for kind, hits in sorted(found.items()):
         runs = sorted({s for s, _ in hits})
         print(f"  {kind}: {len(hits)} in {len(runs)} run(s)")
         for seed, v in hits[:5]:
-            extra = "" if a.max_robots == 60 else f" --max-robots {a.max_robots}"
+            extra = ("" if a.max_robots == 60 else f" --max-robots {a.max_robots}") \
+                + (" --dense" if a.dense else "") + ("" if a.auth == "per-robot"
+                                                     else f" --auth {a.auth}")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")
     sys.exit(1 if total else 0)

@@ -356,8 +356,8 @@ class Checker:
         for e in self.expects:
             if e.function == f and t >= e.t and e.done is None:
                 e.done = t
-        if not self._healthy_and_reachable(replaced, t):
-            return
+        if replaced == r or not self._healthy_and_reachable(replaced, t):
+            return  # (a robot taking back its own slot, which it had left, replaces nobody)
         self.false_takeovers.append(rec)
         liar = any(fl.kind == "liar" and ft <= t for ft, fl in self.faults)
         if not self.loss:

@@ -71,6 +71,7 @@ class EvidenceStore:
         self._mine: dict[str, tuple[int, tuple[bytes, ...]]] = {}
         self._relayed_at: dict[str, float] = {}
         self._refutes_relayed_at: dict[str, float] = {}
+        self._evidence_relayed_at: dict[str, float] = {}
         self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
 
     # ------------------------------------------------------------------ evidence
@@ -79,7 +80,10 @@ class EvidenceStore:
         """Keep `witness`'s signed frame `raw` against `suspect` at `epoch` (`floor`:
         the epoch of f as known). None when the suspect refuted it; otherwise the
         pending claims it now certifies, still fresh at `now`, for the node to count."""
-        if not raw or epoch < floor:
+        if not raw or epoch + 1 < floor:
+            # Older than the takeover we know of. Evidence about the epoch just below it
+            # is kept: it may back a rival claim of that same takeover, which the lower
+            # id wins (the paper's race, after a partition healed).
             return []
         if witness != suspect and self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw):
             # The suspect said, signed, that it was alive after this warning (rule 4): it
@@ -190,11 +194,27 @@ class EvidenceStore:
             del pending[next(iter(pending))]
         pending[(claimant, c.epoch)] = (c.failed, now)
 
-    def cert_frames(self, f: str, suspect: int, epoch: int) -> tuple[bytes, ...]:
-        """The certificate this robot can show for taking f over from `suspect`: every
-        unrefuted backer, not just a quorum."""
+    def cert_frames(self, f: str, suspect: int, epoch: int,
+                    claimant: int | None = None) -> tuple[bytes, ...]:
+        """The certificate this robot (or `claimant`, whose takeover it certified) can
+        show for taking f over from `suspect`: every unrefuted backer, not just a
+        quorum."""
         got = self._evidence.get(f, {}).get((suspect, epoch), {})
-        return tuple(got[w] for w in self._backers(f, suspect, epoch, self._robot_id))
+        who = self._robot_id if claimant is None else claimant
+        return tuple(got[w] for w in self._backers(f, suspect, epoch, who))
+
+    def stale_frames(self, f: str, holder: int, epoch: int, stale: int,
+                     now: float) -> tuple[bytes, ...]:
+        """A robot still heartbeats f as its holder at epoch `stale`, which the takeover
+        by `holder` at `epoch` (certified here) ended: the evidence against it, to relay
+        so that it fences itself or refutes (DESIGN, "Convergence"); at most once per
+        T_max (empty otherwise, or when this robot certified no such takeover)."""
+        failed = self.replaced(f, holder, epoch)
+        if failed is None or epoch - 1 != stale \
+                or now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
+            return ()
+        self._evidence_relayed_at[f] = now
+        return self.cert_frames(f, failed, stale, holder)
 
     def took_over(self, f: str, failed: int, old_epoch: int, epoch: int) -> None:
         """This robot holds f at `epoch` now: keep the certificate of its hold."""

@@ -39,6 +39,12 @@ class Hearing(NodeBase):
             if f == self._function and self._role == Role.ACTIVE:
                 self._relay_cert(f, now)
                 self._heartbeat_now(now)
+            elif self._identity is not None and hb.epoch < epoch:
+                # Per-robot mode, a takeover it missed whose new holder may be gone:
+                # whoever certified it shows the stale holder the evidence against it
+                # (it fences itself, or refutes and keeps its slot everywhere).
+                for raw in self._ev.stale_frames(f, holder, epoch, hb.epoch, now):
+                    self._send_cert(f, raw)
             return
         self._known[f] = Holder(sender, hb.epoch)
         self._ears.slot_beat(f, sender, hb.epoch, now)
@@ -98,10 +104,17 @@ class Hearing(NodeBase):
             if f == self._function and self._role == Role.ACTIVE \
                     and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
                 self._relay_cert(f, now)  # a watcher that missed our takeover
-        if w.suspect == self._robot_id:
-            self._warned_about_us(f, sender, w.epoch, seq, now)
-            return
         holder, epoch = self._known[f]
+        if w.suspect == self._robot_id:
+            if self._role == Role.ACTIVE and f == self._function:
+                self._warned_about_us(f, sender, w.epoch, seq, now)
+                return
+            if (holder, epoch) != (self._robot_id, w.epoch):
+                return
+            # Our own slot, which we no longer execute (we left it, or were faulty) and
+            # nobody took over: the warnings are right, and as a robot that covers it we
+            # may take it back like any standby (DESIGN, "Convergence": a slot has a
+            # holder while a live robot covers it).
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, w.epoch)
         if f not in self._covers or not self._standing_by():
@@ -130,10 +143,9 @@ class Hearing(NodeBase):
     def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
         """Rule 4: a warning about ourselves is answered with a heartbeat at once (and,
         per robot, a signed REFUTE)."""
-        if self._role == Role.ACTIVE and f == self._function:
-            self._refute(f, sender, epoch, seq, now)
-            if self._heartbeat_now(now):
-                self._emit(ev.Refute(subject=self._robot_id, function=f))
+        self._refute(f, sender, epoch, seq, now)
+        if self._heartbeat_now(now):
+            self._emit(ev.Refute(subject=self._robot_id, function=f))
 
     def _count_vote(self, f: str, sender: int, w: wire.Warn, now: float) -> int:
         """Fig. 9: count `sender`'s warning; returns the distinct witnesses now."""

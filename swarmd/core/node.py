@@ -91,16 +91,14 @@ class Node(Hearing, Moves, Signed):
 
     def _views(self, restored: Restored | None) -> dict[str, Holder]:
         """Who holds each slot at start: the plan's holders at epoch 0, or newer ones a
-        restarted robot persisted. Per-robot mode believes a raised epoch only with its
-        certificate, read from a file as from the air (DESIGN, "Convergence"): the holder
-        relays it to a restarted robot that still shows the old one."""
+        restarted robot persisted (its own memory: what it had verified before it went
+        down; its own hold is verified again, `_restore`)."""
         known = {}
         for f in self._plan.functions:
             holder = self._plan.initial_holder(f)
             known[f] = Holder(holder if holder is not None else 0, 0)
         for f, (holder, epoch) in (restored.known.items() if restored is not None else ()):
-            if f in known and epoch >= known[f].epoch \
-                    and (self._identity is None or epoch == 0):
+            if f in known and epoch >= known[f].epoch:
                 known[f] = Holder(holder, epoch)
         return known
 
@@ -116,7 +114,12 @@ class Node(Hearing, Moves, Signed):
         if held is None or held[0] not in self._known:
             return
         if self._verifier is not None:
-            held = self._verified_hold(held[0], held[1], restored)
+            f = held[0]
+            held = self._verified_hold(f, held[1], restored)
+            if held is None and self._known[f].robot == self._robot_id:
+                # Our own hold, unproven: the file's view of the slot is no better.
+                holder = self._plan.initial_holder(f)
+                self._known[f] = Holder(holder if holder is not None else 0, 0)
         if held is not None:
             self._rejoin = Rejoin(self._robot_id, *held, now + self._params.rejoin_hold)
             self._role = Role.REJOINING

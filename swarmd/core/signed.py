@@ -109,8 +109,11 @@ class Signed(NodeBase):
         if self._identity is None or self._role != Role.ACTIVE or f != self._function \
                 or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
             return
-        if witness not in self._ev.may_watch(f, claimants=True) \
-                or seq <= self._ev.refuted_up_to(f, self._robot_id, epoch, witness):
+        if witness not in self._ev.may_watch(f, claimants=True):
+            return
+        if seq <= self._ev.refuted_up_to(f, self._robot_id, epoch, witness):
+            # Refuted already: whoever shows it to us again missed our refutes.
+            self._relay_refutes(f, now)
             return
         msg = wire.Refute(witness, self._plan.slot(f), epoch, seq)
         self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
@@ -120,12 +123,19 @@ class Signed(NodeBase):
         if f is None or holder == self._robot_id:
             return  # a bad slot (counted), or our own refute relayed back
         if self._ev.add_refute(f, holder, r, raw):
-            self._rejudge(f, now)
+            self._rejudge(f, now, Holder(holder, r.epoch))
 
-    def _rejudge(self, f: str, now: float) -> None:
-        """New refutes of f came: a takeover of f they void is undone here as
-        everywhere they reach — our own hold or claim ends, and the view of f goes back
-        to the robot that refuted (DESIGN, "Convergence")."""
+    def _rejudge(self, f: str, now: float, refuter: Holder) -> None:
+        """New refutes of f came from `refuter` (holder, epoch): a takeover of f they
+        void is undone here as everywhere they reach — our own hold or claim ends, and
+        the view of f goes back to the robot that refuted (DESIGN, "Convergence"). A
+        view one epoch above the refuter's that no certificate here backs (read from
+        our state file after a restart) yields to the refuter's signed word."""
+        known = self._known[f]
+        if known.epoch == refuter.epoch + 1 and known.robot != refuter.robot \
+                and self._ev.replaced(f, known.robot, known.epoch) is None \
+                and known.robot != self._robot_id:
+            self._known[f] = refuter
         me = self._robot_id
         c = self._claim
         if c is not None and c.function == f and not self._ev.certify(
