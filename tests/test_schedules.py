@@ -15,6 +15,16 @@ square reflected; the ring turned by four or mirrored, standbys 9 and 10 swapped
 schedule is run once per orbit, in the form with the smallest robot ids. This keeps the
 whole set within CI's time (about 2,200 runs).
 
+Link faults (DESIGN, "Convergence"), on both swarms at two phases of the grid: every
+robot's transmissions fading (`fade`) for 0.8, 1.8 or 5 T_max; every robot deaf to every
+other (`deaf`) as long; every robot fading while another stays deaf to it 0, 0.4 or 0.8
+T_max longer (the shape that left two holders of one slot in per-robot mode); every two
+robots fading together. After the last heal the run lasts `Bounds.settle` and more, so the
+checker judges one view of every slot (invariant 8) as well.
+
+Every run is signed per robot, the mode users run; every SAMPLE-th schedule runs again
+unsigned and with a shared key.
+
 The paper handles one failure at a time: its quorum of two distinct witnesses cannot
 be met when a witness fails with the robot it watches. DESIGN rule 9 (the standby's own
 ears) closes that gap: every schedule here, correlated ones included, must pass.
@@ -30,6 +40,7 @@ from pathlib import Path
 import pytest
 
 from sim.shared.faults import Fault
+from sim.shared.invariants import Bounds
 from sim.virtual.simulator import run_virtual
 from swarmd.config import load_swarm
 from swarmd.core.params import Params
@@ -68,16 +79,35 @@ class Schedule:
     gap: float
     """s between one failure and the next."""
     phase: int
+    length: float = 0.0
+    """Link faults: how long the first one lasts, in T_max."""
+    extra: float = 0.0
+    """`fade+deaf`: how much longer (T_max) the second robot stays deaf to the first."""
 
     def faults(self) -> list[Fault]:
         _, params = swarm(self.swarm)
         t0 = START + self.phase * params.heartbeat_interval / PHASES
+        if self.kind in LINK:
+            return self._link_faults(t0, params)
         dur = PAUSE if self.kind == "pause" else None
         return [Fault(self.kind, round(t0 + i * self.gap, 6), (r,), dur)
                 for i, r in enumerate(self.robots)]
 
+    def _link_faults(self, t0: float, params: Params) -> list[Fault]:
+        d = round(self.length * params.t_max, 6)
+        a, b = self.robots
+        if self.kind == "deaf":
+            return [Fault("deaf", t0, (a,), d, ((b,),))]
+        if self.kind == "fade2":
+            return [Fault("fade", t0, (a,), d), Fault("fade", t0, (b,), d)]
+        return [Fault("fade", t0, (a,), d),
+                Fault("deaf", t0, (b,), round(d + self.extra * params.t_max, 6), ((a,),))]
+
     def duration(self) -> float:
         _, params = swarm(self.swarm)
+        if self.kind in LINK:
+            heal = max((f.end or f.at) for f in self.faults())
+            return round(heal + Bounds.of(params, 0.0).settle + 0.5, 3)
         last = self.faults()[-1]
         bound = params.t_max + params.vote_window + params.claim_hold
         tail = PAUSE + 2 * params.t_max if self.kind == "pause" else 0.0
@@ -114,7 +144,28 @@ def schedules() -> list[Schedule]:
                                          range(PHASES)):
         out.append(Schedule("paper", "crash", trio, 0.0, phase))
         out.append(Schedule("paper", "crash", trio, params.t_max / 2, phase))
+    out += link_schedules()
     return [s for s in out if s.canonical()]
+
+
+LINK = ("deaf", "fade+deaf", "fade2")
+LENGTHS = (0.8, 1.8, 5.0)  # T_max: shorter than a suspicion; past a takeover; long
+EXTRAS = (0.0, 0.4, 0.8)
+
+
+def link_schedules() -> list[Schedule]:
+    out = []
+    for name in ("paper", "ring8"):
+        plan, _ = swarm(name)
+        ids = sorted(plan.robots)
+        for (a, b), phase, length in itertools.product(
+                itertools.permutations(ids, 2), range(0, PHASES, 2), LENGTHS):
+            out.append(Schedule(name, "deaf", (a, b), 0.0, phase, length))
+            for extra in EXTRAS:
+                out.append(Schedule(name, "fade+deaf", (a, b), 0.0, phase, length, extra))
+            if a < b:
+                out.append(Schedule(name, "fade2", (a, b), 0.0, phase, length))
+    return out
 
 
 def _params() -> list[object]:
@@ -124,16 +175,17 @@ def _params() -> list[object]:
 @pytest.mark.parametrize("schedule", _params())
 def test_schedule(schedule: Schedule) -> None:
     plan, params = swarm(schedule.swarm)
-    res = run_virtual(plan, params, duration=schedule.duration(), faults=schedule.faults())
+    res = run_virtual(plan, params, duration=schedule.duration(), faults=schedule.faults(),
+                      auth="per-robot")
     assert res.violations == [], [v.as_dict() for v in res.violations]
 
 
 SAMPLE = 6
-"""Every SAMPLE-th schedule runs again in each signed mode (all of them pass there too:
-`-p` a plugin that sets the simulator's `auth` default runs the whole set)."""
+"""Every SAMPLE-th schedule runs again unsigned and with a shared key (`python
+bench/bench_schedules.py --auth none|shared` runs the whole set in either)."""
 
 
-@pytest.mark.parametrize("auth", ["shared", "per-robot"])
+@pytest.mark.parametrize("auth", ["shared", "none"])
 @pytest.mark.parametrize("schedule", _params()[::SAMPLE])
 def test_schedule_signed(schedule: Schedule, auth: str) -> None:
     plan, params = swarm(schedule.swarm)
