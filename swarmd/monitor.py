@@ -43,6 +43,7 @@ import asyncio
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -54,11 +55,20 @@ from swarmd.config.robot import TransportConfig, UdpTransportConfig, load_refere
 from swarmd.config.source import read_source, validate
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
+from swarmd.core.drops import DropReason
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
 from swarmd.transport.base import Transport
+
+
+class MonitorDrop(StrEnum):
+    """What only the monitor refuses; everything else it counts as the core would
+    (`DropReason`)."""
+
+    OTHER_SWARM = "other_swarm"
+    """Another swarm's frame: a base station may share the channel with other swarms."""
 
 
 @dataclass(slots=True)
@@ -125,7 +135,7 @@ class MonitorState:
             return True
         return (function, epoch, robot) in self.signed_claims
 
-    def _drop(self, reason: str) -> None:
+    def _drop(self, reason: DropReason | MonitorDrop | str) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
 
     def feed(self, data: bytes, now: float) -> None:
@@ -136,10 +146,10 @@ class MonitorState:
             self._drop(exc.reason)
             return
         if frame.swarm_id != self.plan.swarm_id:
-            self._drop("other_swarm")
+            self._drop(MonitorDrop.OTHER_SWARM)
             return
         if frame.sender not in self.plan.robots:
-            self._drop("unknown_sender")
+            self._drop(DropReason.UNKNOWN_SENDER)
             return
         if isinstance(frame.msg, wire.Cert):
             return  # relays a signed frame; no replay filter, as in the daemons

@@ -41,10 +41,12 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from enum import StrEnum
 from typing import Any
 
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.drops import DropReason
 from swarmd.core.events import Event
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
@@ -66,11 +68,21 @@ the next write is due however nothing else changed."""
 
 QUEUE_SIZE = 1024
 BATCH = 64
+
+
+class RuntimeDrop(StrEnum):
+    """A frame the runtime threw away before the core saw it (the core's own refusals
+    are `DropReason`s); reported and exported with them."""
+
+    QUEUE_OVERFLOW = "queue_overflow"
+    """The receive queue was full: its oldest frame made room (module docstring)."""
+
+
 DROP_REPORT_S = 10.0
 """s. Frames dropped since the last report are logged at most this often: an operator
 without a metrics endpoint still sees a robot with the wrong key (`auth`), another swarm
 on the group (`swarm`) or garbage on the channel, without a line per frame."""
-QUIET_DROPS = frozenset({"own", "irrelevant"})
+QUIET_DROPS = frozenset({DropReason.OWN, DropReason.IRRELEVANT})
 """Drop reasons never logged (metrics still count them): `own` is this robot's multicast
 echo, every frame; `irrelevant` is the traffic of the rest of a large swarm (DESIGN
 section 2, "What a robot hears")."""
@@ -121,7 +133,7 @@ class Runtime:
         self.wall_clock = wall_clock
         self.batch = batch
         self.counters: dict[str, int] = {
-            "received": 0, "filtered": 0, "queue_overflow": 0, "sent": 0, "ticks": 0,
+            "received": 0, "filtered": 0, RuntimeDrop.QUEUE_OVERFLOW: 0, "sent": 0, "ticks": 0,
             "node_errors": 0, "transport_errors": 0, "link_errors": 0, "sink_errors": 0,
             "filter_errors": 0, "persist_errors": 0, "state_writes": 0, "duplicate_id": 0,
         }
@@ -333,7 +345,8 @@ class Runtime:
         """Log the frames dropped since the last report, by reason (rate-limited by the
         caller). Drops are counted per frame by the core; a log line per frame would let
         a flood fill the journal."""
-        current = {**self.node.drops, "queue_overflow": self.counters["queue_overflow"]}
+        current = {**self.node.drops,
+                   RuntimeDrop.QUEUE_OVERFLOW: self.counters[RuntimeDrop.QUEUE_OVERFLOW]}
         new = {reason: n - self._drops_reported.get(reason, 0)
                for reason, n in sorted(current.items())
                if reason not in QUIET_DROPS and n > self._drops_reported.get(reason, 0)}
@@ -369,9 +382,9 @@ class Runtime:
                 return
         if len(self._queue) >= self._queue_size:
             self._queue.popleft()
-            self.counters["queue_overflow"] += 1
+            self.counters[RuntimeDrop.QUEUE_OVERFLOW] += 1
             if self.metrics is not None:
-                self.metrics.dropped("queue_overflow")
+                self.metrics.dropped(RuntimeDrop.QUEUE_OVERFLOW)
         self._queue.append(data)
         if not self._drain_scheduled:
             self._drain_scheduled = True
@@ -385,14 +398,14 @@ class Runtime:
         drops = node.drops
         for _ in range(min(self.batch, len(queue))):
             data = queue.popleft()
-            own = drops["own"]
+            own = drops[DropReason.OWN]
             try:
                 actions = node.receive(data, loop.time())
             except Exception:
                 self.counters["node_errors"] += 1
                 log.exception("core node raised on a frame (a bug); frame dropped")
                 continue
-            if drops["own"] != own and hash(bytes(data)) not in self._sent_digests:
+            if drops[DropReason.OWN] != own and hash(bytes(data)) not in self._sent_digests:
                 self._duplicate_id()
             if actions:
                 self._execute(actions)

@@ -11,17 +11,21 @@ refusal from anything else with one `except`.
 
 from __future__ import annotations
 
+from swarmd.core.drops import DropReason
+
 
 class CoreError(Exception):
     """Root of every exception `swarmd.core` raises on purpose."""
 
 
 class CodecError(CoreError, ValueError):
-    """A frame that cannot be decoded or verified. `reason` names the drop counter."""
+    """A frame that cannot be decoded or verified. `reason` names the drop counter: a
+    `DropReason` (a plain name given by the codec is checked against it here, so an
+    unknown one is a bug found at the raise, not a new counter)."""
 
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
+    def __init__(self, reason: DropReason | str, detail: str) -> None:
+        self.reason = DropReason(reason)
+        super().__init__(f"{self.reason}: {detail}")
 
 
 class ParamsError(CoreError, ValueError):
