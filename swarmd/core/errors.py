@@ -3,6 +3,8 @@ refusal from anything else with one `except`.
 
 - `CodecError` (a `ValueError`): bytes that are no valid frame; `receive` turns it into
   a counted drop and never lets it out (DESIGN section 2).
+- `EventRecordError` (a `ValueError`): an event-log record read back that names no
+  event kind or lacks a field of its kind (`Event.from_record`).
 - `ParamsError`, `PlanError` (`ValueError`s): timing or a swarm plan that cannot work;
   raised when they are built, before any robot runs.
 - `NodeError`, `TransitionError` (`RuntimeError`s): misuse of the node by its driver
@@ -28,6 +30,10 @@ class CodecError(CoreError, ValueError):
         super().__init__(f"{self.reason}: {detail}")
 
 
+class EventRecordError(CoreError, ValueError):
+    """An event-log record that is no event: an unknown name or a missing field."""
+
+
 class ParamsError(CoreError, ValueError):
     """Timing parameters that cannot work together."""
 
@@ -44,5 +50,5 @@ class TransitionError(CoreError, RuntimeError):
     """The node tried a transition the table does not allow (a bug, not peer input)."""
 
 
-__all__ = ["CodecError", "CoreError", "NodeError", "ParamsError", "PlanError",
+__all__ = ["CodecError", "CoreError", "EventRecordError", "NodeError", "ParamsError", "PlanError",
            "TransitionError"]
