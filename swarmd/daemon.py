@@ -268,7 +268,7 @@ class Daemon:
         # snapshot and the event records (DESIGN section 3), on this loop.
         watch = getattr(link, "watch", None)
         if watch is not None:
-            self._link_events = watch(self.runtime.node.snapshot, cfg)
+            self._link_events = watch(self.runtime.snapshot, cfg)
         log.info("starting", extra={
             "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
@@ -290,11 +290,7 @@ class Daemon:
         if rt is not None:
             await rt.stop(handover=self.handover_on_stop)
             log.info("stopped", extra={"stats": rt.stats()})
-            for what, closer in (("link", rt.link.close), ("transport", rt.transport.close)):
-                try:
-                    await asyncio.wait_for(closer(), 10.0)
-                except Exception:
-                    log.exception("closing the %s failed", what)
+            await rt.close_io()
         for task in list(self._hook_tasks):
             with contextlib.suppress(asyncio.TimeoutError, Exception):
                 await asyncio.wait_for(asyncio.shield(task), 5.0)

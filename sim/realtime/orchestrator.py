@@ -58,6 +58,22 @@ from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
 from typing import Any, ParamSpec
 
+from sim.realtime.control import (
+    Act,
+    Command,
+    ControlError,
+    Drops,
+    Failed,
+    Forge,
+    Go,
+    Late,
+    Logged,
+    Ready,
+    Report,
+    Stats,
+    decode_report,
+    encode,
+)
 from sim.realtime.logscan import log_errors, log_tail
 from sim.realtime.netfilter import partition_windows
 from sim.realtime.procs import (
@@ -230,10 +246,10 @@ class Orchestrator:
     def _on_events(self, proc: RobotProcess) -> None:
         try:
             while proc.events.poll():
-                self._record(proc, json.loads(proc.events.recv_bytes()))
+                self._record(proc, decode_report(proc.events.recv_bytes()))
         except (EOFError, OSError):
             self._close_events(proc)
-        except ValueError as exc:  # a robot wrote something that is not JSON: count it
+        except ControlError as exc:  # a robot wrote something that is no report: say so
             self.problems.append(f"robot {proc.robot_id}: bad event message: {exc}")
 
     def _close_events(self, proc: RobotProcess) -> None:
@@ -249,34 +265,35 @@ class Orchestrator:
                 proc.died_at = self.run_time()
                 self.view.set_process(proc.robot_id, "left" if proc.left else "exited")
 
-    def _record(self, proc: RobotProcess, rec: dict[str, Any]) -> None:
-        ctl = rec.get("_ctl")
-        if ctl == "ready":
-            proc.ready = True
-            self._ready_check()
-        elif ctl == "error":
-            proc.error = str(rec.get("error"))
-            self._ready_check()
-        elif ctl == "drops":
-            proc.drops = {str(k): int(v) for k, v in rec.get("d", {}).items()}
-        elif ctl == "stats":
-            self.stats[proc.robot_id] = {k: int(v) for k, v in rec.items() if k != "_ctl"}
-        elif ctl == "late":
-            self.wakes += int(rec.get("n", 0))
-            self.late.extend((proc.robot_id, float(t), float(ms)) for t, ms in rec.get("s", ()))
-        elif ctl is None:
-            self.events.append(rec)
-            self.view.feed(rec)
+    def _record(self, proc: RobotProcess, report: Report) -> None:
+        match report:
+            case Ready():
+                proc.ready = True
+                self._ready_check()
+            case Failed(error):
+                proc.error = error
+                self._ready_check()
+            case Drops(counts):
+                proc.drops = dict(counts)
+            case Stats(passed, lost, partitioned, forged):
+                self.stats[proc.robot_id] = {"passed": passed, "lost": lost,
+                                             "partitioned": partitioned, "forged": forged}
+            case Late(wakes, samples):
+                self.wakes += wakes
+                self.late.extend((proc.robot_id, t, ms) for t, ms in samples)
+            case Logged(record):
+                self.events.append(record)
+                self.view.feed(record)
 
     def _ready_check(self) -> None:
         if all(p.ready or p.eof or p.error for p in self.procs.values()):
             self._ready.set()
 
-    def _send(self, proc: RobotProcess, msg: dict[str, Any]) -> None:
+    def _send(self, proc: RobotProcess, msg: Command) -> None:
         try:
-            proc.control.send_bytes(json.dumps(msg).encode())
+            proc.control.send_bytes(encode(msg))
         except OSError as exc:  # the robot is gone; the fault still goes in the log
-            self.problems.append(f"robot {proc.robot_id}: control {msg.get('cmd')}: {exc}")
+            self.problems.append(f"robot {proc.robot_id}: control {msg}: {exc}")
 
     def _kill_proc(self, proc: RobotProcess) -> None:
         if proc.alive and proc.process.pid is not None:
@@ -334,10 +351,10 @@ class Orchestrator:
             case "leave" | "unhealthy" | "liar" | "motor":
                 if proc is not None and proc.alive:
                     proc.left = proc.left or kind == "leave"
-                    self._send(proc, {"cmd": kind})
+                    self._send(proc, Act(kind))
             case "forge":  # the robot process holds R's key: it forges (robot_proc.Forger)
                 if proc is not None and proc.alive:
-                    self._send(proc, {"cmd": "forge", "attack": fault.attack})
+                    self._send(proc, Forge(fault.attack))
             case _:
                 self.problems.append(f"fault kind {fault.kind} is not supported in real time")
 
@@ -397,7 +414,7 @@ class Orchestrator:
             if self.interrupted is None:
                 self.t0 = time.time() + START_MARGIN
                 for proc in self.procs.values():
-                    self._send(proc, {"cmd": "go", "t0": self.t0})
+                    self._send(proc, Go(self.t0))
                 for fault in self.faults:
                     if fault.at <= self.duration:
                         delay = self.t0 + fault.at - time.time()
