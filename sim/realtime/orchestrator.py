@@ -87,6 +87,7 @@ from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, writ
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
 from sim.shared.faults import Fault, fault_record
+from swarmd.core.events import Started, event_of
 from swarmd.transport.addresses import DEFAULT_GROUP
 
 __all__ = ["Orchestrator", "RealtimeResult", "run_realtime", "run_realtime_async"]
@@ -469,7 +470,7 @@ class Orchestrator:
         for p in self.procs.values():
             if not p.alive or end - p.spawned_at < STARTED_GRACE:
                 continue
-            if not any(e.get("robot") == p.robot_id and e.get("event") == "started"
+            if not any(e.get("robot") == p.robot_id and isinstance(event_of(e), Started)
                        and float(e.get("t", 0.0)) >= p.spawned_at - 0.5 for e in self.events):
                 self.problems.append(
                     f"robot {p.robot_id}: process alive but its daemon never started (no "

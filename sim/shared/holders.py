@@ -39,7 +39,6 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from swarmd.core.errors import EventRecordError
 from swarmd.core.events import (
     Backoff,
     Claim,
@@ -51,6 +50,7 @@ from swarmd.core.events import (
     Started,
     Stopped,
     Takeover,
+    event_of,
 )
 
 CRASH = frozenset({"crash", "collide"})
@@ -150,9 +150,8 @@ class HolderFold:
         robot = rec.get("robot")
         if not isinstance(robot, int) or isinstance(robot, bool) or robot <= 0:
             return None
-        try:
-            event = Event.from_record(rec)
-        except EventRecordError:
+        event = event_of(rec)
+        if event is None:
             return None  # no event of the contract: nothing the fold can read
         prev = self.robots.get(robot)
         new = _next(prev, event, self.down)

@@ -27,8 +27,7 @@ from rich.text import Text
 from sim.shared.faults import Fault
 from sim.shared.holders import HolderFold
 from sim.shared.invariants import Violation, check_events
-from swarmd.core.errors import EventRecordError
-from swarmd.core.events import Alert, Event, Leave, Started, Suspect, Takeover
+from swarmd.core.events import Alert, Event, Leave, Started, Suspect, Takeover, event_of
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.runtime import QUIET_DROPS
@@ -125,14 +124,7 @@ def counted_drops(drops: Mapping[str, int]) -> dict[str, int]:
 def _typed(events: Iterable[Mapping[str, Any]]) -> list[tuple[float, int, Event | None]]:
     """(t, robot, the typed event) for each record, in order; None for a record that is
     no event (`Event.from_record` refuses it), which no count or row reads."""
-    out: list[tuple[float, int, Event | None]] = []
-    for rec in events:
-        try:
-            event: Event | None = Event.from_record(rec)
-        except EventRecordError:
-            event = None
-        out.append((float(rec["t"]), int(rec["robot"]), event))
-    return out
+    return [(float(rec["t"]), int(rec["robot"]), event_of(rec)) for rec in events]
 
 
 def _r(x: float | None) -> float | None:

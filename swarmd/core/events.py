@@ -218,6 +218,15 @@ class Fault(Event):
                 if value is not None or key == "kind"}
 
 
+def event_of(record: Mapping[str, Any]) -> Event | None:
+    """`Event.from_record`, or None for a record that is no event: for readers that pass
+    over what they cannot read (a live view, a plot)."""
+    try:
+        return Event.from_record(record)
+    except EventRecordError:
+        return None
+
+
 CORE_EVENTS: tuple[type[Event], ...] = (
     Started, Suspect, Warn, Vote, Claim, Backoff, Takeover, Fenced, Refute, Leave, Alert,
     Stopped,
@@ -232,4 +241,5 @@ EVENTS[Fault.name] = Fault
 __all__ = [
     "CORE_EVENTS", "EVENTS", "Alert", "Backoff", "Claim", "Event", "Fault", "Fenced",
     "Leave", "Refute", "Started", "Stopped", "Suspect", "Takeover", "Vote", "Warn",
+    "event_of",
 ]
