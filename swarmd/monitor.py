@@ -60,7 +60,7 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
-from swarmd.transport.base import Transport
+from swarmd.transport.base import Channel, Transport
 
 
 class MonitorDrop(StrEnum):
@@ -412,8 +412,8 @@ async def listen(
     def on_frame(data: bytes) -> None:
         state.feed(data, loop.time())
 
-    def on_event(name: str, fields: Mapping[str, Any]) -> None:
-        if name.endswith("error"):
+    def on_event(name: Channel, fields: Mapping[str, Any]) -> None:
+        if name in (Channel.SEND_ERROR, Channel.ERROR):
             state._drop(f"transport_{name}")
 
     await transport.start(on_frame, on_event)

@@ -53,7 +53,7 @@ from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
 from swarmd.metrics import Metrics
 from swarmd.notify import Notifier
-from swarmd.transport.base import Transport
+from swarmd.transport.base import Channel, Transport
 
 log = logging.getLogger(__name__)
 
@@ -479,14 +479,14 @@ class Runtime:
         self._check_state()
 
     # ---------------------------------------------------------------- channel events
-    def _on_transport_event(self, name: str, fields: Mapping[str, Any]) -> None:
+    def _on_transport_event(self, name: Channel, fields: Mapping[str, Any]) -> None:
         """A channel condition (radio up or down, a send error): counted and logged to
         the daemon's own log, not the event log, whose names are a contract (DESIGN
         section 3, `swarmd.core.events`). The protocol itself notices a dead channel through
         missing heartbeats, as the paper's robots would."""
         now = self.loop.time()
-        failed = name != "transport_up"
-        if name in ("send_error", "transport_error"):
+        failed = name != Channel.UP
+        if name in (Channel.SEND_ERROR, Channel.ERROR):
             self._counters["transport_errors"] += 1
             last = self._reported.get(name)
             if last is not None and now - last < _RATE_LIMIT_S:
