@@ -33,6 +33,7 @@ from typing import Any
 from swarmd import state as state_mod
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
+from swarmd.core.events import Alert, event_of
 from swarmd.core.node import Node
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
@@ -179,10 +180,11 @@ class Daemon:
             self.extra_sink(record)
         if self._link_events is not None:
             self._link_events(record)
-        fields = {k: v for k, v in record.items() if k not in ("t", "robot", "event")}
-        log.info("event %s", record.get("event"), extra={"event": record.get("event"),
-                                                         "fields": fields})
-        if record.get("event") == "alert" and self._alert_hook:
+        event = event_of(record)
+        name = None if event is None else event.name
+        fields = dict(record) if event is None else event.fields()
+        log.info("event %s", name, extra={"event": name, "fields": fields})
+        if isinstance(event, Alert) and self._alert_hook:
             self._run_hook(record)
 
     def _run_hook(self, record: Mapping[str, Any]) -> None:

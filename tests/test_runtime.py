@@ -426,7 +426,8 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
     assert out.read_text() == "1 f2 no standby\n"
     monkeypatch.setattr(daemon_mod, "ALERT_HOOK_TIMEOUT", 0.2)
     daemon._alert_hook = f"echo $$ > {out}; exec sleep 30"
-    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2"})
+    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
+                     "reason": "no claim"})
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
     pid = int(out.read_text())
     with pytest.raises(ProcessLookupError):
