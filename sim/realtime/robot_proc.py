@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import collections
-import contextlib
 import ctypes
 import os
 import signal
@@ -339,13 +338,19 @@ class LatenessProbe(_Periodic):
 
 
 def _die_with_parent() -> None:
-    """Own process group; SIGKILL from the kernel when the parent goes (Linux)."""
-    with contextlib.suppress(OSError):
+    """Own process group; SIGKILL from the kernel when the parent goes (Linux). Either
+    refused, the robot still runs (the orchestrator kills it by pid, and the control
+    pipe's end stops it): said once on stderr, so a leftover process is explained."""
+    try:
         os.setpgid(0, 0)
+    except OSError as exc:
+        print(f"robot process: no process group of its own ({exc})", file=sys.stderr)
     parent = os.getppid()
-    with contextlib.suppress(OSError, AttributeError):
+    try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError) as exc:
+        print(f"robot process: no death signal from its parent ({exc})", file=sys.stderr)
     if os.getppid() != parent:  # the parent died before prctl took effect
         os._exit(1)
 
@@ -493,12 +498,20 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
     setup_logging("WARNING")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
+    lost = collections.Counter[str]()
+
     def emit(report: Report) -> None:
         # One message per report: a pipe write below PIPE_BUF is atomic, so a SIGKILL
         # never leaves half a record for the orchestrator. The orchestrator gone: nobody
-        # is left to tell, and the control pipe's end stops this robot.
-        with contextlib.suppress(OSError):
+        # is left to tell, and the control pipe's end stops this robot; the loss is
+        # counted and said once in the robot's log.
+        try:
             events.send_bytes(encode(report))
+        except OSError as exc:
+            lost["reports"] += 1
+            if lost["reports"] == 1:
+                print(f"robot {spec.robot_id}: report pipe closed ({exc}); reports are "
+                      "lost from now on", file=sys.stderr)
 
     code = 1
     try:
