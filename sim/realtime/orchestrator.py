@@ -106,7 +106,11 @@ P = ParamSpec("P")
 
 
 class Orchestrator:
-    """One real-time run. Use `run_realtime` / `run_realtime_async`."""
+    """One real-time run. Use `run_realtime` / `run_realtime_async`.
+
+    Built in three steps: the constructor only checks and keeps its arguments (no file,
+    process or socket), `prepare` does the run's I/O, `run` supervises the processes and
+    applies the fault schedule; `cleanup` undoes what `prepare` made."""
 
     def __init__(
         self,
@@ -142,21 +146,10 @@ class Orchestrator:
         self.live = live
         self.report_dir = report_dir
         self.group = group
-        self.port = port or free_udp_port()
-        self.robots = robot_ids(swarm_path)
-        self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
-        # Absolute: the robot files written below name their state_dir, and a relative
-        # path in a robot file is read relative to that file (docs/config.md), so
-        # `--report out/demo` put the trajectories under out/demo/realtime/robots/out/...
-        self.run_dir = (
-            report_dir.resolve() / "realtime" if report_dir
-            else Path(tempfile.mkdtemp(prefix="swarmd-"))
-        )
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.run_dir / "logs").mkdir(exist_ok=True)
-        # Throwaway keys for this run; the robots run from a copy of the swarm file
-        # that names them (robotfiles.sign_for_run).
-        self.swarm_path, self.identity_files = sign_for_run(self.run_dir, swarm_path)
+        self._port = port
+        if transport not in ("udp", "xbee", "serial"):
+            raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
+        self.physics = physics
         self.partitions = partition_windows(
             [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
         )
@@ -167,14 +160,55 @@ class Orchestrator:
         self.problems: list[str] = []
         self.late: list[tuple[int, float, float]] = []
         self.wakes = 0
-        self.view = SwarmView(self.robots)
         self.t0 = 0.0
         self._ready = asyncio.Event()
         self._stop = asyncio.Event()
         self.interrupted: str | None = None
-        self._ctx = forkserver_context(physics)
-        # `--link ros2`: the run's own ROS 2 domain (sim.realtime.ros2_robot).
+        # Set by `prepare` (the start step: files, keys, radios), never here.
+        self.port = 0
+        self.robots: tuple[int, ...] = ()
+        self.ready_timeout = READY_TIMEOUT
+        self.view = SwarmView(())
+        self.radio_of: dict[int, int] = {}
+        self.identity_files: Any = None
+        self._run_dir: Path | None = None
+        self._ctx: Any = None
         self.ros_domain: Any = None
+        self.medium: Medium | None = None
+
+    @property
+    def run_dir(self) -> Path:
+        """The run's directory (robot files, logs, keys, radios); made by `prepare`."""
+        if self._run_dir is None:
+            raise RuntimeError("Orchestrator.prepare() first: the run has no directory yet")
+        return self._run_dir
+
+    def prepare(self) -> None:
+        """The start step, all the run's I/O before any robot: read the swarm, pick the
+        port, make the run directory, sign this run's throwaway keys, lease a ROS 2
+        domain and start the emulated radios. Idempotent (`run` calls it too); what it
+        made is undone by `cleanup`, also after a failure half-way."""
+        if self._run_dir is not None:
+            return
+        self.port = self._port or free_udp_port()
+        self.robots = robot_ids(self.swarm_path)
+        self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
+        self.view = SwarmView(self.robots)
+        self.radio_of = {r: i + 1 for i, r in enumerate(self.robots)}
+        # Absolute: the robot files written below name their state_dir, and a relative
+        # path in a robot file is read relative to that file (docs/config.md), so
+        # `--report out/demo` put the trajectories under out/demo/realtime/robots/out/...
+        self._run_dir = (
+            self.report_dir.resolve() / "realtime" if self.report_dir
+            else Path(tempfile.mkdtemp(prefix="swarmd-"))
+        )
+        self._run_dir.mkdir(parents=True, exist_ok=True)
+        (self._run_dir / "logs").mkdir(exist_ok=True)
+        # Throwaway keys for this run; the robots run from a copy of the swarm file
+        # that names them (robotfiles.sign_for_run).
+        self.swarm_path, self.identity_files = sign_for_run(self._run_dir, self.swarm_path)
+        self._ctx = forkserver_context(self.physics)
+        # `--link ros2`: the run's own ROS 2 domain (sim.realtime.ros2_robot).
         if self.link.startswith("ros2"):
             from sim.realtime.ros2_robot import DomainLease
 
@@ -182,16 +216,12 @@ class Orchestrator:
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
         # same radios in transparent mode, AP=0, under the serial transport).
-        self.medium: Medium | None = None
-        self.radio_of = {r: i + 1 for i, r in enumerate(self.robots)}
-        if transport in ("xbee", "serial"):
+        if self.transport in ("xbee", "serial"):
             from sim.xbee_emu.medium import Medium
 
             self.medium = Medium(len(self.robots), protocol="802.15.4",
-                                 directory=self.run_dir / "radios", seed=seed,
-                                 transparent=transport == "serial").start()
-        elif transport != "udp":
-            raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
+                                 directory=self._run_dir / "radios", seed=self.seed,
+                                 transparent=self.transport == "serial").start()
 
     def _transport_doc(self, robot: int) -> dict[str, Any] | None:
         if self.medium is None:
@@ -383,6 +413,7 @@ class Orchestrator:
         return event.is_set()
 
     async def run(self, *, handle_signals: bool = False) -> RealtimeResult:
+        self.prepare()
         loop = asyncio.get_running_loop()
         handles: list[asyncio.TimerHandle] = []
         live_ctx: Any = contextlib.nullcontext()
@@ -523,8 +554,8 @@ class Orchestrator:
         if self.medium is not None:
             self.medium.stop()
             self.medium = None
-        if self.report_dir is None:
-            shutil.rmtree(self.run_dir, ignore_errors=True)
+        if self.report_dir is None and self._run_dir is not None:
+            shutil.rmtree(self._run_dir, ignore_errors=True)
 
 
 async def run_realtime_async(
@@ -556,6 +587,7 @@ async def run_realtime_async(
                         physics=physics, live=live, report_dir=report_dir, port=port,
                         transport=transport, craft=craft, link=link, refuse_arm=refuse_arm)
     try:
+        orch.prepare()
         result = await orch.run(handle_signals=handle_signals)
     finally:
         orch.cleanup()
