@@ -75,7 +75,6 @@ from sim.realtime.control import (
     encode,
 )
 from sim.realtime.logscan import log_errors, log_tail
-from sim.realtime.netfilter import partition_windows
 from sim.realtime.procs import (
     RobotProcess,
     forkserver_context,
@@ -84,6 +83,7 @@ from sim.realtime.procs import (
 )
 from sim.realtime.result import RealtimeResult
 from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, write_robot_file
+from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
 from sim.shared.faults import Fault, fault_record
@@ -109,8 +109,9 @@ class Orchestrator:
     """One real-time run. Use `run_realtime` / `run_realtime_async`.
 
     Built in three steps: the constructor only checks and keeps its arguments (no file,
-    process or socket), `prepare` does the run's I/O, `run` supervises the processes and
-    applies the fault schedule; `cleanup` undoes what `prepare` made."""
+    process or socket), `prepare` does the run's I/O, `run` supervises the processes
+    while its `FaultSchedule` says when each fault acts; `cleanup` undoes what `prepare`
+    made."""
 
     def __init__(
         self,
@@ -134,7 +135,8 @@ class Orchestrator:
         self.craft = craft
         self.transport = transport
         self.duration = duration
-        self.faults = sorted(faults, key=lambda f: f.at)
+        self.schedule = FaultSchedule(faults, duration)
+        self.faults = self.schedule.faults
         self.loss = loss
         self.seed = seed
         # The robots' link (robot_proc.LINK_FACTORIES): `quad` drives the MuJoCo craft
@@ -150,9 +152,6 @@ class Orchestrator:
         if transport not in ("udp", "xbee", "serial"):
             raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
         self.physics = physics
-        self.partitions = partition_windows(
-            [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
-        )
         self.procs: dict[int, RobotProcess] = {}
         self.retired: list[RobotProcess] = []
         self.events: list[dict[str, Any]] = []
@@ -248,7 +247,8 @@ class Orchestrator:
         spec = RobotSpec(
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
-            loss=self.loss, seed=self.seed, partitions=self.partitions, link=self.link, t0=t0,
+            loss=self.loss, seed=self.seed, partitions=self.schedule.partitions,
+            link=self.link, t0=t0,
             craft=self.craft, refuse_arm=robot in self.refuse_arm,
         )
         ev_r, ev_w = self._ctx.Pipe(duplex=False)
@@ -415,7 +415,6 @@ class Orchestrator:
     async def run(self, *, handle_signals: bool = False) -> RealtimeResult:
         self.prepare()
         loop = asyncio.get_running_loop()
-        handles: list[asyncio.TimerHandle] = []
         live_ctx: Any = contextlib.nullcontext()
         startup = 0.0
         ended_at = 0.0
@@ -447,10 +446,7 @@ class Orchestrator:
                 self.t0 = time.time() + START_MARGIN
                 for proc in self.procs.values():
                     self._send(proc, Go(self.t0))
-                for fault in self.faults:
-                    if fault.at <= self.duration:
-                        delay = self.t0 + fault.at - time.time()
-                        handles.append(loop.call_later(max(0.0, delay), self._apply, fault))
+                self.schedule.arm(self.t0, self._apply)
                 if self.live and sys.stdout.isatty():
                     from rich.live import Live
 
@@ -463,8 +459,7 @@ class Orchestrator:
         finally:
             for sig in installed:
                 loop.remove_signal_handler(sig)
-            for h in handles:
-                h.cancel()
+            self.schedule.cancel()
             self.kill_all()
             await self._drain()
         self._process_problems()
