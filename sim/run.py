@@ -29,6 +29,7 @@ from typing import Any
 from sim.shared.eventlog import stops_at_end, write_events
 from sim.shared.faults import Fault, FaultSpecError, check_faults, parse_fault
 from sim.shared.summary import Summary, counted_drops, summarize
+from swarmd.core.events import Leave, Started, event_of
 
 TRANSPORTS = ("udp", "xbee", "serial")
 """Channels of the real-time mode (sim.realtime.orchestrator)."""
@@ -392,9 +393,9 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
     # retries, slower on a loaded machine) is the link's time, not the protocol's.
     # Without a leave, from its daemon's start, when it held its function.
     started = {e["robot"]: float(e["t"]) for e in reversed(result.events)
-               if e.get("event") == "started"}
+               if isinstance(event_of(e), Started)}
     left = {e["robot"]: float(e["t"]) for e in reversed(result.events)
-            if e.get("event") == "leave" and e.get("reason") == "fault"}
+            if isinstance(ev := event_of(e), Leave) and ev.reason == "fault"}
     refused = [RefusedArm("unhealthy",
                           round(left.get(r, started.get(r, 0.0)), 6) - 1e-6
                           if r in left else round(started.get(r, 0.0), 6) + 1e-6, (r,))

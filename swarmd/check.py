@@ -135,7 +135,7 @@ def coverage_section(cfg: SwarmConfig) -> Section:
 
 
 def timing_section(cfg: SwarmConfig) -> Section | None:
-    """The Params in use and the detection bound that follows from them."""
+    """The Params in use and the takeover bound that follows from them."""
     params = _params(cfg)
     if params is None:
         return None
@@ -145,9 +145,7 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
          "file" if name in overrides else cfg.timing.preset)
         for name, value in params.as_dict().items()
     )
-    # A watcher fires t_max after the last heartbeat (Fig. 7), warnings repeat every
-    # warn_interval until a quorum met, then the standby holds its claim (wait state).
-    bound = params.t_max + params.claim_hold + params.warn_interval
+    bound = params.takeover_bound()
     return Section(
         key="timing",
         title=f"Timing (preset {cfg.timing.preset})",
@@ -157,11 +155,10 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
             "preset": cfg.timing.preset,
             "params": params.as_dict(),
             "overrides": sorted(overrides),
-            "detection_bound_s": round(bound, 6),
+            "takeover_bound_s": round(bound, 6),
         },
         notes=(
-            f"expected detection bound (no loss): t_max + claim_hold + warn_interval = "
-            f"{bound:g} s",
+            f"takeover bound (no loss): t_max + vote_window + claim_hold = {bound:g} s",
         ),
     )
 

@@ -33,6 +33,7 @@ from typing import Any
 from swarmd import state as state_mod
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
+from swarmd.core.events import Alert, event_of
 from swarmd.core.node import Node
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
@@ -179,10 +180,11 @@ class Daemon:
             self.extra_sink(record)
         if self._link_events is not None:
             self._link_events(record)
-        fields = {k: v for k, v in record.items() if k not in ("t", "robot", "event")}
-        log.info("event %s", record.get("event"), extra={"event": record.get("event"),
-                                                         "fields": fields})
-        if record.get("event") == "alert" and self._alert_hook:
+        event = event_of(record)
+        name = None if event is None else event.name
+        fields = dict(record) if event is None else event.fields()
+        log.info("event %s", name, extra={"event": name, "fields": fields})
+        if isinstance(event, Alert) and self._alert_hook:
             self._run_hook(record)
 
     def _run_hook(self, record: Mapping[str, Any]) -> None:
@@ -268,7 +270,7 @@ class Daemon:
         # snapshot and the event records (DESIGN section 3), on this loop.
         watch = getattr(link, "watch", None)
         if watch is not None:
-            self._link_events = watch(self.runtime.node.snapshot, cfg)
+            self._link_events = watch(self.runtime.snapshot, cfg)
         log.info("starting", extra={
             "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
@@ -290,11 +292,7 @@ class Daemon:
         if rt is not None:
             await rt.stop(handover=self.handover_on_stop)
             log.info("stopped", extra={"stats": rt.stats()})
-            for what, closer in (("link", rt.link.close), ("transport", rt.transport.close)):
-                try:
-                    await asyncio.wait_for(closer(), 10.0)
-                except Exception:
-                    log.exception("closing the %s failed", what)
+            await rt.close_io()
         for task in list(self._hook_tasks):
             with contextlib.suppress(asyncio.TimeoutError, Exception):
                 await asyncio.wait_for(asyncio.shield(task), 5.0)

@@ -43,22 +43,25 @@ import asyncio
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
+from enum import StrEnum
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
-
-from swarmd.config import ConfigError, SwarmConfig, load_robot
-from swarmd.config.errors import Problem
-from swarmd.config.robot import TransportConfig, UdpTransportConfig, load_referenced_swarm
-from swarmd.config.source import read_source, validate
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
+from swarmd.core.drops import DropReason
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
-from swarmd.transport.base import Transport
+from swarmd.transport.base import Channel, Transport
+
+
+class MonitorDrop(StrEnum):
+    """What only the monitor refuses; everything else it counts as the core would
+    (`DropReason`)."""
+
+    OTHER_SWARM = "other_swarm"
+    """Another swarm's frame: a base station may share the channel with other swarms."""
 
 
 @dataclass(slots=True)
@@ -125,7 +128,7 @@ class MonitorState:
             return True
         return (function, epoch, robot) in self.signed_claims
 
-    def _drop(self, reason: str) -> None:
+    def _drop(self, reason: DropReason | MonitorDrop | str) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
 
     def feed(self, data: bytes, now: float) -> None:
@@ -136,10 +139,10 @@ class MonitorState:
             self._drop(exc.reason)
             return
         if frame.swarm_id != self.plan.swarm_id:
-            self._drop("other_swarm")
+            self._drop(MonitorDrop.OTHER_SWARM)
             return
         if frame.sender not in self.plan.robots:
-            self._drop("unknown_sender")
+            self._drop(DropReason.UNKNOWN_SENDER)
             return
         if isinstance(frame.msg, wire.Cert):
             return  # relays a signed frame; no replay filter, as in the daemons
@@ -334,54 +337,6 @@ class MonitorState:
         return Group(table, *lines)
 
 
-class _BaseStationFile(BaseModel):
-    """A base station file: a robot file without `robot:` (it is no robot) and without
-    link, state or metrics (it executes nothing and sends nothing)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    swarm: str
-    transport: TransportConfig = Field(default_factory=UdpTransportConfig)
-    key_files: list[str] = Field(default_factory=list)
-
-
-@dataclass(frozen=True)
-class BaseStation:
-    """What `swarmd monitor --config` listens with: the swarm, a transport section (any
-    kind: UDP, an XBee coordinator, a serial radio) and the keys frames are checked with."""
-
-    swarm: SwarmConfig
-    transport: Any
-    keys: tuple[bytes, ...]
-
-
-def load_base_station(path: str | Path) -> BaseStation:
-    """A base station file, or a robot file (its swarm, transport and keys are used).
-    Raises ConfigUnreadable or ConfigError, like `load_robot`."""
-    from swarmd.keys import KeyFileError, load_key
-
-    src = read_source(path)
-    if isinstance(src.data, dict) and "robot" in src.data:
-        robot = load_robot(path)
-        return BaseStation(robot.swarm, robot.transport, robot.keys())
-    f: _BaseStationFile = validate(_BaseStationFile, src)
-    problems: list[Problem] = []
-    swarm = load_referenced_swarm(src, f.swarm, problems)
-    keys: list[bytes] = []
-    if swarm is not None and (swarm_key := swarm.key()) is not None:
-        keys.append(swarm_key)
-    for i, name in enumerate(f.key_files):
-        try:
-            key = load_key(src.resolve(name))
-        except KeyFileError as exc:
-            problems.append(src.problem(("key_files", i), str(exc)))
-            continue
-        if key not in keys:
-            keys.append(key)
-    if swarm is None or any(p.severity == "error" for p in problems):
-        raise ConfigError(problems)
-    return BaseStation(swarm, f.transport, tuple(keys))
-
-
 async def listen(
     state: MonitorState,
     transport: Transport,
@@ -402,8 +357,8 @@ async def listen(
     def on_frame(data: bytes) -> None:
         state.feed(data, loop.time())
 
-    def on_event(name: str, fields: Mapping[str, Any]) -> None:
-        if name.endswith("error"):
+    def on_event(name: Channel, fields: Mapping[str, Any]) -> None:
+        if name in (Channel.SEND_ERROR, Channel.ERROR):
             state._drop(f"transport_{name}")
 
     await transport.start(on_frame, on_event)

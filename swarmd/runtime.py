@@ -41,17 +41,19 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from enum import StrEnum
 from typing import Any
 
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.drops import DropReason
 from swarmd.core.events import Event
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
 from swarmd.metrics import Metrics
 from swarmd.notify import Notifier
-from swarmd.transport.base import Transport
+from swarmd.transport.base import Channel, Transport
 
 log = logging.getLogger(__name__)
 
@@ -66,11 +68,21 @@ the next write is due however nothing else changed."""
 
 QUEUE_SIZE = 1024
 BATCH = 64
+
+
+class RuntimeDrop(StrEnum):
+    """A frame the runtime threw away before the core saw it (the core's own refusals
+    are `DropReason`s); reported and exported with them."""
+
+    QUEUE_OVERFLOW = "queue_overflow"
+    """The receive queue was full: its oldest frame made room (module docstring)."""
+
+
 DROP_REPORT_S = 10.0
 """s. Frames dropped since the last report are logged at most this often: an operator
 without a metrics endpoint still sees a robot with the wrong key (`auth`), another swarm
 on the group (`swarm`) or garbage on the channel, without a line per frame."""
-QUIET_DROPS = frozenset({"own", "irrelevant"})
+QUIET_DROPS = frozenset({DropReason.OWN, DropReason.IRRELEVANT})
 """Drop reasons never logged (metrics still count them): `own` is this robot's multicast
 echo, every frame; `irrelevant` is the traffic of the rest of a large swarm (DESIGN
 section 2, "What a robot hears")."""
@@ -103,10 +115,10 @@ class Runtime:
         queue_size: int = QUEUE_SIZE,
         batch: int = BATCH,
     ) -> None:
-        self.node = node
+        self._node = node
         self.robot_id = node.robot_id
-        self.transport = transport
-        self.link = link
+        self._transport = transport
+        self._link = link
         self.function_params = function_params
         self.event_sink = event_sink
         self.receive_filter = receive_filter
@@ -120,11 +132,12 @@ class Runtime:
         self.time_origin = time_origin
         self.wall_clock = wall_clock
         self.batch = batch
-        self.counters: dict[str, int] = {
-            "received": 0, "filtered": 0, "queue_overflow": 0, "sent": 0, "ticks": 0,
+        self._counters: dict[str, int] = {
+            "received": 0, "filtered": 0, RuntimeDrop.QUEUE_OVERFLOW: 0, "sent": 0, "ticks": 0,
             "node_errors": 0, "transport_errors": 0, "link_errors": 0, "sink_errors": 0,
             "filter_errors": 0, "persist_errors": 0, "state_writes": 0, "duplicate_id": 0,
         }
+        self._raw_send_failed = False
         self.max_lateness = 0.0
         """s. Largest delay seen between a deadline and the tick that served it."""
         self.first_broadcast = asyncio.Event()
@@ -165,8 +178,8 @@ class Runtime:
         self._loop = asyncio.get_running_loop()
         self._running = True
         try:
-            await self.transport.start(self._on_frame, self._on_transport_event)
-            await self.link.start(self._on_health)
+            await self._transport.start(self._on_frame, self._on_transport_event)
+            await self._link.start(self._on_health)
         except BaseException:
             # Never started: `stop` must not run the node's stop (a LEAVE into a
             # transport that never opened, a misleading send error).
@@ -183,7 +196,7 @@ class Runtime:
         link afterwards, so the LEAVE is on the wire before the socket closes."""
         if not self._running:
             return
-        self._step(lambda now: self.node.stop(now, handover=handover))
+        self._step(lambda now: self._node.stop(now, handover=handover))
         self._report_drops()  # what was refused since the last report is not lost
         self._running = False
         self._queue.clear()
@@ -197,17 +210,58 @@ class Runtime:
 
     def heard(self) -> Mapping[int, float]:
         """robot -> loop time of the last frame the node accepted from it."""
-        return self.node.snapshot().heard
+        return self._node.snapshot().heard
+
+    def snapshot(self) -> Snapshot:
+        """The node's state now (what the state file persists)."""
+        return self._node.snapshot()
+
+    def keys(self) -> tuple[bytes, ...]:
+        """The swarm keys the node uses now (`keys[0]` signs)."""
+        return tuple(self._node.keys)
+
+    def next_deadline(self) -> float | None:
+        """Loop time of the node's next timer (None: it waits for nothing)."""
+        return self._node.next_deadline()
+
+    def drop_counts(self) -> dict[str, int]:
+        """Frames refused so far, by reason: the core's and the runtime's own."""
+        return {**self._node.drops,
+                RuntimeDrop.QUEUE_OVERFLOW: self._counters[RuntimeDrop.QUEUE_OVERFLOW]}
+
+    def send_raw(self, frame: bytes) -> bool:
+        """Put bytes on the channel past the core (fault injection: a forger's frames,
+        which are not this robot's own, so not remembered as its echoes). False when the
+        transport refused them: counted in `transport_errors`, logged the first time."""
+        try:
+            self._transport.send(frame)
+        except Exception as exc:
+            self._counters["transport_errors"] += 1
+            if not self._raw_send_failed:
+                self._raw_send_failed = True
+                log.warning("raw send refused by the transport; counted from now on",
+                            extra={"error": f"{type(exc).__name__}: {exc}"})
+            return False
+        return True
+
+    async def close_io(self, timeout: float = 10.0) -> None:
+        """Close the link and the transport (after `stop`), each within `timeout` s; a
+        close that fails is logged and the other still closed."""
+        for what, closer in (("link", self._link.close), ("transport", self._transport.close)):
+            try:
+                await asyncio.wait_for(closer(), timeout)
+            except Exception:
+                log.exception("closing the %s failed", what)
 
     def inject(self, msg: wire.Message) -> None:
         """Broadcast an arbitrary message as this robot (fault injection: `liar:R@T`)."""
-        self._step(lambda now: self.node.send_message(msg, now))
+        self._step(lambda now: self._node.send_message(msg, now))
 
     def set_keys(self, keys: Sequence[bytes]) -> None:
         """New swarm keys (SIGHUP): `keys[0]` signs from the next frame on, any of them
         verifies; frames already queued are checked against the new list. Raises
         `NodeError` and keeps the old keys if the node refuses them (`Node.set_keys`)."""
-        self.node.set_keys(keys)
+        self._node.set_keys(keys)
 
     # ---------------------------------------------------------------- the step path
     def _step(self, call: Callable[[float], list[Action]]) -> None:
@@ -215,7 +269,7 @@ class Runtime:
         try:
             actions = call(now)
         except Exception:
-            self.counters["node_errors"] += 1
+            self._counters["node_errors"] += 1
             log.exception("core node raised (a bug); the daemon continues")
             actions = []
         self._execute(actions)
@@ -233,9 +287,9 @@ class Runtime:
                 case Release(function):
                     changed = True
                     try:
-                        self.link.release(function)
+                        self._link.release(function)
                     except Exception:
-                        self.counters["link_errors"] += 1
+                        self._counters["link_errors"] += 1
                         log.exception("robot link release failed",
                                       extra={"function": function})
                 case Event() as event:
@@ -248,12 +302,12 @@ class Runtime:
 
     def _send(self, frame: bytes) -> None:
         try:
-            self.transport.send(frame)
+            self._transport.send(frame)
         except Exception:
-            self.counters["transport_errors"] += 1
+            self._counters["transport_errors"] += 1
             log.exception("transport send raised")
             return
-        self.counters["sent"] += 1
+        self._counters["sent"] += 1
         digests = self._sent_digests
         digests[hash(frame)] = None
         if len(digests) > SENT_MEMORY:
@@ -271,9 +325,9 @@ class Runtime:
             except Exception:
                 log.exception("no parameters for function", extra={"function": function})
         try:
-            self.link.assign(function, epoch, params)
+            self._link.assign(function, epoch, params)
         except Exception:
-            self.counters["link_errors"] += 1
+            self._counters["link_errors"] += 1
             log.exception("robot link assign failed", extra={"function": function})
 
     def _event(self, event: Event) -> None:
@@ -286,7 +340,7 @@ class Runtime:
         try:
             self.event_sink(record)
         except Exception:
-            self.counters["sink_errors"] += 1
+            self._counters["sink_errors"] += 1
             log.exception("event sink failed")
 
     # ---------------------------------------------------------------- the single timer
@@ -294,9 +348,9 @@ class Runtime:
         if not self._running:
             return
         try:
-            deadline = self.node.next_deadline()
+            deadline = self._node.next_deadline()
         except Exception:
-            self.counters["node_errors"] += 1
+            self._counters["node_errors"] += 1
             log.exception("next_deadline raised (a bug); retrying in 100 ms")
             deadline = self.loop.time() + 0.1
         if deadline == self._armed_at and self._timer is not None:
@@ -313,17 +367,17 @@ class Runtime:
         due = self._armed_at
         self._armed_at = None
         now = self.loop.time()
-        if due is not None and self.counters["ticks"] > 0:
+        if due is not None and self._counters["ticks"] > 0:
             # (The first tick is due at construction time; start-up is not lateness.)
             lateness = max(0.0, now - due)
             self.max_lateness = max(self.max_lateness, lateness)
             if self.metrics is not None:
                 self.metrics.heartbeat_lateness(lateness)
-        self.counters["ticks"] += 1
+        self._counters["ticks"] += 1
         if now - self._drop_reported_at >= self.drop_report_interval:
             self._drop_reported_at = now
             self._report_drops()
-        self._step(self.node.tick)
+        self._step(self._node.tick)
         # Receive-only steps do not look at the snapshot (a flood would make that
         # costly); a tick does, so an epoch learnt from a heartbeat is persisted within
         # one deadline.
@@ -333,7 +387,7 @@ class Runtime:
         """Log the frames dropped since the last report, by reason (rate-limited by the
         caller). Drops are counted per frame by the core; a log line per frame would let
         a flood fill the journal."""
-        current = {**self.node.drops, "queue_overflow": self.counters["queue_overflow"]}
+        current = self.drop_counts()
         new = {reason: n - self._drops_reported.get(reason, 0)
                for reason, n in sorted(current.items())
                if reason not in QUIET_DROPS and n > self._drops_reported.get(reason, 0)}
@@ -354,24 +408,24 @@ class Runtime:
     def _on_frame(self, data: bytes) -> None:
         if not self._running:
             return
-        self.counters["received"] += 1
+        self._counters["received"] += 1
         if self.metrics is not None:
             self.metrics.frame_received()
         if self.receive_filter is not None:
             try:
                 keep = self.receive_filter(data, self.loop.time())
             except Exception:
-                self.counters["filter_errors"] += 1
+                self._counters["filter_errors"] += 1
                 log.exception("receive filter raised; frame kept")
                 keep = True
             if not keep:
-                self.counters["filtered"] += 1
+                self._counters["filtered"] += 1
                 return
         if len(self._queue) >= self._queue_size:
             self._queue.popleft()
-            self.counters["queue_overflow"] += 1
+            self._counters[RuntimeDrop.QUEUE_OVERFLOW] += 1
             if self.metrics is not None:
-                self.metrics.dropped("queue_overflow")
+                self.metrics.dropped(RuntimeDrop.QUEUE_OVERFLOW)
         self._queue.append(data)
         if not self._drain_scheduled:
             self._drain_scheduled = True
@@ -381,18 +435,18 @@ class Runtime:
         self._drain_scheduled = False
         if not self._running:
             return
-        node, queue, loop = self.node, self._queue, self.loop
+        node, queue, loop = self._node, self._queue, self.loop
         drops = node.drops
         for _ in range(min(self.batch, len(queue))):
             data = queue.popleft()
-            own = drops["own"]
+            own = drops[DropReason.OWN]
             try:
                 actions = node.receive(data, loop.time())
             except Exception:
-                self.counters["node_errors"] += 1
+                self._counters["node_errors"] += 1
                 log.exception("core node raised on a frame (a bug); frame dropped")
                 continue
-            if drops["own"] != own and hash(bytes(data)) not in self._sent_digests:
+            if drops[DropReason.OWN] != own and hash(bytes(data)) not in self._sent_digests:
                 self._duplicate_id()
             if actions:
                 self._execute(actions)
@@ -404,7 +458,7 @@ class Runtime:
 
     def _duplicate_id(self) -> None:
         """A valid frame with our id that we did not send (module docstring)."""
-        self.counters["duplicate_id"] += 1
+        self._counters["duplicate_id"] += 1
         if self.metrics is not None:
             self.metrics.duplicate_id()
         now = self.loop.time()
@@ -412,7 +466,7 @@ class Runtime:
             self._duplicate_logged_at = now
             log.error(f"another daemon is sending as robot {self.robot_id}: two robot "
                       "files with the same id?",
-                      extra={"robot": self.robot_id, "frames": self.counters["duplicate_id"]})
+                      extra={"robot": self.robot_id, "frames": self._counters["duplicate_id"]})
 
     # ---------------------------------------------------------------- robot health
     def _on_health(self, health: Health) -> None:
@@ -421,19 +475,19 @@ class Runtime:
         if self._last_health is not None:
             log.info("robot health changed", extra={"health": health.name.lower()})
         self._last_health = health
-        self._step(lambda now: self.node.robot_health(health, now))
+        self._step(lambda now: self._node.robot_health(health, now))
         self._check_state()
 
     # ---------------------------------------------------------------- channel events
-    def _on_transport_event(self, name: str, fields: Mapping[str, Any]) -> None:
+    def _on_transport_event(self, name: Channel, fields: Mapping[str, Any]) -> None:
         """A channel condition (radio up or down, a send error): counted and logged to
         the daemon's own log, not the event log, whose names are a contract (DESIGN
         section 3, `swarmd.core.events`). The protocol itself notices a dead channel through
         missing heartbeats, as the paper's robots would."""
         now = self.loop.time()
-        failed = name != "transport_up"
-        if name in ("send_error", "transport_error"):
-            self.counters["transport_errors"] += 1
+        failed = name != Channel.UP
+        if name in (Channel.SEND_ERROR, Channel.ERROR):
+            self._counters["transport_errors"] += 1
             last = self._reported.get(name)
             if last is not None and now - last < _RATE_LIMIT_S:
                 return  # counted; reported at most once a second
@@ -444,9 +498,9 @@ class Runtime:
     # ---------------------------------------------------------------- persistence
     def _check_state(self, *, force: bool = False) -> None:
         try:
-            snap = self.node.snapshot()
+            snap = self._node.snapshot()
         except Exception:
-            self.counters["node_errors"] += 1
+            self._counters["node_errors"] += 1
             log.exception("snapshot raised (a bug)")
             return
         role_key = (snap.role, snap.function, snap.epoch)
@@ -469,20 +523,20 @@ class Runtime:
         try:
             self.seq_write_at = self.state_writer(snap)
         except OSError as exc:  # disk full, directory gone or read-only: say which
-            self.counters["persist_errors"] += 1
+            self._counters["persist_errors"] += 1
             log.error("cannot write the state file; will retry on the next change",
                       extra={"error": str(exc)})
             return
         except Exception:
-            self.counters["persist_errors"] += 1
+            self._counters["persist_errors"] += 1
             log.exception("cannot write the state file (a bug); will retry on the next "
                           "change")
             return
-        self.counters["state_writes"] += 1
+        self._counters["state_writes"] += 1
         self._last_persisted = key
 
     # ---------------------------------------------------------------- introspection
     def stats(self) -> dict[str, Any]:
         """Counters, the core's drops and the largest tick lateness (s)."""
-        return {**self.counters, "queue": len(self._queue),
-                "max_lateness": self.max_lateness, "drops": dict(self.node.drops)}
+        return {**self._counters, "queue": len(self._queue),
+                "max_lateness": self.max_lateness, "drops": dict(self._node.drops)}

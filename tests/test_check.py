@@ -37,7 +37,7 @@ def test_check_paper_ok_with_table() -> None:
     f1 = [cell.strip() for cell in rows[0].split("│")[1:-1]]
     assert f1 == ["f1", "slot", "1", "2, 4", "5", "OK"]
     assert "t_max" in result.output
-    assert "t_max + claim_hold + warn_interval = 0.8 s" in result.output
+    assert "t_max + vote_window + claim_hold = 1.7 s" in result.output
 
 
 def test_check_warning_no_standby_still_exit_0(tmp_path: Path) -> None:
@@ -81,7 +81,7 @@ def test_check_json(tmp_path: Path) -> None:
         "function": "f1", "kind": "slot", "holder": 1, "watchers": [2, 3, 11, 12],
         "standbys": [13], "status": "OK",
     }
-    assert data["timing"]["detection_bound_s"] == pytest.approx(0.8)
+    assert data["timing"]["takeover_bound_s"] == pytest.approx(1.7)  # 0.5 + 1.0 + 0.2
     bad = runner.invoke(app, ["check", "--json", str(_paper_with(tmp_path, r0={"id": 2}))])
     assert bad.exit_code == 1
     assert json.loads(bad.output)["problems"][0]["field"] == "robots[1].id"

@@ -278,9 +278,9 @@ async def test_a_stopping_daemon_reports_the_drops_since_its_last_report(
     out.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
     out.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
     try:
-        await wait_until(lambda: rt.counters["ticks"] > 1, 5.0, "first ticks")
+        await wait_until(lambda: rt.stats()["ticks"] > 1, 5.0, "first ticks")
         out.sendto(b"\x00" * 3, (GROUP, port))  # well inside the 10 s report interval
-        await wait_until(lambda: rt.node.drops.get("malformed", 0) == 1, 5.0, "the drop")
+        await wait_until(lambda: rt.drop_counts().get("malformed", 0) == 1, 5.0, "the drop")
         assert not _messages(caplog, "dropped frames")
     finally:
         out.close()

@@ -1,11 +1,14 @@
-"""DESIGN section 1: imports point one way.
+"""DESIGN section 1: imports point one way, package by package.
 
-    core  <-  edge (runtime, transports, links, config, state)  <-  daemon (daemon, monitor,
-    check)  <-  simulators (sim.shared <- sim.virtual / sim.physics / sim.xbee_emu <-
-    sim.realtime <- sim.run)  <-  commands (swarmd.commands, swarmd.cli)
+    core  <-  base (files, keys, identity, functions, logs, notify, eventlog)
+          <-  transport, link  <-  config  <-  services (runtime, state, metrics, budget,
+    launch)  <-  daemon (daemon, monitor, check)  <-  simulators (sim.shared <- sim.virtual
+    / sim.physics / sim.xbee_emu <- sim.realtime <- sim.run)  <-  commands (swarmd.commands,
+    swarmd.cli)
 
-and `swarmd/core` is sans-IO: no I/O module, nothing else of the project. Every import
-counts, also one inside a function (a lazy import is still a dependency of the module).
+`swarmd/core` is sans-IO: no I/O module, no clock, no randomness, no pydantic, nothing
+else of the project. Only the config layer imports pydantic. Every import counts, also
+one inside a function (a lazy import is still a dependency of the module).
 """
 
 from __future__ import annotations
@@ -18,14 +21,23 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 CORE = ROOT / "swarmd" / "core"
 BANNED = {"asyncio", "socket", "time", "random", "serial", "logging", "threading",
-          "select", "selectors", "subprocess", "os"}
+          "select", "selectors", "subprocess", "os", "secrets", "datetime", "pydantic"}
+"""What the core never imports: I/O, clocks (`time`, `datetime`: the driver passes
+`now`), randomness (`random`, `secrets`: the driver passes seeds and keys) and the
+config layer's validation library."""
+
+ONLY_IN: dict[str, str] = {"pydantic": "config"}
+"""Outside libraries only one group may import (DESIGN section 2: config validates)."""
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "core": ("swarmd.core",),
-    "edge": ("swarmd.transport", "swarmd.link", "swarmd.config", "swarmd.keys",
-             "swarmd.budget", "swarmd.state", "swarmd.eventlog", "swarmd.logs",
-             "swarmd.metrics", "swarmd.notify", "swarmd.functions", "swarmd.launch",
-             "swarmd.runtime", "swarmd.files", "swarmd.identity"),
+    "base": ("swarmd.files", "swarmd.keys", "swarmd.identity", "swarmd.functions",
+             "swarmd.logs", "swarmd.notify", "swarmd.eventlog"),
+    "transport": ("swarmd.transport",),
+    "link": ("swarmd.link",),
+    "config": ("swarmd.config",),
+    "services": ("swarmd.runtime", "swarmd.state", "swarmd.metrics", "swarmd.budget",
+                 "swarmd.launch"),
     "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.monitor_ros2", "swarmd.check",
                "swarmd.waiting"),
     "sim.shared": ("sim.shared",),
@@ -38,11 +50,16 @@ GROUPS: dict[str, tuple[str, ...]] = {
 }
 """Every project module belongs to exactly one group (longest prefix wins)."""
 
-_BELOW_SIM = {"core", "edge", "daemon"}
+_EDGE = {"core", "base", "transport", "link", "config", "services"}
+_BELOW_SIM = _EDGE | {"daemon"}
 MAY_IMPORT: dict[str, set[str]] = {
     "core": {"core"},
-    "edge": {"core", "edge"},
-    "daemon": {"core", "edge", "daemon"},
+    "base": {"core", "base"},
+    "transport": {"core", "base", "transport"},
+    "link": {"core", "base", "link"},
+    "config": {"core", "base", "transport", "config"},
+    "services": _EDGE,
+    "daemon": _BELOW_SIM,
     "sim.shared": _BELOW_SIM | {"sim.shared"},
     "sim.virtual": _BELOW_SIM | {"sim.shared", "sim.virtual"},
     "sim.physics": _BELOW_SIM | {"sim.shared", "sim.physics"},
@@ -53,7 +70,8 @@ MAY_IMPORT: dict[str, set[str]] = {
                              "sim.realtime", "sim.run"},
     "commands": set(GROUPS),
 }
-"""Which groups a group may import: its own and those below it, never one above."""
+"""Which groups a group may import: its own and those below it, never one above or
+beside it (a transport knows no link, a link no transport)."""
 
 
 def module_name(path: Path) -> str:
@@ -109,12 +127,17 @@ def group_of(module: str) -> str | None:
 
 
 def wrong_way(module: str, imports: list[str]) -> list[str]:
-    """The imports of `module` that point up or sideways (DESIGN section 1)."""
+    """The imports of `module` that point up or sideways (DESIGN section 1), or reach a
+    library only another group may use (`ONLY_IN`)."""
     source = group_of(module)
     assert source is not None, f"{module} belongs to no layer: add it to GROUPS"
     bad = []
     for name in imports:
-        if name.split(".")[0] not in {"swarmd", "sim"} or name in {"swarmd", "sim"}:
+        top = name.split(".")[0]
+        if top in ONLY_IN and ONLY_IN[top] != source:
+            bad.append(f"{name} (only {ONLY_IN[top]})")
+            continue
+        if top not in {"swarmd", "sim"} or name in {"swarmd", "sim"}:
             continue
         target = group_of(name)
         if target is None or target not in MAY_IMPORT[source]:
@@ -168,6 +191,21 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
         "sim.xbee_emu.radio (sim.xbee_emu)"]
     assert wrong_way("sim.virtual.simulator", ["sim.physics.robot"]) != []
     assert wrong_way("sim.realtime.orchestrator", ["sim.physics.link", "swarmd.core"]) == []
+    # Package by package: a transport never reaches a link, nor the config layer a
+    # runtime; pydantic stays in the config layer.
+    assert wrong_way("swarmd.transport.udp", ["swarmd.link.base"]) == [
+        "swarmd.link.base (link)"]
+    assert wrong_way("swarmd.config.robot", ["swarmd.runtime"]) == [
+        "swarmd.runtime (services)"]
+    assert wrong_way("swarmd.monitor", ["pydantic"]) == ["pydantic (only config)"]
+    assert wrong_way("swarmd.config.robot", ["pydantic", "swarmd.transport.media"]) == []
+
+
+def test_core_bans_clocks_randomness_and_pydantic(tmp_path: Path) -> None:
+    sample = tmp_path / "x.py"
+    sample.write_text("import secrets\nfrom datetime import datetime\nimport pydantic\n")
+    assert [n for n in imported_modules(sample, "swarmd.core.x")
+            if n.split(".")[0] in BANNED] == ["secrets", "datetime", "pydantic"]
 
 
 def _core_cycle(graph: dict[str, set[str]]) -> list[str]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -56,3 +57,15 @@ def test_as_dict_round_trips() -> None:
     p = radio()
     fields: dict[str, Any] = dict(p.as_dict())
     assert Params(**fields) == p
+
+
+@pytest.mark.parametrize("preset", [udp, radio])
+def test_one_takeover_bound_for_check_and_the_checker(preset: Callable[[], Params]) -> None:
+    # `swarmd check` prints Params.takeover_bound; the invariant checker must hold runs
+    # to the same figure, with and without loss.
+    from sim.shared.invariants import Bounds
+
+    p = preset()
+    assert p.takeover_bound() == pytest.approx(p.t_max + p.vote_window + p.claim_hold)
+    assert Bounds.of(p, 0.0).takeover == pytest.approx(p.takeover_bound())
+    assert Bounds.of(p, 0.1).takeover == pytest.approx(p.takeover_bound(lossy=True))

@@ -263,6 +263,19 @@ async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
     assert [p for p in _pids(tmp_path / "realtime") if _alive(p)] == []
 
 
+def test_the_constructor_does_no_io_prepare_does(tmp_path: Path) -> None:
+    # The orchestrator's I/O (run directory, keys, radios) is its explicit start step.
+    orch = Orchestrator(PAPER, duration=1.0, faults=[], loss=0.0, seed=0, physics=False,
+                        live=False, report_dir=tmp_path / "report")
+    assert not (tmp_path / "report").exists()
+    with pytest.raises(RuntimeError, match="prepare"):
+        _ = orch.run_dir
+    orch.prepare()
+    assert (tmp_path / "report" / "realtime" / "logs").is_dir()
+    assert orch.robots == (1, 2, 3, 4, 5, 6) and orch.port > 0
+    orch.cleanup()
+
+
 @pytest.mark.slow
 async def test_an_interrupted_run_returns_what_happened_so_far(tmp_path: Path) -> None:
     orch = Orchestrator(PAPER, duration=30.0, faults=[parse_fault("crash:2@0.5")], loss=0.0,
@@ -332,6 +345,7 @@ def test_errors_a_robot_survived_are_quoted_from_its_log(
 ) -> None:
     orch = Orchestrator(PAPER, duration=1.0, faults=[], loss=0.0, seed=0, physics=False,
                         live=False, report_dir=tmp_path)
+    orch.prepare()
     log = tmp_path / "realtime" / "logs" / "robot3.log"
     log.write_text('{"level":"warning","msg":"channel: send_error"}\n'
                    '{"level":"error","msg":"robot 3: cannot fly f3 (epoch 0): under the ground"}\n'

@@ -129,8 +129,8 @@ async def test_runtime_two_daemons_hear_each_other(tmp_path: Path) -> None:
     b = await launch(robot_cfg(tmp_path, 2, port))
     try:
         await wait_until(lambda: 2 in a.heard and 1 in b.heard, 3.0, "heartbeats")
-        await wait_until(lambda: 2 in runtime_of(a).node.snapshot().heard, 1.0, "node input")
-        assert runtime_of(a).node.drops["own"] > 0  # loopback echo, dropped by sender id
+        await wait_until(lambda: 2 in runtime_of(a).snapshot().heard, 1.0, "node input")
+        assert runtime_of(a).drop_counts()["own"] > 0  # loopback echo, dropped by sender id
         started = next(e for e in a.events if e["event"] == "started")
         assert (started["role"], started["function"]) == ("active", "f1")
     finally:
@@ -170,10 +170,10 @@ async def test_runtime_queue_drops_oldest_and_counts(tmp_path: Path) -> None:
         assert transport.on_frame is not None
         for i in range(1_000):  # all before the loop runs once: a burst
             transport.on_frame(b"garbage %d" % i)
-        assert rt.counters["queue_overflow"] == 900
+        assert rt.stats()["queue_overflow"] == 900
         await wait_until(lambda: rt.stats()["queue"] == 0, 2.0, "drain")
         assert sum(node.drops.values()) == 100
-        assert rt.counters["received"] == 1_000
+        assert rt.stats()["received"] == 1_000
         assert transport.sent  # the first heartbeat went out meanwhile
     finally:
         await rt.stop(handover=False)
@@ -193,7 +193,7 @@ async def test_runtime_survives_a_link_that_raises(tmp_path: Path) -> None:
     await rt.start()
     try:
         await wait_until(lambda: len(transport.sent) >= 2, 2.0, "heartbeats after the error")
-        assert rt.counters["link_errors"] == 1
+        assert rt.stats()["link_errors"] == 1
     finally:
         await rt.stop(handover=False)
 
@@ -292,14 +292,14 @@ async def test_socket_link_silence_stops_heartbeats_and_leaves(tmp_path: Path) -
         # The robot never connects: after 0.3 s it counts as faulty (DESIGN rule 7).
         await wait_until(lambda: "leave" in a.names(), 3.0, "leave on fault")
         rt = runtime_of(a)
-        assert rt.node.snapshot().health == Health.FAULTY
+        assert rt.snapshot().health == Health.FAULTY
         leave = next(e for e in a.events if e["event"] == "leave")
         assert leave["reason"] == "fault" and leave["function"] == "f1"
-        sent = rt.counters["sent"]
-        deadline = rt.node.next_deadline()
+        sent = rt.stats()["sent"]
+        deadline = rt.next_deadline()
         assert deadline is None or deadline > asyncio.get_running_loop().time()
         await asyncio.sleep(0.25)  # 2.5 heartbeat periods: none may go out
-        assert rt.counters["sent"] == sent
+        assert rt.stats()["sent"] == sent
     finally:
         await a.finish()
 
@@ -342,7 +342,7 @@ async def test_restarted_daemon_does_not_resume_a_function_taken_over(tmp_path: 
             started = next(e for e in back.events if e["event"] == "started")
             assert started["role"] == "standby" and started["function"] is None
             assert link.history == []  # never assigned f2
-            snap = runtime_of(back).node.snapshot()
+            snap = runtime_of(back).snapshot()
             assert snap.role == Role.STANDBY and snap.known["f2"] == (6, 1)
         finally:
             await back.finish()
@@ -374,10 +374,10 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> No
     frames: list[bytes] = []
     a = await launch(load_robot(robot), keep=frames)
     assert a.daemon is not None
-    daemon, node = a.daemon, runtime_of(a).node
+    daemon, rt = a.daemon, runtime_of(a)
 
     def keys() -> tuple[bytes, ...]:
-        return node.keys
+        return rt.keys()
     daemon.config_path = robot
 
     async def signs_with(key: bytes) -> None:
@@ -407,7 +407,7 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> No
         daemon.reload()
         assert keys() == (k_new,) and daemon.reload_errors == 1
         await signs_with(k_new)
-        assert node.drops["auth"] == 0
+        assert rt.drop_counts().get("auth", 0) == 0
     finally:
         assert await a.finish() == 0
 
@@ -426,7 +426,8 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
     assert out.read_text() == "1 f2 no standby\n"
     monkeypatch.setattr(daemon_mod, "ALERT_HOOK_TIMEOUT", 0.2)
     daemon._alert_hook = f"echo $$ > {out}; exec sleep 30"
-    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2"})
+    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
+                     "reason": "no claim"})
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
     pid = int(out.read_text())
     with pytest.raises(ProcessLookupError):
@@ -444,13 +445,13 @@ async def test_runtime_second_daemon_with_our_id_is_reported_not_our_echo(
     a = await launch(robot_cfg(tmp_path / "a", 1, port))
     try:
         rt_a = runtime_of(a)
-        await wait_until(lambda: rt_a.node.drops["own"] >= 3, 3.0, "own echoes")
-        assert rt_a.counters["duplicate_id"] == 0  # our echoes are recognised
+        await wait_until(lambda: rt_a.drop_counts()["own"] >= 3, 3.0, "own echoes")
+        assert rt_a.stats()["duplicate_id"] == 0  # our echoes are recognised
         b = await launch(robot_cfg(tmp_path / "b", 1, port))
         try:
             rt_b = runtime_of(b)
-            await wait_until(lambda: rt_a.counters["duplicate_id"] > 0
-                             and rt_b.counters["duplicate_id"] > 0, 3.0, "duplicate id")
+            await wait_until(lambda: rt_a.stats()["duplicate_id"] > 0
+                             and rt_b.stats()["duplicate_id"] > 0, 3.0, "duplicate id")
         finally:
             assert await b.finish() == 0
     finally:

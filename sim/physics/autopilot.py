@@ -683,6 +683,10 @@ class MavlinkAutopilot:
     def set_health(self, health: Health) -> None:
         self.core.forced = max(self.core.forced, health)
 
+    def set_label(self, function: str) -> None:
+        """Name the function the craft flies in its trajectory file (MAVLink has none)."""
+        self.core.label = function
+
     async def start(self) -> None:
         loop = asyncio.get_running_loop()
         transport, _ = await loop.create_datagram_endpoint(
@@ -712,7 +716,7 @@ class MavlinkAutopilot:
         except Exception:  # garbage on the port must not stop the autopilot
             self.counters["bad"] += 1
             return
-        self.quad._catch_up()
+        self.quad.catch_up()
         t = self.quad.robot.t
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
@@ -744,7 +748,7 @@ class MavlinkAutopilot:
     async def _run(self) -> None:
         while True:
             await asyncio.sleep(TICK)
-            self.quad._catch_up()
+            self.quad.catch_up()
             t = self.quad.robot.t
             self.core.control(t)
             self._flush(self.core.telemetry(t))
@@ -810,7 +814,7 @@ class SimMavlinkLink:
 
     def assign(self, function: str, epoch: int, params: Any) -> None:
         if self.autopilot is not None:
-            self.autopilot.core.label = function  # the trajectory file's label only
+            self.autopilot.set_label(function)  # the trajectory file's label only
         self.link.assign(function, epoch, params)
 
     def release(self, function: str) -> None:

@@ -164,7 +164,7 @@ class QuadLink:
             log.error("robot %d: cannot fly %s (epoch %d): %s", self.robot_id, function,
                       epoch, exc)
             return
-        self._catch_up()
+        self.catch_up()
         if not self.robot.assign(function, spec, t0=t0_wall - self.wall0):
             log.warning("robot %d: assigned %s but cannot fly (%s)", self.robot_id, function,
                         self.robot.mode.value)
@@ -172,7 +172,7 @@ class QuadLink:
 
     def release(self, function: str) -> None:
         """Stop `function` and land at home."""
-        self._catch_up()
+        self.catch_up()
         self.robot.release(function)
 
     async def close(self) -> None:
@@ -183,7 +183,7 @@ class QuadLink:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._task
             self._task = None
-        self._catch_up()
+        self.catch_up()
         self._land_before_exit()
         self.robot.sample_now()
         self._flush()
@@ -208,7 +208,7 @@ class QuadLink:
     # -- simulator faults ----------------------------------------------------------------
     def fail_motor(self, index: int = 0) -> None:
         """`motor:R@T`: a rotor stops; the craft falls while the daemon runs on."""
-        self._catch_up()
+        self.catch_up()
         self.robot.fail_motor(index)
         log.warning("robot %d: motor %d failed", self.robot_id, index)
         self._report()
@@ -227,8 +227,9 @@ class QuadLink:
         """Robot time: seconds since `start` on the loop's (monotonic) clock."""
         return asyncio.get_running_loop().time() - self._mono0
 
-    def _catch_up(self) -> None:
-        # Commands act at the present instant, so step physics up to now first.
+    def catch_up(self) -> None:
+        """Step the physics up to now (robot time): commands and reads act at the
+        present instant (an autopilot sharing this craft calls it before each)."""
         with contextlib.suppress(RuntimeError):  # no running loop: nothing to catch up
             self._step(self._now())
 

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sim.shared.holders import HolderFold
+from swarmd.core.events import Alert, Claim, Event, Fault, Suspect, Takeover, event_of
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -127,13 +128,13 @@ def _save(fig: Figure, ax: Axes, title: str, path: Path) -> Path:
     return path
 
 
-_MARKERS = {
+_MARKERS: dict[type[Event], tuple[str, str, str]] = {
     # event -> (marker, colour, which robot's lane: the event's robot or its subject)
-    "fault": ("X", "#d62728", "robot"),
-    "suspect": ("v", "#9467bd", "subject"),
-    "claim": ("o", "#ff7f0e", "robot"),
-    "takeover": ("*", "#1f77b4", "robot"),
-    "alert": ("!", "#d62728", "robot"),
+    Fault: ("X", "#d62728", "robot"),
+    Suspect: ("v", "#9467bd", "subject"),
+    Claim: ("o", "#ff7f0e", "robot"),
+    Takeover: ("*", "#1f77b4", "robot"),
+    Alert: ("!", "#d62728", "robot"),
 }
 
 
@@ -172,13 +173,13 @@ def timeline_png(
                 ax.text((s.start + s.end) / 2, row, s.function, ha="center", va="center",
                         color="white", fontsize=8, fontweight="bold")
     for e in events:
-        name = str(e.get("event"))
-        if name not in _MARKERS:
+        event = event_of(e)
+        if event is None or type(event) not in _MARKERS:
             continue
-        marker, colour, which = _MARKERS[name]
+        marker, colour, which = _MARKERS[type(event)]
         who = e.get("subject") if which == "subject" else e.get("robot")
         if not isinstance(who, int) or who not in lane:
-            if name == "fault":  # robot 0: a partition; draw it across the chart
+            if isinstance(event, Fault):  # robot 0: a partition; draw it across the chart
                 ax.axvline(float(e.get("t", 0.0)), color=colour, linestyle=":", linewidth=1)
             continue
         t = float(e.get("t", 0.0))
@@ -188,11 +189,12 @@ def timeline_png(
         else:
             ax.plot([t], [y], marker=marker, color=colour, markersize=8 if marker == "*" else 6,
                     linestyle="none")
-        if name == "fault":
-            ax.text(t, y + 0.15, str(e.get("kind", "")), fontsize=7, color=colour, ha="left")
-        elif name == "takeover":
-            ax.text(t, y + 0.15, f"{e.get('function', '')} e{e.get('epoch', '')}", fontsize=7,
-                    color=colour, ha="left")
+        match event:
+            case Fault(kind=kind):
+                ax.text(t, y + 0.15, str(kind), fontsize=7, color=colour, ha="left")
+            case Takeover(function=function, epoch=epoch):
+                ax.text(t, y + 0.15, f"{function} e{epoch}", fontsize=7, color=colour,
+                        ha="left")
     ax.set_yticks(range(len(robots)), [f"robot {r}" for r in robots])
     ax.set_ylim(-0.6, len(robots) - 0.2)
     ax.invert_yaxis()

@@ -147,12 +147,13 @@ class PointLink:
     async def start(self, on_health: HealthCallback) -> None:
         self._mono0 = asyncio.get_running_loop().time()
 
-    def _catch_up(self) -> None:
+    def catch_up(self) -> None:
+        """Step the point craft up to now (robot time), as `QuadLink.catch_up`."""
         if self._mono0 is not None:
             self.robot.step_until(asyncio.get_running_loop().time() - self._mono0)
 
     def fail_motor(self, index: int = 0) -> None:
-        self._catch_up()
+        self.catch_up()
         self.robot.fail_motor(index)
 
     async def close(self) -> None:

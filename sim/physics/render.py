@@ -32,6 +32,7 @@ import numpy as np
 
 from sim.physics.plots import ROLE_COLORS, Span, role_at, role_spans
 from sim.physics.robot import Trajectory
+from swarmd.core.events import Fault, Takeover, event_of
 
 BACKENDS = ("egl", "osmesa")
 WIDTH, HEIGHT = 640, 480
@@ -92,11 +93,11 @@ def key_times(events: Sequence[Mapping[str, Any]]) -> list[tuple[float, str]]:
     """(t, label) of the moments worth a still: faults and takeovers."""
     out = []
     for e in events:
-        name = e.get("event")
-        if name == "fault":
-            out.append((float(e["t"]), f"fault-{e.get('kind', '')}-r{e.get('robot', '')}"))
-        elif name == "takeover":
-            out.append((float(e["t"]), f"takeover-{e.get('function', '')}-r{e.get('robot', '')}"))
+        match event_of(e):
+            case Fault(kind=kind):
+                out.append((float(e["t"]), f"fault-{kind}-r{e.get('robot', '')}"))
+            case Takeover(function=function):
+                out.append((float(e["t"]), f"takeover-{function}-r{e.get('robot', '')}"))
     return sorted(out)
 
 
@@ -244,8 +245,8 @@ def _with_fall(tr: Trajectory, events: Sequence[Mapping[str, Any]]) -> Trajector
         return tr
     last = float(tr.t[-1])
     # Killed where the samples end (a restarted robot's samples go on after its kill).
-    killed = any(e.get("event") == "fault" and e.get("robot") == tr.robot
-                 and e.get("kind") in ("crash", "restart")
+    killed = any(isinstance(ev := event_of(e), Fault) and e.get("robot") == tr.robot
+                 and ev.kind in ("crash", "restart")
                  and abs(float(e.get("t", 0.0)) - last) <= 0.5 for e in events)
     if not killed or (tr.modes and tr.modes[-1] in ("parked", "crashed")):
         return tr

@@ -58,8 +58,23 @@ from collections.abc import Callable, Coroutine, Sequence
 from pathlib import Path
 from typing import Any, ParamSpec
 
+from sim.realtime.control import (
+    Act,
+    Command,
+    ControlError,
+    Drops,
+    Failed,
+    Forge,
+    Go,
+    Late,
+    Logged,
+    Ready,
+    Report,
+    Stats,
+    decode_report,
+    encode,
+)
 from sim.realtime.logscan import log_errors, log_tail
-from sim.realtime.netfilter import partition_windows
 from sim.realtime.procs import (
     RobotProcess,
     forkserver_context,
@@ -68,9 +83,11 @@ from sim.realtime.procs import (
 )
 from sim.realtime.result import RealtimeResult
 from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, write_robot_file
+from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
 from sim.shared.faults import Fault, fault_record
+from swarmd.core.events import Started, event_of
 from swarmd.transport.addresses import DEFAULT_GROUP
 
 __all__ = ["Orchestrator", "RealtimeResult", "run_realtime", "run_realtime_async"]
@@ -89,7 +106,12 @@ P = ParamSpec("P")
 
 
 class Orchestrator:
-    """One real-time run. Use `run_realtime` / `run_realtime_async`."""
+    """One real-time run. Use `run_realtime` / `run_realtime_async`.
+
+    Built in three steps: the constructor only checks and keeps its arguments (no file,
+    process or socket), `prepare` does the run's I/O, `run` supervises the processes
+    while its `FaultSchedule` says when each fault acts; `cleanup` undoes what `prepare`
+    made."""
 
     def __init__(
         self,
@@ -113,7 +135,8 @@ class Orchestrator:
         self.craft = craft
         self.transport = transport
         self.duration = duration
-        self.faults = sorted(faults, key=lambda f: f.at)
+        self.schedule = FaultSchedule(faults, duration)
+        self.faults = self.schedule.faults
         self.loss = loss
         self.seed = seed
         # The robots' link (robot_proc.LINK_FACTORIES): `quad` drives the MuJoCo craft
@@ -125,24 +148,10 @@ class Orchestrator:
         self.live = live
         self.report_dir = report_dir
         self.group = group
-        self.port = port or free_udp_port()
-        self.robots = robot_ids(swarm_path)
-        self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
-        # Absolute: the robot files written below name their state_dir, and a relative
-        # path in a robot file is read relative to that file (docs/config.md), so
-        # `--report out/demo` put the trajectories under out/demo/realtime/robots/out/...
-        self.run_dir = (
-            report_dir.resolve() / "realtime" if report_dir
-            else Path(tempfile.mkdtemp(prefix="swarmd-"))
-        )
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.run_dir / "logs").mkdir(exist_ok=True)
-        # Throwaway keys for this run; the robots run from a copy of the swarm file
-        # that names them (robotfiles.sign_for_run).
-        self.swarm_path, self.identity_files = sign_for_run(self.run_dir, swarm_path)
-        self.partitions = partition_windows(
-            [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
-        )
+        self._port = port
+        if transport not in ("udp", "xbee", "serial"):
+            raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
+        self.physics = physics
         self.procs: dict[int, RobotProcess] = {}
         self.retired: list[RobotProcess] = []
         self.events: list[dict[str, Any]] = []
@@ -150,14 +159,55 @@ class Orchestrator:
         self.problems: list[str] = []
         self.late: list[tuple[int, float, float]] = []
         self.wakes = 0
-        self.view = SwarmView(self.robots)
         self.t0 = 0.0
         self._ready = asyncio.Event()
         self._stop = asyncio.Event()
         self.interrupted: str | None = None
-        self._ctx = forkserver_context(physics)
-        # `--link ros2`: the run's own ROS 2 domain (sim.realtime.ros2_robot).
+        # Set by `prepare` (the start step: files, keys, radios), never here.
+        self.port = 0
+        self.robots: tuple[int, ...] = ()
+        self.ready_timeout = READY_TIMEOUT
+        self.view = SwarmView(())
+        self.radio_of: dict[int, int] = {}
+        self.identity_files: Any = None
+        self._run_dir: Path | None = None
+        self._ctx: Any = None
         self.ros_domain: Any = None
+        self.medium: Medium | None = None
+
+    @property
+    def run_dir(self) -> Path:
+        """The run's directory (robot files, logs, keys, radios); made by `prepare`."""
+        if self._run_dir is None:
+            raise RuntimeError("Orchestrator.prepare() first: the run has no directory yet")
+        return self._run_dir
+
+    def prepare(self) -> None:
+        """The start step, all the run's I/O before any robot: read the swarm, pick the
+        port, make the run directory, sign this run's throwaway keys, lease a ROS 2
+        domain and start the emulated radios. Idempotent (`run` calls it too); what it
+        made is undone by `cleanup`, also after a failure half-way."""
+        if self._run_dir is not None:
+            return
+        self.port = self._port or free_udp_port()
+        self.robots = robot_ids(self.swarm_path)
+        self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
+        self.view = SwarmView(self.robots)
+        self.radio_of = {r: i + 1 for i, r in enumerate(self.robots)}
+        # Absolute: the robot files written below name their state_dir, and a relative
+        # path in a robot file is read relative to that file (docs/config.md), so
+        # `--report out/demo` put the trajectories under out/demo/realtime/robots/out/...
+        self._run_dir = (
+            self.report_dir.resolve() / "realtime" if self.report_dir
+            else Path(tempfile.mkdtemp(prefix="swarmd-"))
+        )
+        self._run_dir.mkdir(parents=True, exist_ok=True)
+        (self._run_dir / "logs").mkdir(exist_ok=True)
+        # Throwaway keys for this run; the robots run from a copy of the swarm file
+        # that names them (robotfiles.sign_for_run).
+        self.swarm_path, self.identity_files = sign_for_run(self._run_dir, self.swarm_path)
+        self._ctx = forkserver_context(self.physics)
+        # `--link ros2`: the run's own ROS 2 domain (sim.realtime.ros2_robot).
         if self.link.startswith("ros2"):
             from sim.realtime.ros2_robot import DomainLease
 
@@ -165,16 +215,12 @@ class Orchestrator:
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
         # same radios in transparent mode, AP=0, under the serial transport).
-        self.medium: Medium | None = None
-        self.radio_of = {r: i + 1 for i, r in enumerate(self.robots)}
-        if transport in ("xbee", "serial"):
+        if self.transport in ("xbee", "serial"):
             from sim.xbee_emu.medium import Medium
 
             self.medium = Medium(len(self.robots), protocol="802.15.4",
-                                 directory=self.run_dir / "radios", seed=seed,
-                                 transparent=transport == "serial").start()
-        elif transport != "udp":
-            raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
+                                 directory=self._run_dir / "radios", seed=self.seed,
+                                 transparent=self.transport == "serial").start()
 
     def _transport_doc(self, robot: int) -> dict[str, Any] | None:
         if self.medium is None:
@@ -201,7 +247,8 @@ class Orchestrator:
         spec = RobotSpec(
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
-            loss=self.loss, seed=self.seed, partitions=self.partitions, link=self.link, t0=t0,
+            loss=self.loss, seed=self.seed, partitions=self.schedule.partitions,
+            link=self.link, t0=t0,
             craft=self.craft, refuse_arm=robot in self.refuse_arm,
         )
         ev_r, ev_w = self._ctx.Pipe(duplex=False)
@@ -230,10 +277,10 @@ class Orchestrator:
     def _on_events(self, proc: RobotProcess) -> None:
         try:
             while proc.events.poll():
-                self._record(proc, json.loads(proc.events.recv_bytes()))
+                self._record(proc, decode_report(proc.events.recv_bytes()))
         except (EOFError, OSError):
             self._close_events(proc)
-        except ValueError as exc:  # a robot wrote something that is not JSON: count it
+        except ControlError as exc:  # a robot wrote something that is no report: say so
             self.problems.append(f"robot {proc.robot_id}: bad event message: {exc}")
 
     def _close_events(self, proc: RobotProcess) -> None:
@@ -249,34 +296,35 @@ class Orchestrator:
                 proc.died_at = self.run_time()
                 self.view.set_process(proc.robot_id, "left" if proc.left else "exited")
 
-    def _record(self, proc: RobotProcess, rec: dict[str, Any]) -> None:
-        ctl = rec.get("_ctl")
-        if ctl == "ready":
-            proc.ready = True
-            self._ready_check()
-        elif ctl == "error":
-            proc.error = str(rec.get("error"))
-            self._ready_check()
-        elif ctl == "drops":
-            proc.drops = {str(k): int(v) for k, v in rec.get("d", {}).items()}
-        elif ctl == "stats":
-            self.stats[proc.robot_id] = {k: int(v) for k, v in rec.items() if k != "_ctl"}
-        elif ctl == "late":
-            self.wakes += int(rec.get("n", 0))
-            self.late.extend((proc.robot_id, float(t), float(ms)) for t, ms in rec.get("s", ()))
-        elif ctl is None:
-            self.events.append(rec)
-            self.view.feed(rec)
+    def _record(self, proc: RobotProcess, report: Report) -> None:
+        match report:
+            case Ready():
+                proc.ready = True
+                self._ready_check()
+            case Failed(error):
+                proc.error = error
+                self._ready_check()
+            case Drops(counts):
+                proc.drops = dict(counts)
+            case Stats(passed, lost, partitioned, forged):
+                self.stats[proc.robot_id] = {"passed": passed, "lost": lost,
+                                             "partitioned": partitioned, "forged": forged}
+            case Late(wakes, samples):
+                self.wakes += wakes
+                self.late.extend((proc.robot_id, t, ms) for t, ms in samples)
+            case Logged(record):
+                self.events.append(record)
+                self.view.feed(record)
 
     def _ready_check(self) -> None:
         if all(p.ready or p.eof or p.error for p in self.procs.values()):
             self._ready.set()
 
-    def _send(self, proc: RobotProcess, msg: dict[str, Any]) -> None:
+    def _send(self, proc: RobotProcess, msg: Command) -> None:
         try:
-            proc.control.send_bytes(json.dumps(msg).encode())
+            proc.control.send_bytes(encode(msg))
         except OSError as exc:  # the robot is gone; the fault still goes in the log
-            self.problems.append(f"robot {proc.robot_id}: control {msg.get('cmd')}: {exc}")
+            self.problems.append(f"robot {proc.robot_id}: control {msg}: {exc}")
 
     def _kill_proc(self, proc: RobotProcess) -> None:
         if proc.alive and proc.process.pid is not None:
@@ -334,10 +382,10 @@ class Orchestrator:
             case "leave" | "unhealthy" | "liar" | "motor":
                 if proc is not None and proc.alive:
                     proc.left = proc.left or kind == "leave"
-                    self._send(proc, {"cmd": kind})
+                    self._send(proc, Act(kind))
             case "forge":  # the robot process holds R's key: it forges (robot_proc.Forger)
                 if proc is not None and proc.alive:
-                    self._send(proc, {"cmd": "forge", "attack": fault.attack})
+                    self._send(proc, Forge(fault.attack))
             case _:
                 self.problems.append(f"fault kind {fault.kind} is not supported in real time")
 
@@ -365,8 +413,8 @@ class Orchestrator:
         return event.is_set()
 
     async def run(self, *, handle_signals: bool = False) -> RealtimeResult:
+        self.prepare()
         loop = asyncio.get_running_loop()
-        handles: list[asyncio.TimerHandle] = []
         live_ctx: Any = contextlib.nullcontext()
         startup = 0.0
         ended_at = 0.0
@@ -397,11 +445,8 @@ class Orchestrator:
             if self.interrupted is None:
                 self.t0 = time.time() + START_MARGIN
                 for proc in self.procs.values():
-                    self._send(proc, {"cmd": "go", "t0": self.t0})
-                for fault in self.faults:
-                    if fault.at <= self.duration:
-                        delay = self.t0 + fault.at - time.time()
-                        handles.append(loop.call_later(max(0.0, delay), self._apply, fault))
+                    self._send(proc, Go(self.t0))
+                self.schedule.arm(self.t0, self._apply)
                 if self.live and sys.stdout.isatty():
                     from rich.live import Live
 
@@ -414,8 +459,7 @@ class Orchestrator:
         finally:
             for sig in installed:
                 loop.remove_signal_handler(sig)
-            for h in handles:
-                h.cancel()
+            self.schedule.cancel()
             self.kill_all()
             await self._drain()
         self._process_problems()
@@ -452,7 +496,7 @@ class Orchestrator:
         for p in self.procs.values():
             if not p.alive or end - p.spawned_at < STARTED_GRACE:
                 continue
-            if not any(e.get("robot") == p.robot_id and e.get("event") == "started"
+            if not any(e.get("robot") == p.robot_id and isinstance(event_of(e), Started)
                        and float(e.get("t", 0.0)) >= p.spawned_at - 0.5 for e in self.events):
                 self.problems.append(
                     f"robot {p.robot_id}: process alive but its daemon never started (no "
@@ -505,8 +549,8 @@ class Orchestrator:
         if self.medium is not None:
             self.medium.stop()
             self.medium = None
-        if self.report_dir is None:
-            shutil.rmtree(self.run_dir, ignore_errors=True)
+        if self.report_dir is None and self._run_dir is not None:
+            shutil.rmtree(self._run_dir, ignore_errors=True)
 
 
 async def run_realtime_async(
@@ -538,6 +582,7 @@ async def run_realtime_async(
                         physics=physics, live=live, report_dir=report_dir, port=port,
                         transport=transport, craft=craft, link=link, refuse_arm=refuse_arm)
     try:
+        orch.prepare()
         result = await orch.run(handle_signals=handle_signals)
     finally:
         orch.cleanup()

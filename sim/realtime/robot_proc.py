@@ -36,9 +36,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import collections
-import contextlib
 import ctypes
-import json
 import os
 import signal
 import sys
@@ -49,6 +47,22 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from sim.realtime.control import (
+    Act,
+    Command,
+    ControlError,
+    Drops,
+    Failed,
+    Forge,
+    Go,
+    Late,
+    Logged,
+    Ready,
+    Report,
+    Stats,
+    decode_command,
+    encode,
+)
 from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.liar import liar_warnings
@@ -186,7 +200,7 @@ class Liar(_Periodic):
         while True:
             rt = self.runtime
             if rt is not None:
-                for warn in liar_warnings(self.plan, rt.node.snapshot()):
+                for warn in liar_warnings(self.plan, rt.snapshot()):
                     rt.inject(warn)
                     self.forged += 1
             await asyncio.sleep(self.interval)
@@ -236,12 +250,11 @@ class Forger(_Periodic):
             daemon = self.daemon
             rt = daemon.runtime if daemon is not None else None
             if daemon is not None and rt is not None:
-                frames = forged_frames(attack, self.plan, rt.node.snapshot(),
+                frames = forged_frames(attack, self.plan, rt.snapshot(),
                                        keys=daemon.cfg.keys(), signer=daemon.signer,
                                        round_=round_, recorded=tuple(self._tape))
                 for data in frames:
-                    with contextlib.suppress(Exception):  # a full socket: the frame is lost
-                        rt.transport.send(data)
+                    if rt.send_raw(data):  # False: a full socket, the frame is lost
                         self.sent += 1
                 round_ += 1
                 if attack not in REPEATING:
@@ -257,12 +270,12 @@ DROPS_PERIOD = 1.0
 
 class DropReporter(_Periodic):
     """Every `DROPS_PERIOD`, the daemon's counted drops (`sim.shared.summary.counted_drops`
-    of the core's, plus the runtime's queue overflow) as `{"_ctl": "drops", "d": {...}}`
-    when they changed, and once more when the daemon stops: the run's summary shows
+    of the core's, plus the runtime's queue overflow) as a `Drops` report when they
+    changed, and once more when the daemon stops: the run's summary shows
     what every robot refused, by reason, as of its last report (a SIGKILLed robot's
     last second is lost)."""
 
-    def __init__(self, emit: Callable[[Mapping[str, Any]], None]) -> None:
+    def __init__(self, emit: Callable[[Report], None]) -> None:
         self.emit = emit
         self.daemon: Daemon | None = None
         self._last: dict[str, int] = {}
@@ -275,11 +288,10 @@ class DropReporter(_Periodic):
         rt = self.daemon.runtime if self.daemon is not None else None
         if rt is None:
             return
-        drops = counted_drops({**rt.node.drops,
-                               "queue_overflow": rt.counters["queue_overflow"]})
+        drops = counted_drops(rt.drop_counts())
         if drops != self._last:
             self._last = drops
-            self.emit({"_ctl": "drops", "d": drops})
+            self.emit(Drops(drops))
 
     async def _run(self) -> None:
         while True:
@@ -292,22 +304,21 @@ class DropReporter(_Periodic):
 
 class LatenessProbe(_Periodic):
     """How late this process's event loop runs: every `PROBE_PERIOD` it asks to wake up
-    and measures by how much it overslept; every `PROBE_REPORT` it emits
-    `{"_ctl": "late", "n": wake-ups, "s": [[t, ms], ...]}`, listing only the wake-ups
-    `LATE_MS` or more late (t = their run time), so an idle swarm sends a few bytes a
-    second.
+    and measures by how much it overslept; every `PROBE_REPORT` it emits a `Late` report
+    counting the wake-ups and listing only those `LATE_MS` or more late (t = their run
+    time), so an idle swarm sends a few bytes a second.
 
     The daemon's heartbeats ride on the same loop, so this is how late they go out: a
     lateness near `t_max` makes the neighbours suspect a healthy robot (paper Fig. 7)."""
 
-    def __init__(self, emit: Callable[[Mapping[str, Any]], None],
+    def __init__(self, emit: Callable[[Report], None],
                  clock: Callable[[], float]) -> None:
         self.emit = emit
         self.clock = clock
 
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
-        samples: list[list[float]] = []
+        samples: list[tuple[float, float]] = []
         wakes = 0
         reported = loop.time()
         while True:
@@ -317,9 +328,9 @@ class LatenessProbe(_Periodic):
             wakes += 1
             late_ms = round(1000 * max(0.0, now - due), 1)
             if late_ms >= LATE_MS:
-                samples.append([round(self.clock(), 3), late_ms])
+                samples.append((round(self.clock(), 3), late_ms))
             if now - reported >= PROBE_REPORT:
-                self.emit({"_ctl": "late", "n": wakes, "s": samples})
+                self.emit(Late(wakes, samples))
                 samples, wakes, reported = [], 0, now
 
 
@@ -327,13 +338,19 @@ class LatenessProbe(_Periodic):
 
 
 def _die_with_parent() -> None:
-    """Own process group; SIGKILL from the kernel when the parent goes (Linux)."""
-    with contextlib.suppress(OSError):
+    """Own process group; SIGKILL from the kernel when the parent goes (Linux). Either
+    refused, the robot still runs (the orchestrator kills it by pid, and the control
+    pipe's end stops it): said once on stderr, so a leftover process is explained."""
+    try:
         os.setpgid(0, 0)
+    except OSError as exc:
+        print(f"robot process: no process group of its own ({exc})", file=sys.stderr)
     parent = os.getppid()
-    with contextlib.suppress(OSError, AttributeError):
+    try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError) as exc:
+        print(f"robot process: no death signal from its parent ({exc})", file=sys.stderr)
     if os.getppid() != parent:  # the parent died before prctl took effect
         os._exit(1)
 
@@ -353,7 +370,7 @@ class _Robot:
     def __init__(
         self,
         spec: RobotSpec,
-        emit: Callable[[Mapping[str, Any]], None],
+        emit: Callable[[Report], None],
         control: Connection | None,
     ) -> None:
         self.spec = spec
@@ -385,8 +402,7 @@ class _Robot:
         assert self.control is not None
         try:
             while self.control.poll():
-                msg = json.loads(self.control.recv_bytes())
-                self._command(msg)
+                self._command(decode_command(self.control.recv_bytes()))
         except (EOFError, OSError):
             # The orchestrator is gone: stop (no orphan daemons).
             asyncio.get_running_loop().remove_reader(self.control.fileno())
@@ -394,34 +410,34 @@ class _Robot:
                 self.go.set()
             if self.stop_event is not None:
                 self.stop_event.set()
-        except (ValueError, TypeError) as exc:
+        except ControlError as exc:
             print(f"robot {self.spec.robot_id}: bad control message: {exc}", file=sys.stderr)
 
-    def _command(self, msg: Mapping[str, Any]) -> None:
-        cmd = msg.get("cmd")
-        if cmd == "go":
-            self.t0 = float(msg["t0"])
-            if self.go is not None:
-                self.go.set()
-        elif cmd == "leave":
-            # DESIGN section 3 `leave`: the node's stop(handover=True) path, then exit.
-            if self.stop_event is not None:
-                self.stop_event.set()
-        elif cmd == "unhealthy":
-            # DESIGN rule 7: the robot reports a fault; the daemon sends LEAVE.
-            set_health = getattr(self.link, "set_health", None)
-            if set_health is not None:
-                set_health(Health.FAULTY)
-        elif cmd == "liar":
-            self.liar.start()
-        elif cmd == "forge":
-            self.forger.launch(str(msg.get("attack", "")))
-        elif cmd == "motor":
-            fail = getattr(self.link, "fail_motor", None)
-            if fail is not None:
-                fail()
-        else:
-            print(f"robot {self.spec.robot_id}: unknown control {msg!r}", file=sys.stderr)
+    def _command(self, cmd: Command) -> None:
+        match cmd:
+            case Go(t0):
+                self.t0 = t0
+                if self.go is not None:
+                    self.go.set()
+            case Act("leave"):
+                # DESIGN section 3 `leave`: the node's stop(handover=True) path, then exit.
+                if self.stop_event is not None:
+                    self.stop_event.set()
+            case Act("unhealthy"):
+                # DESIGN rule 7: the robot reports a fault; the daemon sends LEAVE.
+                set_health = getattr(self.link, "set_health", None)
+                if set_health is not None:
+                    set_health(Health.FAULTY)
+            case Act("liar"):
+                self.liar.start()
+            case Forge(attack):
+                self.forger.launch(attack)
+            case Act("motor"):
+                fail = getattr(self.link, "fail_motor", None)
+                if fail is not None:
+                    fail()
+            case _:
+                print(f"robot {self.spec.robot_id}: unknown control {cmd!r}", file=sys.stderr)
 
     async def run(self) -> int:
         loop = asyncio.get_running_loop()
@@ -430,7 +446,7 @@ class _Robot:
         if self.control is not None:
             loop.add_reader(self.control.fileno(), self._on_control)
         if self.t0 is None:
-            self.emit({"_ctl": "ready", "pid": os.getpid()})
+            self.emit(Ready(os.getpid()))
             await self.go.wait()
             if self.stop_event.is_set():
                 return 0
@@ -439,7 +455,7 @@ class _Robot:
         await asyncio.sleep(max(0.0, self.t0 - time.time()))
 
         def sink(record: Mapping[str, Any]) -> None:
-            self.emit(record)
+            self.emit(Logged(dict(record)))
 
         def ready(daemon: Daemon) -> None:
             self.liar.runtime = daemon.runtime
@@ -482,11 +498,20 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
     setup_logging("WARNING")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-    def emit(record: Mapping[str, Any]) -> None:
-        # One message per record: a pipe write below PIPE_BUF is atomic, so a SIGKILL
-        # never leaves half a record for the orchestrator.
-        with contextlib.suppress(OSError):
-            events.send_bytes(json.dumps(record, separators=(",", ":")).encode())
+    lost = collections.Counter[str]()
+
+    def emit(report: Report) -> None:
+        # One message per report: a pipe write below PIPE_BUF is atomic, so a SIGKILL
+        # never leaves half a record for the orchestrator. The orchestrator gone: nobody
+        # is left to tell, and the control pipe's end stops this robot; the loss is
+        # counted and said once in the robot's log.
+        try:
+            events.send_bytes(encode(report))
+        except OSError as exc:
+            lost["reports"] += 1
+            if lost["reports"] == 1:
+                print(f"robot {spec.robot_id}: report pipe closed ({exc}); reports are "
+                      "lost from now on", file=sys.stderr)
 
     code = 1
     try:
@@ -494,7 +519,7 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
         code = asyncio.run(robot.run())
         _report_stats(robot.filter.stats, robot.liar.forged + robot.forger.sent, emit)
     except Exception as exc:  # a robot that cannot start says why, in its log and pipe
-        emit({"_ctl": "error", "error": f"{type(exc).__name__}: {exc}"})
+        emit(Failed(f"{type(exc).__name__}: {exc}"))
         raise
     finally:
         sys.stdout.flush()
@@ -503,10 +528,9 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
 
 
 def _report_stats(
-    stats: FilterStats, forged: int, emit: Callable[[Mapping[str, Any]], None]
+    stats: FilterStats, forged: int, emit: Callable[[Report], None]
 ) -> None:
-    emit({"_ctl": "stats", "passed": stats.passed, "lost": stats.lost,
-          "partitioned": stats.partitioned, "forged": forged})
+    emit(Stats(stats.passed, stats.lost, stats.partitioned, forged))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -521,9 +545,9 @@ def main(argv: list[str] | None = None) -> int:
     cfg_path = Path(args.config)
     out = open(args.events, "a", buffering=1) if args.events else None  # noqa: SIM115
 
-    def emit(record: Mapping[str, Any]) -> None:
-        if out is not None and "_ctl" not in record:
-            out.write(json.dumps(record, separators=(",", ":")) + "\n")
+    def emit(report: Report) -> None:
+        if out is not None and isinstance(report, Logged):
+            out.write(encode(report).decode() + "\n")
 
     robot_id = int(load_robot(cfg_path).robot)
     t0 = args.t0 if args.t0 is not None else time.time()

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sim.shared.holders import HolderFold
+from swarmd.core.events import Fault, Started, Stopped, event_of
 
 
 @dataclass(slots=True)
@@ -42,16 +43,18 @@ class SwarmView:
             view.role = "-" if holding.role in ("crashed", "stopped") else holding.role.upper()
             view.function = holding.executing
             view.epoch = holding.epoch if holding.role in ("active", "claiming") else None
-        name = str(rec.get("event", ""))
-        if name == "started":
-            view.process = "running"
-        elif name == "stopped":
-            view.process = "stopped"
-        elif name == "fault":
-            view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
-                            "leave": "leaving", "collide": "collided",
-                            }.get(str(rec.get("kind", "")), view.process)
-        view.last_event = name if name != "fault" else f"fault {rec.get('kind')}"
+        event = event_of(rec)
+        match event:
+            case Started():
+                view.process = "running"
+            case Stopped():
+                view.process = "stopped"
+            case Fault(kind=kind):
+                view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
+                                "leave": "leaving", "collide": "collided",
+                                }.get(str(kind), view.process)
+        view.last_event = ("" if event is None else f"fault {event.kind}"
+                           if isinstance(event, Fault) else event.name)
         view.last_t = float(rec.get("t", 0.0))
 
     def set_process(self, robot: int, process: str) -> None:

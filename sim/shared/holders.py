@@ -3,7 +3,8 @@
 Theory of operation
 -------------------
 The event log (DESIGN section 3: `{"t", "robot", "event", ...}`) tells, robot by robot,
-what the node did; `HolderFold` replays it into one `Holding` per robot, the role the
+what the node did; `HolderFold` reads each record back as its typed event
+(`Event.from_record`) and replays them into one `Holding` per robot, the role the
 node is in (roles.py: active, standby, claiming, fenced) and the function that role is
 about. Every reader of "who holds what" uses this one fold: the invariant checker
 (`Checker.executing`), the summary (holder when a fault hit, holders at the end), the
@@ -37,6 +38,20 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from swarmd.core.events import (
+    Backoff,
+    Claim,
+    Event,
+    Fault,
+    Fenced,
+    Leave,
+    Refute,
+    Started,
+    Stopped,
+    Takeover,
+    event_of,
+)
 
 CRASH = frozenset({"crash", "collide"})
 """The default `down` faults: a crashed process logs nothing more until it restarts; a
@@ -77,47 +92,42 @@ def role_name(value: Any) -> str:
     return "standby" if name == "inactive" else name
 
 
-def _function(rec: Mapping[str, Any]) -> str | None:
-    fn = rec.get("function")
+def _function(fn: Any) -> str | None:
     return None if fn is None else str(fn)
 
 
-def _epoch(rec: Mapping[str, Any]) -> int | None:
-    epoch = rec.get("epoch")
+def _epoch(epoch: Any) -> int | None:
     return epoch if isinstance(epoch, int) else None
 
 
-def _next(prev: Holding | None, rec: Mapping[str, Any], down: frozenset[str]) -> Holding | None:
-    """The robot's holding after `rec`, or None when the event changes nothing."""
-    name = rec.get("event")
-    if prev is not None and prev.role == "crashed" and name not in ("started", "stopped"):
+def _next(prev: Holding | None, event: Event, down: frozenset[str]) -> Holding | None:
+    """The robot's holding after `event`, or None when the event changes nothing."""
+    if prev is not None and prev.role == "crashed" and not isinstance(event, Started | Stopped):
         return None  # a downed robot's stray events do not bring it back
-    match name:
-        case "started":
-            role = role_name(rec.get("role", "standby"))
-            return Holding(role, _function(rec) if role == "active" else None)
-        case "claim":
-            return Holding("claiming", _function(rec), _epoch(rec))
-        case "backoff" | "leave":
+    match event:
+        case Started(role=role_value, function=fn):
+            role = role_name(role_value)
+            return Holding(role, _function(fn) if role == "active" else None)
+        case Claim(function=fn, epoch=epoch):
+            return Holding("claiming", _function(fn), _epoch(epoch))
+        case Backoff() | Leave():
             return STANDBY
-        case "refute":
+        case Refute(function=fn):
             # A claimant that hears the suspect alive gives up its claim (REFUTED);
             # watchers and the suspect itself refute too, and stay what they were.
-            if prev is not None and prev.role == "claiming" \
-                    and prev.function == _function(rec):
+            if prev is not None and prev.role == "claiming" and prev.function == _function(fn):
                 return STANDBY
             return None
-        case "takeover":
-            return Holding("active", _function(rec), _epoch(rec))
-        case "fenced":
-            return Holding("fenced", _function(rec))
-        case "stopped":
+        case Takeover(function=fn, epoch=epoch):
+            return Holding("active", _function(fn), _epoch(epoch))
+        case Fenced(function=fn):
+            return Holding("fenced", _function(fn))
+        case Stopped():
             return Holding("stopped")
-        case "fault":
-            kind = str(rec.get("kind", ""))
-            if kind in down:
+        case Fault(kind=kind):
+            if str(kind) in down:
                 return Holding("crashed")
-            if kind in _SILENT_FAULTS and prev is not None and prev.role == "claiming":
+            if str(kind) in _SILENT_FAULTS and prev is not None and prev.role == "claiming":
                 return STANDBY
             return None
         case _:
@@ -135,12 +145,16 @@ class HolderFold:
 
     def feed(self, rec: Mapping[str, Any]) -> Holding | None:
         """Apply one event record; the robot's new holding if it changed, else None.
-        Records of robot 0 (a partition) or without a robot id change nothing."""
+        Records of robot 0 (a partition) or without a robot id change nothing, nor do
+        records that are no event (`Event.from_record` refuses them)."""
         robot = rec.get("robot")
         if not isinstance(robot, int) or isinstance(robot, bool) or robot <= 0:
             return None
+        event = event_of(rec)
+        if event is None:
+            return None  # no event of the contract: nothing the fold can read
         prev = self.robots.get(robot)
-        new = _next(prev, rec, self.down)
+        new = _next(prev, event, self.down)
         if new is None or new == prev:
             return None
         self.robots[robot] = new

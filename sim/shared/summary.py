@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +27,7 @@ from rich.text import Text
 from sim.shared.faults import Fault
 from sim.shared.holders import HolderFold
 from sim.shared.invariants import Violation, check_events
+from swarmd.core.events import Alert, Event, Leave, Started, Suspect, Takeover, event_of
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.runtime import QUIET_DROPS
@@ -120,6 +121,12 @@ def counted_drops(drops: Mapping[str, int]) -> dict[str, int]:
     return {k: int(n) for k, n in sorted(drops.items()) if n and k not in QUIET_DROPS}
 
 
+def _typed(events: Iterable[Mapping[str, Any]]) -> list[tuple[float, int, Event | None]]:
+    """(t, robot, the typed event) for each record, in order; None for a record that is
+    no event (`Event.from_record` refuses it), which no count or row reads."""
+    return [(float(rec["t"]), int(rec["robot"]), event_of(rec)) for rec in events]
+
+
 def _r(x: float | None) -> float | None:
     return None if x is None else round(x, 3)
 
@@ -161,6 +168,7 @@ def summarize(
     its process ended on its own (real time); the checker treats each as a crash (its
     replacement is no false takeover) and the fault table shows it as one."""
     events = sorted(events, key=lambda e: e["t"])
+    typed = _typed(events)
     died = [Fault("crash", t, (r,)) for r, t in sorted((deaths or {}).items())]
     checker = check_events(events, [*faults, *died], plan, params, loss=loss,
                            duration=duration)
@@ -188,21 +196,20 @@ def summarize(
         r = fault.robot
         f, down = _state_at(events, r, fault.at)
         detected = taken = by = epoch = None
-        for i, e in enumerate(events):
+        for i, (t, robot, event) in enumerate(typed):
             if down:
                 break  # a fault on a robot already dead explains nothing
-            if e["t"] < fault.at:
+            if t < fault.at:
                 continue
-            name = e["event"]
             if detected is None and (
-                (name == "suspect" and e.get("subject") == r)
-                or (name == "leave" and e["robot"] == r)
+                (isinstance(event, Suspect) and event.subject == r)
+                or (isinstance(event, Leave) and robot == r)
             ):
-                detected = e["t"] - fault.at
-            if taken is None and name == "takeover" and e.get("replaced") == r \
-                    and (f is None or e.get("function") == f) and i not in credited:
+                detected = t - fault.at
+            if taken is None and isinstance(event, Takeover) and event.replaced == r \
+                    and (f is None or event.function == f) and i not in credited:
                 credited.add(i)
-                taken, by, epoch = e["t"] - fault.at, e["robot"], e.get("epoch")
+                taken, by, epoch = t - fault.at, robot, event.epoch
         outcomes.append(FaultOutcome(spec, fault.kind, r, fault.at, f, detected,
                                      taken, by, epoch))
     dead = set(checker.dead)
@@ -211,11 +218,11 @@ def summarize(
         duration=duration,
         robots=len(plan.robots),
         faults=outcomes,
-        takeovers=sum(1 for e in events if e["event"] == "takeover"),
+        takeovers=sum(1 for _, _, e in typed if isinstance(e, Takeover)),
         false_takeovers=[{k: (round(v, 3) if isinstance(v, float) else v)
                           for k, v in ft.items()} for ft in checker.false_takeovers],
         violations=unique,
-        alerts=sum(1 for e in events if e["event"] == "alert"),
+        alerts=sum(1 for _, _, e in typed if isinstance(e, Alert)),
         holders=holders_at_end(events, dead),
         false_suspicions=checker.false_suspicions,
     )
@@ -283,9 +290,9 @@ def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
     after the start-up grace (their watchers rightly took them for dead) and had no fault
     before (a restart starts late on purpose)."""
     first: dict[int, float] = {}
-    for e in events:
-        if e["event"] == "started":
-            first.setdefault(int(e["robot"]), float(e["t"]))
+    for t, robot, event in _typed(events):
+        if isinstance(event, Started):
+            first.setdefault(robot, t)
     return {r: t for r, t in sorted(first.items()) if t > grace
             and not any(f.kind != "partition" and r in f.robots and f.at <= t for f in faults)}
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from swarmd.core import wire
@@ -22,9 +23,19 @@ from swarmd.core.events import Event, Fault
 from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.transport.base import Transport
+from swarmd.transport.base import Channel, Transport
 
 Record = dict[str, Any]
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelRecord:
+    """A channel condition one robot's transport reported, at `t` s of the run."""
+
+    t: float
+    robot: int
+    condition: Channel
+    fields: dict[str, Any]
 
 
 class _Robot:
@@ -64,9 +75,9 @@ class _Robot:
         if self.alive:
             self.execute(self.node.receive(data, self.swarm.loop.time()))
 
-    def on_event(self, name: str, fields: Mapping[str, Any]) -> None:
-        self.swarm.record({"t": self.swarm.elapsed(), "robot": self.robot_id, "event": name,
-                           **fields})
+    def on_event(self, condition: Channel, fields: Mapping[str, Any]) -> None:
+        self.swarm.channel.append(
+            ChannelRecord(self.swarm.elapsed(), self.robot_id, condition, dict(fields)))
 
 
 class RadioSwarm:
@@ -88,6 +99,9 @@ class RadioSwarm:
         self.identities = dict(identities or {})
         """Per-robot mode: each robot's own signer (DESIGN section 2, "Who may say what")."""
         self.events: list[Record] = []
+        """The nodes' event-log records (and injected faults), in order."""
+        self.channel: list[ChannelRecord] = []
+        """The transports' channel conditions (send errors, radio up), in order."""
         self.robots: dict[int, _Robot] = {}
         self._changed = asyncio.Event()
         self._t0 = 0.0

@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
         """Validate a swarm file; show who watches and who covers each function.
 
         Prints every problem with its file, field and line, then the coverage table, the
-        timing in use with the detection bound, the channel budget on each radio medium,
+        timing in use with the takeover bound, the channel budget on each radio medium,
         and what a simulated craft could not fly (docs/config.md).
 
         Exit codes: 0 usable (warnings allowed), 1 errors, 2 the file cannot be read.

@@ -78,10 +78,11 @@ def register(app: typer.Typer) -> None:
 
         from swarmd.config import ConfigError, ConfigUnreadable, load_swarm
         from swarmd.config.auth import public_keys
+        from swarmd.config.base_station import load_base_station
         from swarmd.daemon import make_transport
         from swarmd.identity import Keyring
         from swarmd.keys import KeyFileError
-        from swarmd.monitor import MonitorState, listen, load_base_station
+        from swarmd.monitor import MonitorState, listen
         from swarmd.transport.base import Transport, TransportError
         from swarmd.transport.udp import UdpTransport
 

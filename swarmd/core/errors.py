@@ -3,6 +3,8 @@ refusal from anything else with one `except`.
 
 - `CodecError` (a `ValueError`): bytes that are no valid frame; `receive` turns it into
   a counted drop and never lets it out (DESIGN section 2).
+- `EventRecordError` (a `ValueError`): an event-log record read back that names no
+  event kind or lacks a field of its kind (`Event.from_record`).
 - `ParamsError`, `PlanError` (`ValueError`s): timing or a swarm plan that cannot work;
   raised when they are built, before any robot runs.
 - `NodeError`, `TransitionError` (`RuntimeError`s): misuse of the node by its driver
@@ -11,17 +13,25 @@ refusal from anything else with one `except`.
 
 from __future__ import annotations
 
+from swarmd.core.drops import DropReason
+
 
 class CoreError(Exception):
     """Root of every exception `swarmd.core` raises on purpose."""
 
 
 class CodecError(CoreError, ValueError):
-    """A frame that cannot be decoded or verified. `reason` names the drop counter."""
+    """A frame that cannot be decoded or verified. `reason` names the drop counter: a
+    `DropReason` (a plain name given by the codec is checked against it here, so an
+    unknown one is a bug found at the raise, not a new counter)."""
 
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
+    def __init__(self, reason: DropReason | str, detail: str) -> None:
+        self.reason = DropReason(reason)
+        super().__init__(f"{self.reason}: {detail}")
+
+
+class EventRecordError(CoreError, ValueError):
+    """An event-log record that is no event: an unknown name or a missing field."""
 
 
 class ParamsError(CoreError, ValueError):
@@ -40,5 +50,5 @@ class TransitionError(CoreError, RuntimeError):
     """The node tried a transition the table does not allow (a bug, not peer input)."""
 
 
-__all__ = ["CodecError", "CoreError", "NodeError", "ParamsError", "PlanError",
+__all__ = ["CodecError", "CoreError", "EventRecordError", "NodeError", "ParamsError", "PlanError",
            "TransitionError"]

@@ -12,8 +12,14 @@ daemon's own log and counters, so no name outside this module reaches the log.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
+
+from swarmd.core.errors import EventRecordError
+
+_NAME_KEY = "event"
+"""The key of a record's kind: the event log's one name-keyed field (DESIGN section 3)."""
 
 
 class Event:
@@ -29,7 +35,25 @@ class Event:
 
     def record(self, t: float, robot: int) -> dict[str, Any]:
         """The JSON Lines object: {"t", "robot", "event", ...fields}."""
-        return {"t": t, "robot": robot, "event": self.name, **self.fields()}
+        return {"t": t, "robot": robot, _NAME_KEY: self.name, **self.fields()}
+
+    @classmethod
+    def from_record(cls, record: Mapping[str, Any]) -> Event:
+        """The typed event a JSON record (`record`'s output, or a line of an event log
+        read back) holds. Keys beyond the kind's fields (`t`, `robot`) are ignored.
+        Raises `EventRecordError` for a name no kind has, a record without a field its
+        kind's class requires, or (called on a subclass) a record of another kind."""
+        name = record.get(_NAME_KEY)
+        kind = EVENTS.get(name) if isinstance(name, str) else None
+        if kind is None:
+            raise EventRecordError(f"unknown event {name!r}; known: {', '.join(EVENTS)}")
+        if not issubclass(kind, cls):
+            raise EventRecordError(f"a {name!r} record is no {cls.__name__}")
+        missing = [key for attr, key in _keys(kind) if key not in record
+                   and _field(kind, attr).default is dataclasses.MISSING]
+        if missing:
+            raise EventRecordError(f"{name!r} record without {', '.join(missing)}")
+        return kind(**{attr: record[key] for attr, key in _keys(kind) if key in record})
 
     @classmethod
     def contract(cls) -> tuple[str, ...]:
@@ -194,6 +218,15 @@ class Fault(Event):
                 if value is not None or key == "kind"}
 
 
+def event_of(record: Mapping[str, Any]) -> Event | None:
+    """`Event.from_record`, or None for a record that is no event: for readers that pass
+    over what they cannot read (a live view, a plot)."""
+    try:
+        return Event.from_record(record)
+    except EventRecordError:
+        return None
+
+
 CORE_EVENTS: tuple[type[Event], ...] = (
     Started, Suspect, Warn, Vote, Claim, Backoff, Takeover, Fenced, Refute, Leave, Alert,
     Stopped,
@@ -208,4 +241,5 @@ EVENTS[Fault.name] = Fault
 __all__ = [
     "CORE_EVENTS", "EVENTS", "Alert", "Backoff", "Claim", "Event", "Fault", "Fenced",
     "Leave", "Refute", "Started", "Stopped", "Suspect", "Takeover", "Vote", "Warn",
+    "event_of",
 ]

@@ -5,9 +5,10 @@ model). Two presets: `udp()` for loopback / Wi-Fi multicast, where frames
 are cheap and latency is milliseconds, and `radio()` for XBee / SiK radios, where the
 air is shared at 250 kbps and a frame costs milliseconds of airtime.
 
-The detection bound follows from the fields: a watcher fires at most `t_max` after the
-last heartbeat it heard (paper Fig. 7), so a crash is suspected within `t_max` and taken
-over within about `t_max + warn_interval + claim_hold` when nothing is lost.
+The takeover bound follows from the fields (`Params.takeover_bound`): a watcher fires at
+most `t_max` after the last heartbeat it heard (paper Fig. 7), so a crash is suspected
+within `t_max` and taken over within `t_max + vote_window + claim_hold` when nothing is
+lost (two more vote windows under loss).
 """
 
 from __future__ import annotations
@@ -88,6 +89,16 @@ class Params:
     def with_overrides(self, **overrides: Any) -> Params:
         """A copy with some fields changed, validated again."""
         return replace(self, **overrides)
+
+    def takeover_bound(self, *, lossy: bool = False) -> float:
+        """s from a holder's crash to its takeover, at most: every watcher suspects within
+        `t_max` of the last heartbeat it heard (paper Fig. 7); the quorum's warnings meet
+        within `vote_window` (DESIGN rule 3); then the claim hold (the wait state). On a
+        `lossy` channel the warnings, repeated every `warn_interval`, may need two more
+        vote windows. The one formula `swarmd check` prints and the invariant checker
+        holds runs to."""
+        bound = self.t_max + self.vote_window + self.claim_hold
+        return bound + 2 * self.vote_window if lossy else bound
 
     def as_dict(self) -> dict[str, float | int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -25,6 +25,8 @@ faster than real time (it lasts until 2104). The robot a forged frame names hear
 
 from __future__ import annotations
 
+from swarmd.core.drops import DropReason
+
 WINDOW = 64
 JUMP = 1 << 23
 """How far ahead of its wall clock an honest sender's counter may be: eight times the
@@ -89,12 +91,12 @@ class ReplayFilter:
     def accept(self, sender: int, seq: int, now: float | None = None) -> bool:
         return self.check(sender, seq, now) is None
 
-    def check(self, sender: int, seq: int, now: float | None = None) -> str | None:
+    def check(self, sender: int, seq: int, now: float | None = None) -> DropReason | None:
         """None if the frame is new, else the drop reason (`replay` or `seq_jump`).
         Without `now` (or an origin), seqs are not bounded."""
         bound = self.limit(now)
         if bound is not None and seq > bound:
-            return "seq_jump"
+            return DropReason.SEQ_JUMP
         prev = self.state.get(sender)
         if prev is None:
             self.state[sender] = (seq, 1)
@@ -107,7 +109,7 @@ class ReplayFilter:
             return None
         age = top - seq
         if age >= WINDOW or seen >> age & 1:
-            return "replay"
+            return DropReason.REPLAY
         self.state[sender] = (top, seen | (1 << age))
         return None
 

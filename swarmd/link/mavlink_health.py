@@ -108,6 +108,24 @@ class AutopilotView:
     rebooted: int = 0
     """Times the autopilot's boot clock went backwards (a reboot)."""
 
+    def commanded(self, mode: str, *, release: bool = False) -> None:
+        """The link asked the craft for `mode` (`release`: on a release, hold/land/rtl)."""
+        if release:
+            self.release_mode = mode
+        else:
+            self.commanded_mode = mode
+
+    def refusal(self, what: str, now: float, *, drops_mode: bool) -> None:
+        """The autopilot refused `what` at `now`; `drops_mode`: it was a mode change, so
+        the craft does not fly the mode the link asked for."""
+        self.refused = (what, now)
+        if drops_mode:
+            self.commanded_mode = None
+
+    def accepted_critical(self) -> None:
+        """A critical command was accepted: an earlier refusal no longer stands."""
+        self.refused = None
+
     @property
     def armed(self) -> bool:
         return bool(self.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)

@@ -336,10 +336,7 @@ class Pilot:
         except KeyError:
             log.error("no %s mode %r on %s", what, name, self.flavour)
             return None
-        if what == "release":
-            self.view.release_mode = name
-        else:
-            self.view.commanded_mode = name
+        self.view.commanded(name, release=what == "release")
         return _Command(what, MAV_CMD_DO_SET_MODE, (1, main, sub, 0, 0, 0, 0), True)
 
     def _drop_flight_commands(self) -> None:
@@ -391,8 +388,8 @@ class Pilot:
         if msg.result == MAV_RESULT_ACCEPTED:
             self._done[p.what] = now
             self._failed.pop(p.what, None)
-            if p.critical and self.view.refused is not None:
-                self.view.refused = None
+            if p.critical:
+                self.view.accepted_critical()
             if p.what == "takeoff":
                 self._took_off = True
             return
@@ -404,9 +401,7 @@ class Pilot:
             return
         self.counters["refused"] += 1
         self._failed[c.what] = now
-        self.view.refused = (f"{c.what} ({why})", now)
-        if c.what in ("guided", "release"):
-            self.view.commanded_mode = None
+        self.view.refusal(f"{c.what} ({why})", now, drops_mode=c.what in ("guided", "release"))
         log.warning("autopilot refused %s: %s", c.what, why)
 
     # -- setpoints -----------------------------------------------------------------------

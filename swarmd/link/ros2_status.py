@@ -17,6 +17,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from swarmd.core.events import (
+    Alert,
+    Backoff,
+    Claim,
+    Fenced,
+    Leave,
+    Started,
+    Stopped,
+    Takeover,
+    event_of,
+)
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Snapshot
 from swarmd.core.roles import Health, Role
@@ -62,17 +73,18 @@ class SwarmStatus:
 
     def on_event(self, record: Mapping[str, Any]) -> bool:
         """Fold one event record; True when it may change a status (publish now)."""
-        event, function = record.get("event"), record.get("function")
+        event = event_of(record)
+        function = getattr(event, "function", None)
         if not isinstance(function, str):
-            return event in ("started", "stopped", "fenced", "leave")
-        if event == "alert":
-            self.alerts[function] = (str(record.get("reason", "alert")),
-                                     self.known.get(function))
-        elif event == "claim":
-            self.claiming.add(function)
-        elif event in ("takeover", "backoff"):
-            self.claiming.discard(function)
-            self.alerts.pop(function, None)
+            return isinstance(event, Started | Stopped | Fenced | Leave)
+        match event:
+            case Alert(reason=reason):
+                self.alerts[function] = (str(reason), self.known.get(function))
+            case Claim():
+                self.claiming.add(function)
+            case Takeover() | Backoff():
+                self.claiming.discard(function)
+                self.alerts.pop(function, None)
         return True
 
     def statuses(self, snap: Snapshot, now: float) -> list[Status]:

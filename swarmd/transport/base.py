@@ -17,19 +17,37 @@ Rules:
 - `max_payload` is the largest datagram the channel carries in one piece (bytes). The
   XBee and serial transports send a larger frame in fragments and reassemble it on
   receipt (`fragment.py`); `on_frame` only ever gets whole frames.
-- `on_event(name, fields)` reports channel conditions for the event log and monitor,
-  e.g. ("transport_down", {"reason": ...}), ("transport_up", {}).
+- `on_event(condition, fields)` reports channel conditions (a `Channel`) for the
+  daemon's log and the monitor, e.g. (Channel.DOWN, {"kind": ..., "reason": ...}). Every
+  transport reports through a `ChannelEvents`, which names its kind on send errors and
+  keeps a raising callback out of its I/O path.
 """
 
 from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, MutableMapping
+from enum import StrEnum
 from typing import Any, Protocol
 
+
+class Channel(StrEnum):
+    """A channel condition a transport reports (a `StrEnum`: its value is the name the
+    daemon's log prints, `channel: transport_down`)."""
+
+    UP = "transport_up"
+    """Open and carrying frames (again)."""
+    DOWN = "transport_down"
+    """Not carrying frames (a radio unplugged); the transport retries by itself."""
+    ERROR = "transport_error"
+    """Something failed that does not stop the channel (an ICMP error on receive)."""
+    SEND_ERROR = "send_error"
+    """A frame could not go out (queue full, radio down, oversize); counted, dropped."""
+
+
 FrameCallback = Callable[[bytes], None]
-EventCallback = Callable[[str, Mapping[str, Any]], None]
+EventCallback = Callable[[Channel, Mapping[str, Any]], None]
 
 
 class TransportError(RuntimeError):
@@ -53,15 +71,16 @@ class ChannelEvents:
     `kind`. A callback that raises is logged, never propagated: it would otherwise
     surface in the transport's I/O path (a send, a status callback) and break it."""
 
-    def __init__(self, kind: str, counters: Counter[str], logger: logging.Logger) -> None:
+    def __init__(self, kind: str, counters: Counter[str] | MutableMapping[str, int],
+                 logger: logging.Logger) -> None:
         self.kind = kind
         self.counters = counters
         self.logger = logger
         self.callback: EventCallback | None = None
         """Set by the transport's `start`; events before it are dropped."""
 
-    def emit(self, name: str, fields: Mapping[str, Any]) -> None:
-        """Report one channel condition, e.g. ("transport_down", {"reason": ...})."""
+    def emit(self, name: Channel, fields: Mapping[str, Any]) -> None:
+        """Report one channel condition, e.g. (Channel.DOWN, {"reason": ...})."""
         if self.callback is None:
             return
         try:
@@ -71,5 +90,6 @@ class ChannelEvents:
 
     def send_error(self, reason: str, **fields: Any) -> None:
         """A frame that could not go out: counted and reported, never raised (rules)."""
-        self.counters[f"send_error:{reason}"] += 1
-        self.emit("send_error", {"kind": self.kind, "reason": reason, **fields})
+        key = f"send_error:{reason}"
+        self.counters[key] = self.counters.get(key, 0) + 1
+        self.emit(Channel.SEND_ERROR, {"kind": self.kind, "reason": reason, **fields})

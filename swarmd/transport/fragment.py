@@ -51,6 +51,8 @@ import struct
 from collections import Counter, OrderedDict
 from dataclasses import dataclass
 
+from swarmd.transport.drops import FragmentDrop
+
 MARKER = 0xF1
 HEADER = struct.Struct(">BHHB")
 HEADER_LEN = HEADER.size  # 6
@@ -152,7 +154,7 @@ class Reassembler:
         self._partial: OrderedDict[tuple[int, int], _Partial] = OrderedDict()
         self._done: OrderedDict[tuple[int, int], float] = OrderedDict()
         """Messages completed within `expiry`: a late duplicate piece is not a new one."""
-        self.drops: Counter[str] = Counter()
+        self.drops: Counter[FragmentDrop] = Counter()
         self.completed = 0
 
     def __len__(self) -> int:
@@ -164,40 +166,40 @@ class Reassembler:
             return datagram
         self._expire(now)
         if len(datagram) <= HEADER_LEN:
-            self.drops["short"] += 1
+            self.drops[FragmentDrop.SHORT] += 1
             return None
         _, sender, msg_id, packed = HEADER.unpack_from(datagram)
         index, count = packed >> 4, packed & 0x0F
         if not 2 <= count <= MAX_FRAGMENTS:
-            self.drops["bad_count"] += 1
+            self.drops[FragmentDrop.BAD_COUNT] += 1
             return None
         if index >= count:
-            self.drops["bad_index"] += 1
+            self.drops[FragmentDrop.BAD_INDEX] += 1
             return None
         key = (sender, msg_id)
         if key in self._done:
-            self.drops["duplicate"] += 1
+            self.drops[FragmentDrop.DUPLICATE] += 1
             return None
         part = self._partial.get(key)
         if part is None:
             mine = [k for k in self._partial if k[0] == sender]
             if len(mine) >= self.max_per_sender:
                 del self._partial[mine[0]]  # arrival order: that sender's oldest
-                self.drops["evicted_sender"] += 1
+                self.drops[FragmentDrop.EVICTED_SENDER] += 1
             while len(self._partial) >= self.max_partial:
                 self._partial.popitem(last=False)
-                self.drops["evicted"] += 1
+                self.drops[FragmentDrop.EVICTED] += 1
             part = self._partial[key] = _Partial(count, now, [None] * count)
         elif part.count != count:
-            self.drops["inconsistent"] += 1
+            self.drops[FragmentDrop.INCONSISTENT] += 1
             return None
         if part.pieces[index] is not None:
-            self.drops["duplicate"] += 1
+            self.drops[FragmentDrop.DUPLICATE] += 1
             return None
         piece = datagram[HEADER_LEN:]
         if part.size + len(piece) > MAX_FRAME:
             del self._partial[key]
-            self.drops["too_large"] += 1
+            self.drops[FragmentDrop.TOO_LARGE] += 1
             return None
         part.pieces[index] = piece
         part.size += len(piece)
@@ -208,7 +210,7 @@ class Reassembler:
         self._remember(key, now)
         frame = b"".join(p for p in part.pieces if p is not None)
         if len(frame) < _SENDER.stop or int.from_bytes(frame[_SENDER], "big") != sender:
-            self.drops["sender_mismatch"] += 1
+            self.drops[FragmentDrop.SENDER_MISMATCH] += 1
             return None
         self.completed += 1
         return frame
@@ -227,7 +229,7 @@ class Reassembler:
             if now - part.started < self.expiry:
                 break
             del self._partial[key]
-            self.drops["expired"] += 1
+            self.drops[FragmentDrop.EXPIRED] += 1
         while self._done:
             key, done = next(iter(self._done.items()))
             if now - done < self.expiry:

@@ -23,6 +23,8 @@ from __future__ import annotations
 import zlib
 from collections import Counter
 
+from swarmd.transport.drops import FramingDrop
+
 DELIMITER = b"\x00"
 CRC_LEN = 4
 MAX_FRAME = 1024
@@ -87,7 +89,7 @@ class FrameDecoder:
         self._buf = bytearray()
         self._max_encoded = max_frame + CRC_LEN + 2 + (max_frame + CRC_LEN) // 0xFE
         self._skipping = False
-        self.drops: Counter[str] = Counter()
+        self.drops: Counter[FramingDrop] = Counter()
         """Rejected chunks by reason: cobs, crc, short, overlong."""
         self.frames = 0
 
@@ -120,7 +122,7 @@ class FrameDecoder:
         if len(self._buf) > self._max_encoded:
             # No delimiter for longer than any frame can be: noise (or a lost 0x00).
             # Drop what we hold and ignore bytes up to the next delimiter.
-            self.drops["overlong"] += 1
+            self.drops[FramingDrop.OVERLONG] += 1
             self._buf.clear()
             self._skipping = True
 
@@ -128,14 +130,14 @@ class FrameDecoder:
         try:
             raw = cobs_decode(chunk)
         except CobsError:
-            self.drops["cobs"] += 1
+            self.drops[FramingDrop.COBS] += 1
             return None
         if len(raw) <= CRC_LEN:
-            self.drops["short"] += 1
+            self.drops[FramingDrop.SHORT] += 1
             return None
         frame, crc = raw[:-CRC_LEN], raw[-CRC_LEN:]
         if zlib.crc32(frame).to_bytes(CRC_LEN, "little") != crc:
-            self.drops["crc"] += 1
+            self.drops[FramingDrop.CRC] += 1
             return None
         self.frames += 1
         return frame

@@ -24,6 +24,7 @@ from typing import Any
 
 from swarmd.transport import fragment, framing
 from swarmd.transport.base import (
+    Channel,
     ChannelEvents,
     EventCallback,
     FrameCallback,
@@ -103,7 +104,7 @@ class SerialTransport:
         try:
             await self._open()
         except Exception as exc:
-            self._events.emit("transport_down", {"kind": "serial", "port": self.port,
+            self._events.emit(Channel.DOWN, {"kind": "serial", "port": self.port,
                                                  "reason": f"cannot open: {exc}"})
             self._reopener.lost()
         self._reopener.start()
@@ -116,7 +117,7 @@ class SerialTransport:
             loop, lambda: _Protocol(self), self.port, baudrate=self.baud)
         self._transport = transport
         self.decoder = framing.FrameDecoder(max_frame=max(self._max_payload, 255))
-        self._events.emit("transport_up", {"kind": "serial", "port": self.port, "baud": self.baud,
+        self._events.emit(Channel.UP, {"kind": "serial", "port": self.port, "baud": self.baud,
                                            "max_payload": self._max_payload})
 
     async def close(self) -> None:
@@ -180,7 +181,7 @@ class SerialTransport:
             return
         reason = str(exc) if exc else "port closed"
         log.warning("serial %s down: %s", self.port, reason)
-        self._events.emit("transport_down", {"kind": "serial", "port": self.port, "reason": reason})
+        self._events.emit(Channel.DOWN, {"kind": "serial", "port": self.port, "reason": reason})
         if self._reopener is not None:
             self._reopener.lost()
 

@@ -17,7 +17,6 @@ import asyncio
 import errno
 import logging
 import socket
-from collections.abc import Mapping
 from typing import Any
 
 from swarmd.transport.addresses import (
@@ -28,7 +27,13 @@ from swarmd.transport.addresses import (
     interface_address,
     multicast_group,
 )
-from swarmd.transport.base import EventCallback, FrameCallback, TransportError
+from swarmd.transport.base import (
+    Channel,
+    ChannelEvents,
+    EventCallback,
+    FrameCallback,
+    TransportError,
+)
 from swarmd.transport.media import UDP_MAX_PAYLOAD
 
 log = logging.getLogger(__name__)
@@ -87,7 +92,9 @@ class UdpTransport:
         self._sock: socket.socket | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
-        self._on_event: EventCallback | None = None
+        self.send_reasons: dict[str, int] = {}
+        """Send errors by reason (`send_error:<reason>`); their total is in `counters`."""
+        self._events = ChannelEvents("udp", self.send_reasons, log)
 
     @classmethod
     def from_config(cls, cfg: Any) -> UdpTransport:
@@ -125,15 +132,15 @@ class UdpTransport:
     async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
         """Open the socket, join the group, deliver datagrams to `on_frame`."""
         self._on_frame = on_frame
-        self._on_event = on_event
+        self._events.callback = on_event
         self._loop = asyncio.get_running_loop()
         self._sock = self._socket()
         # A plain reader rather than asyncio's datagram transport: that one allocates a
         # 256 KiB buffer per datagram, which dominates an idle daemon's CPU time
         # (bench/bench_daemon.py); our frames are tens of bytes.
         self._loop.add_reader(self._sock.fileno(), self._read_ready)
-        on_event("transport_up", {"kind": "udp", "group": self.group, "port": self.port,
-                                  "interface": self.interface})
+        self._events.emit(Channel.UP, {"kind": "udp", "group": self.group, "port": self.port,
+                                       "interface": self.interface})
 
     def _read_ready(self) -> None:
         sock = self._sock
@@ -155,7 +162,7 @@ class UdpTransport:
             self._fail_send("transport not open")
             return
         if len(frame) > MAX_PAYLOAD:
-            self._fail_send(f"frame of {len(frame)} bytes exceeds {MAX_PAYLOAD}")
+            self._fail_send("oversize", size=len(frame), limit=MAX_PAYLOAD)
             return
         try:
             self._sock.sendto(frame, (self.group, self.port))
@@ -169,10 +176,9 @@ class UdpTransport:
             return
         self.counters["sent"] += 1
 
-    def _fail_send(self, reason: str) -> None:
+    def _fail_send(self, reason: str, **fields: Any) -> None:
         self.counters["send_errors"] += 1
-        if self._on_event is not None:
-            self._on_event("send_error", {"reason": reason})
+        self._events.send_error(reason, **fields)
 
     def _received(self, data: bytes) -> None:
         self.counters["received"] += 1
@@ -183,9 +189,7 @@ class UdpTransport:
         # ICMP errors and the like arrive here; they never stop the socket, so count
         # them and tell the event log (transport contract).
         self.counters["receive_errors"] += 1
-        if self._on_event is not None:
-            fields: Mapping[str, Any] = {"where": where, "reason": str(exc)}
-            self._on_event("transport_error", fields)
+        self._events.emit(Channel.ERROR, {"kind": "udp", "where": where, "reason": str(exc)})
 
     async def close(self) -> None:
         """Leave the group and close the socket."""

@@ -46,6 +46,7 @@ from typing import Any
 
 from swarmd.transport import fragment
 from swarmd.transport.base import (
+    Channel,
     ChannelEvents,
     EventCallback,
     FrameCallback,
@@ -199,7 +200,7 @@ class XBeeTransport:
         self.info = info
         self._max_payload = info.max_payload
         self._up = True
-        self._events.emit("transport_up", {
+        self._events.emit(Channel.UP, {
             "kind": "xbee", "port": self.port, "protocol": info.protocol,
             "pan_id": f"0x{info.pan_id:04X}", "channel": f"0x{info.channel:02X}",
             "address": f"{info.address64:016X}", "max_payload": info.max_payload,
@@ -207,7 +208,7 @@ class XBeeTransport:
 
     def _reopen_failed(self, exc: Exception) -> None:
         if isinstance(exc, RadioSetupError):
-            self._events.emit("transport_error", {"kind": "xbee", "reason": str(exc)})
+            self._events.emit(Channel.ERROR, {"kind": "xbee", "reason": str(exc)})
 
     def _reopened(self) -> None:
         log.warning("XBee %s back after %.1f s", self.port, time.monotonic() - self._down_since)
@@ -219,7 +220,7 @@ class XBeeTransport:
         self._down_since = time.monotonic()
         self.counters["outages"] += 1
         log.warning("XBee %s down: %s", self.port, reason)
-        self._events.emit("transport_down", {"kind": "xbee", "port": self.port, "reason": reason})
+        self._events.emit(Channel.DOWN, {"kind": "xbee", "port": self.port, "reason": reason})
         self._drop_in_flight("radio down")
         if self._radio is not None:
             self._radio.close_soon()

@@ -51,16 +51,31 @@ class ReaderHangups(logging.Filter):
 
     The record arrives on the library's listener thread; when that thread belongs to
     one of our open radios the record is dropped (counted as `hangup_reads`) and the
-    radio's owner is told. Other threads' records pass unchanged."""
+    radio's owner is told. Other threads' records pass unchanged.
+
+    One filter serves every radio of the process (the reader logger is global), so the
+    map of listener threads is written by each radio's device thread and read on every
+    listener thread: a lock guards it (a dict resized under a reader is no safe read)."""
 
     MESSAGE = "returned no data"
 
     def __init__(self) -> None:
         super().__init__()
-        self.listeners: dict[threading.Thread, DeviceThread] = {}
+        self._listeners: dict[threading.Thread, DeviceThread] = {}
+        self._lock = threading.Lock()
+
+    def watch(self, listener: threading.Thread, owner: DeviceThread) -> None:
+        """Records of `listener` (a radio's reader thread) now go to `owner`."""
+        with self._lock:
+            self._listeners[listener] = owner
+
+    def unwatch(self, listener: threading.Thread) -> None:
+        with self._lock:
+            self._listeners.pop(listener, None)
 
     def filter(self, record: logging.LogRecord) -> bool:
-        owner = self.listeners.get(threading.current_thread())
+        with self._lock:
+            owner = self._listeners.get(threading.current_thread())
         if owner is None or self.MESSAGE not in record.getMessage():
             return True
         owner._reader_hung_up()
@@ -284,16 +299,27 @@ class DeviceThread:
                 # next 0x7E. (digi-xbee's own AT and send timeouts are separate.)
                 serial_port.timeout = READ_GAP
         except BaseException:
-            with contextlib.suppress(Exception):
+            try:
                 dev.close()
+            except Exception as exc:  # the set-up error below is the one to report
+                self._ignored("close", exc)
             raise
         self._hangup_reported = False
         self._device = dev
         self._device_node = os.path.realpath(self.port)
         listener = getattr(dev, "_packet_listener", None)  # digi-xbee's reader thread
         if isinstance(listener, threading.Thread):
-            _HANGUPS.listeners[listener] = self
+            _HANGUPS.watch(listener, self)
         return info
+
+    def _ignored(self, what: str, exc: Exception) -> None:
+        """An error this thread goes on after: counted as `ignored:<what>`, and logged
+        the first time for each `what` (a flapping radio would fill the journal)."""
+        key = f"ignored:{what}"
+        self.counters[key] += 1
+        if self.counters[key] == 1:
+            log.warning("xbee %s failed (%s: %s); going on, counted as %s", what,
+                        type(exc).__name__, exc, key, extra={"port": self.port})
 
     def _set(self, dev: Any, name: str, value: bytes) -> None:
         """Set and apply one parameter; a refusal becomes `RadioRefused`."""
@@ -330,24 +356,32 @@ class DeviceThread:
         if diffs:
             raise RadioMismatch(self.port, diffs)
         limit = MAX_PAYLOAD.get(protocol, 73)
-        with contextlib.suppress(Exception):
+        # EE and NP are optional refinements (not every firmware answers them): without
+        # them the protocol's table value stands.
+        try:
             if bytes(dev.get_parameter("EE")) not in (b"", b"\x00"):
                 limit = MAX_PAYLOAD_ENCRYPTED.get(protocol, 65)
-        with contextlib.suppress(Exception):
+        except Exception as exc:
+            self._ignored("read EE", exc)
+        try:
             np_value = int.from_bytes(bytes(dev.get_parameter("NP")), "big")
             if 0 < np_value < limit:
                 limit = np_value  # the radio knows best (e.g. source routing, encryption)
+        except Exception as exc:
+            self._ignored("read NP", exc)
         address = int(str(dev.get_64bit_addr()), 16)
         return RadioInfo(protocol, mode, pan, channel, coordinator, address, limit)
 
     def _close_device(self) -> None:
         dev, self._device = self._device, None
         if dev is not None:
-            with contextlib.suppress(Exception):
+            try:
                 dev.close()
+            except Exception as exc:  # a port already gone (unplugged): nothing to free
+                self._ignored("close", exc)
             listener = getattr(dev, "_packet_listener", None)
             if isinstance(listener, threading.Thread):
-                _HANGUPS.listeners.pop(listener, None)
+                _HANGUPS.unwatch(listener)
 
     def _write(self, frame_id: int, frame: bytes) -> None:
         from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
