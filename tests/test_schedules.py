@@ -109,7 +109,7 @@ class Schedule:
             heal = max((f.end or f.at) for f in self.faults())
             return round(heal + Bounds.of(params, 0.0).settle + 0.5, 3)
         last = self.faults()[-1]
-        bound = params.t_max + params.vote_window + params.claim_hold
+        bound = params.takeover_bound()
         tail = PAUSE + 2 * params.t_max if self.kind == "pause" else 0.0
         return round(last.at + max(bound + 1.0, tail), 3)
 

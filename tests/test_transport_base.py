@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from swarmd.transport.base import ChannelEvents
+from swarmd.transport.base import Channel, ChannelEvents
 
 log = logging.getLogger("swarmd.transport.test")
 
@@ -21,7 +21,7 @@ def test_send_errors_are_counted_and_name_the_transport() -> None:
     events.send_error("radio down")  # before start: counted, not reported
     events.callback = lambda name, fields: seen.append((name, fields))
     events.send_error("oversize", size=90, limit=64)
-    events.emit("transport_up", {"port": "/dev/ttyX"})
+    events.emit(Channel.UP, {"port": "/dev/ttyX"})
     assert counters == {"send_error:radio down": 1, "send_error:oversize": 1}
     assert seen == [
         ("send_error", {"kind": "serial", "reason": "oversize", "size": 90, "limit": 64}),
@@ -37,7 +37,7 @@ def test_a_callback_that_raises_is_logged_not_propagated(
     events = ChannelEvents("xbee", Counter(), log)
     events.callback = broken
     events.send_error("queue full")
-    events.emit("transport_down", {})
+    events.emit(Channel.DOWN, {})
     assert [r.getMessage() for r in caplog.records if r.name == log.name] == [
         "on_event raised", "on_event raised"]
     assert events.counters == {"send_error:queue full": 1}

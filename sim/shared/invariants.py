@@ -95,7 +95,7 @@ class Bounds:
         # Crash -> every watcher suspects within t_max; two warnings reach the standby
         # within the vote window; then claim_hold. Loss only delays the warnings, which
         # repeat every warn_interval: allow two more vote windows under loss.
-        takeover = p.t_max + p.vote_window + p.claim_hold + (2 * p.vote_window if loss else 0.0)
+        takeover = p.takeover_bound(lossy=bool(loss))
         # A stale holder heartbeats on resume; the new holder answers at once (rule 2).
         dual = p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
         converge = 2 * p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)

@@ -154,7 +154,7 @@ class Reassembler:
         self._partial: OrderedDict[tuple[int, int], _Partial] = OrderedDict()
         self._done: OrderedDict[tuple[int, int], float] = OrderedDict()
         """Messages completed within `expiry`: a late duplicate piece is not a new one."""
-        self.drops: Counter[FragmentDrop] = Counter()
+        self.drops: Counter[str] = Counter()
         self.completed = 0
 
     def __len__(self) -> int:

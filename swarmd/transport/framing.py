@@ -89,7 +89,7 @@ class FrameDecoder:
         self._buf = bytearray()
         self._max_encoded = max_frame + CRC_LEN + 2 + (max_frame + CRC_LEN) // 0xFE
         self._skipping = False
-        self.drops: Counter[FramingDrop] = Counter()
+        self.drops: Counter[str] = Counter()
         """Rejected chunks by reason: cobs, crc, short, overlong."""
         self.frames = 0
 
