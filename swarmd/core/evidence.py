@@ -72,6 +72,7 @@ class EvidenceStore:
         self._relayed_at: dict[str, float] = {}
         self._refutes_relayed_at: dict[str, float] = {}
         self._evidence_relayed_at: dict[str, float] = {}
+        self._mine_epoch: dict[str, int] = {}
         self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
 
     # ------------------------------------------------------------------ evidence
@@ -219,6 +220,7 @@ class EvidenceStore:
     def took_over(self, f: str, failed: int, old_epoch: int, epoch: int) -> None:
         """This robot holds f at `epoch` now: keep the certificate of its hold."""
         self._mine[f] = (failed, self.cert_frames(f, failed, old_epoch))
+        self._mine_epoch[f] = old_epoch
         self._certified.setdefault(f, {})[(self._robot_id, epoch)] = (
             failed, self._backers(f, failed, old_epoch, self._robot_id))
 
@@ -235,6 +237,11 @@ class EvidenceStore:
         if mine is None or now - self._relayed_at.get(f, -1e18) < gap:
             return None
         self._relayed_at[f] = now
+        # The latest unrefuted warnings, not those of the moment we took over: a holder
+        # may have refuted those since, while later ones still back our hold.
+        fresh = self.cert_frames(f, mine[0], self._mine_epoch.get(f, -1))
+        if fresh:
+            mine = self._mine[f] = (mine[0], fresh)
         return mine
 
     def restore(self, f: str, epoch: int, frames: tuple[bytes, ...],
@@ -288,11 +295,14 @@ class EvidenceStore:
         got[r.witness] = (r.seq, raw)
         return True
 
-    def refute_frames(self, f: str, holder: int, epoch: int, now: float) -> tuple[bytes, ...]:
+    def refute_frames(self, f: str, holder: int, epoch: int, now: float,
+                      every: float | None = None) -> tuple[bytes, ...]:
         """The signed REFUTEs `holder` made about f at `epoch`, to relay to a robot that
-        still acts on a claim they void; at most once per T_max (empty otherwise)."""
+        still acts on a claim they void; at most once per `every` (default T_max; empty
+        otherwise)."""
         got = self._refutes.get(f, {}).get((holder, epoch))
-        if not got or now - self._refutes_relayed_at.get(f, -1e18) < self._params.t_max:
+        gap = self._params.t_max if every is None else every
+        if not got or now - self._refutes_relayed_at.get(f, -1e18) < gap:
             return ()
         self._refutes_relayed_at[f] = now
         return tuple(raw for _, raw in got.values())

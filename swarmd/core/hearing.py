@@ -75,7 +75,12 @@ class Hearing(NodeBase):
         watch = self._watches.get(f)
         if watch is not None:
             suspected = watch.suspecting
-            if watch.heard(now) and suspected and (sender, epoch) == before:
+            if watch.heard(now) and suspected and epoch <= before.epoch:
+                # The suspect heard alive (rule 4), or the rival that won the suspect's
+                # own takeover race at its epoch (lowest id): the suspicion is over, and
+                # the log says so (the paper's property: every warning ends in a
+                # takeover, a refutation or an alert). A holder at a newer epoch ends it
+                # by its takeover.
                 self._emit(ev.Refute(subject=sender, function=f))
         votes = self._votes.get(f)
         if votes is not None and votes.witnesses:

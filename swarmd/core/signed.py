@@ -80,11 +80,19 @@ class Signed(NodeBase):
         self._send(wire.Claim(failed, self._plan.slot(f), self._epoch))
 
     def _relay_unasked(self, now: float) -> None:
-        """Anti-entropy: a robot that restarted, or missed the takeover and heard nothing
-        since that would make us relay, learns it within RELAY_EVERY T_max
-        (DESIGN, "Convergence")."""
-        if self._identity is not None and self._role == Role.ACTIVE and self._epoch:
-            self._relay_cert(self._function, now, RELAY_EVERY * self._params.t_max)
+        """Anti-entropy: a robot that restarted, or missed the takeover (or its undoing)
+        and heard nothing since that would make us relay, learns it within RELAY_EVERY
+        T_max (DESIGN, "Convergence")."""
+        if self._identity is None or self._role != Role.ACTIVE or self._function is None:
+            return
+        every = RELAY_EVERY * self._params.t_max
+        if self._epoch:
+            self._relay_cert(self._function, now, every)
+        # And the refutes of a takeover of our slot we undid: a robot that restarted
+        # with it in its view learns it is void (`_rejudge`).
+        for raw in self._ev.refute_frames(self._function, self._robot_id, self._epoch, now,
+                                          every):
+            self._send_cert(self._function, raw)
 
     def _on_cert(self, cert: wire.Cert, now: float) -> None:
         f = self._slot(cert.function)
@@ -136,6 +144,7 @@ class Signed(NodeBase):
                 and self._ev.replaced(f, known.robot, known.epoch) is None \
                 and known.robot != self._robot_id:
             self._known[f] = refuter
+            self._suspicion_moot(f, now)
         me = self._robot_id
         c = self._claim
         if c is not None and c.function == f and not self._ev.certify(
@@ -149,8 +158,19 @@ class Signed(NodeBase):
             if failed is None or epoch == 0 or self._ev.is_certified(f, holder, epoch):
                 return
             self._known[f] = Holder(failed, epoch - 1)
+            self._suspicion_moot(f, now)
             if holder == me and self._function == f and self._role == Role.ACTIVE:
                 self._fence(epoch - 1, now)
+
+    def _suspicion_moot(self, f: str, now: float) -> None:
+        """Our view of f went back to a holder that just said, signed, it is alive: a
+        suspicion of the takeover's holder we watched is moot. It ends as a refuted one
+        (rule 4), and the watch runs on for the holder (it fires again after T_max if
+        that one is silent)."""
+        watch = self._watches.get(f)
+        if watch is not None and watch.suspecting:
+            watch.heard(now)
+            self._emit(ev.Refute(subject=self._known[f].robot, function=f))
 
     def _relay_refutes(self, f: str, now: float) -> None:
         """Someone acts on a takeover of f that refutes we hold void (an uncertified
