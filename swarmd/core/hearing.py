@@ -110,16 +110,8 @@ class Hearing(NodeBase):
                     and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
                 self._relay_cert(f, now)  # a watcher that missed our takeover
         holder, epoch = self._known[f]
-        if w.suspect == self._robot_id:
-            if self._role == Role.ACTIVE and f == self._function:
-                self._warned_about_us(f, sender, w.epoch, seq, now)
-                return
-            if (holder, epoch) != (self._robot_id, w.epoch):
-                return
-            # Our own slot, which we no longer execute (we left it, or were faulty) and
-            # nobody took over: the warnings are right, and as a robot that covers it we
-            # may take it back like any standby (DESIGN, "Convergence": a slot has a
-            # holder while a live robot covers it).
+        if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
+            return
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, w.epoch)
         if f not in self._covers or not self._standing_by():
@@ -144,6 +136,17 @@ class Hearing(NodeBase):
         if count >= self._params.quorum and not self._ears.heard_lately(
                 f, w.suspect, w.epoch, now, self._params.t_max / 2):
             self._start_claim(f, w.suspect, w.epoch, now)
+
+    def _ours_unheld(self, f: str, sender: int, w: wire.Warn, seq: int, now: float) -> bool:
+        """A warning about ourselves. Holding the slot, we answer it (rule 4). Not
+        holding it while every view still names us (we left it, or were faulty, and
+        nobody took it over): the warning is right, and as a robot that covers the slot
+        we may take it back like any standby — True, count it (DESIGN, "Convergence": a
+        slot has a holder while a live robot covers it)."""
+        if self._role == Role.ACTIVE and f == self._function:
+            self._warned_about_us(f, sender, w.epoch, seq, now)
+            return False
+        return tuple(self._known[f]) == (self._robot_id, w.epoch)
 
     def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
         """Rule 4: a warning about ourselves is answered with a heartbeat at once (and,
