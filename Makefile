@@ -1,6 +1,10 @@
 # swarmd developer targets. `make demo` and `make test` are the README's two commands.
-PY ?= python3
-PIP ?= $(PY) -m pip
+# Everything installs into the checkout's own virtual environment (.venv), never into
+# the interpreter on PATH: `make` leaves the system's Python untouched.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+PIP := $(PY) -m pip
 STAMP := .make-stamps
 
 .PHONY: setup system-deps test lint demo demo-mavlink bench clean
@@ -9,7 +13,10 @@ $(STAMP)/system: scripts/system-deps.sh
 	bash scripts/system-deps.sh
 	mkdir -p $(STAMP) && touch $@
 
-$(STAMP)/python: pyproject.toml
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP)/python: pyproject.toml | $(PY)
 	$(PIP) install -q -e '.[sim,ros2,dev]'
 	mkdir -p $(STAMP) && touch $@
 
@@ -42,4 +49,4 @@ bench: setup
 	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 clean:
-	rm -rf $(STAMP) out .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(STAMP) $(VENV) out .pytest_cache .mypy_cache .ruff_cache
