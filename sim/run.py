@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sim.shared.channel import LOSS_MODELS
 from sim.shared.eventlog import stops_at_end, write_events
 from sim.shared.faults import Fault, FaultSpecError, check_faults, parse_fault
 from sim.shared.summary import Summary, counted_drops, summarize
@@ -76,6 +77,10 @@ class SimOptions:
     duration: float = 15.0
     seed: int = 0
     loss: float = 0.0
+    loss_model: str = "bernoulli"
+    """`bernoulli` or `burst` (Gilbert-Elliott per directed link, sim/shared/channel.py)."""
+    burst_len: float = 4.0
+    """Mean frames of a loss burst (`burst`)."""
     faults: tuple[str, ...] = ()
     """Fault specs as typed (`crash:2@5`; sim.shared.faults)."""
     events: Path | None = None
@@ -103,6 +108,11 @@ class SimOptions:
             problems.append(f"--duration: {self.duration:g} is not above 0")
         if not 0.0 <= self.loss <= 1.0:
             problems.append(f"--loss: {self.loss:g} is not between 0 and 1")
+        if self.loss_model not in LOSS_MODELS:
+            problems.append(f"--loss-model: {self.loss_model!r} is not one of "
+                            f"{', '.join(LOSS_MODELS)}")
+        if not self.burst_len >= 1.0:
+            problems.append(f"--burst-len: {self.burst_len:g} is below 1 frame")
         if self.transport not in TRANSPORTS:
             problems.append(f"--transport: {self.transport!r} is not one of "
                             f"{', '.join(TRANSPORTS)}")
@@ -359,7 +369,8 @@ def _run_virtual(checked: _Checked, faults: list[Fault], options: SimOptions,
     start = time.perf_counter()
     result = run_virtual(checked.plan, checked.params, duration=options.duration,
                          faults=faults, loss=options.loss, seed=options.seed,
-                         keys=(key,) if key else (), auth=_auth(checked))
+                         keys=(key,) if key else (), auth=_auth(checked),
+                         loss_model=options.loss_model, burst_len=options.burst_len)
     wall = time.perf_counter() - start
     summary = summarize(result.events, faults, checked.plan, checked.params,
                         loss=options.loss, duration=options.duration, mode="virtual",
@@ -383,7 +394,8 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
                               report_dir=options.report, physics=options.physics,
                               craft=options.chosen_craft() if options.flies else None,
                               transport=options.transport, live=options.live,
-                              link=options.robot_link, refuse_arm=options.refuse_arm)
+                              link=options.robot_link, refuse_arm=options.refuse_arm,
+                              loss_model=options.loss_model, burst_len=options.burst_len)
     except (ValueError, RuntimeError) as exc:  # a swarm that could not start
         raise SimError(f"swarmd sim: {exc}") from None
     # A robot whose autopilot refuses to arm is faulty: its daemon hands its function

@@ -86,7 +86,7 @@ from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, writ
 from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
-from sim.shared.faults import Fault, fault_record
+from sim.shared.faults import LINK_KINDS, Fault, fault_record
 from swarmd.core.events import Started, event_of
 from swarmd.transport.addresses import DEFAULT_GROUP
 
@@ -130,8 +130,12 @@ class Orchestrator:
         craft: str | None = None,
         link: str | None = None,
         refuse_arm: Sequence[int] = (),
+        loss_model: str = "bernoulli",
+        burst_len: float = 4.0,
     ) -> None:
         self.swarm_path = swarm_path
+        self.loss_model = loss_model
+        self.burst_len = burst_len
         self.craft = craft
         self.transport = transport
         self.duration = duration
@@ -248,7 +252,7 @@ class Orchestrator:
             robot_id=robot, config_path=str(cfg),
             log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
             loss=self.loss, seed=self.seed, partitions=self.schedule.partitions,
-            link=self.link, t0=t0,
+            loss_model=self.loss_model, burst_len=self.burst_len, link=self.link, t0=t0,
             craft=self.craft, refuse_arm=robot in self.refuse_arm,
         )
         ev_r, ev_w = self._ctx.Pipe(duplex=False)
@@ -351,8 +355,9 @@ class Orchestrator:
 
     def _apply(self, fault: Fault) -> None:
         loop = asyncio.get_running_loop()
-        if fault.kind == "partition":
-            self._fault_event(fault)  # the receive filters already hold the window
+        if fault.kind in LINK_KINDS:
+            for part in fault.split():
+                self._fault_event(part)  # the receive filters already hold the window
             return
         parts = fault.split()
         if len(parts) > 1:  # several robots at one instant: one fault each
@@ -570,6 +575,8 @@ async def run_realtime_async(
     craft: str | None = None,
     link: str | None = None,
     refuse_arm: Sequence[int] = (),
+    loss_model: str = "bernoulli",
+    burst_len: float = 4.0,
 ) -> RealtimeResult:
     """Run the swarm in real time (see the module docstring); awaitable form for tests.
     `handle_signals`: SIGINT and SIGTERM end the run early with a partial result
@@ -580,7 +587,8 @@ async def run_realtime_async(
     (the `mavlink-*` links)."""
     orch = Orchestrator(swarm_path, duration=duration, faults=faults, loss=loss, seed=seed,
                         physics=physics, live=live, report_dir=report_dir, port=port,
-                        transport=transport, craft=craft, link=link, refuse_arm=refuse_arm)
+                        transport=transport, craft=craft, link=link, refuse_arm=refuse_arm,
+                        loss_model=loss_model, burst_len=burst_len)
     try:
         orch.prepare()
         result = await orch.run(handle_signals=handle_signals)

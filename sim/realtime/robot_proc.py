@@ -97,6 +97,9 @@ class RobotSpec:
     loss: float = 0.0
     seed: int = 0
     partitions: tuple[PartitionWindow, ...] = ()
+    """Partitions and one-way link faults (`netfilter.link_windows`)."""
+    loss_model: str = "bernoulli"
+    burst_len: float = 4.0
     link: str = "none"
     t0: float | None = None
     """Start at once with this run origin (a restart); None: wait for the `go` message."""
@@ -389,6 +392,8 @@ class _Robot:
             seed=spec.seed,
             partitions=spec.partitions,
             clock=self._run_time,
+            loss_model=spec.loss_model,
+            burst_len=spec.burst_len,
         )
         self.stop_event: asyncio.Event | None = None
         self.go: asyncio.Event | None = None

@@ -14,7 +14,7 @@ import asyncio
 import time
 from collections.abc import Callable, Sequence
 
-from sim.realtime.netfilter import PartitionWindow, partition_windows
+from sim.realtime.netfilter import PartitionWindow, link_windows
 from sim.shared.faults import Fault
 
 
@@ -24,9 +24,8 @@ class FaultSchedule:
     def __init__(self, faults: Sequence[Fault], duration: float) -> None:
         self.faults = sorted(faults, key=lambda f: f.at)
         self.duration = duration
-        self.partitions: tuple[PartitionWindow, ...] = partition_windows(
-            [(f.at, f.duration or 0.0, f.groups) for f in self.faults if f.kind == "partition"]
-        )
+        self.partitions: tuple[PartitionWindow, ...] = link_windows(
+            [part for f in self.faults for part in f.split()])
         self._handles: list[asyncio.TimerHandle] = []
 
     @property

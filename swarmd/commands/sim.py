@@ -101,6 +101,13 @@ def register(app: typer.Typer) -> None:
         loss: Annotated[float, typer.Option(
             "--loss", metavar="P", callback=probability, help="Probability, 0 to below 1, "
             "that a receiver misses a frame (drawn per frame and per receiver).")] = 0.0,
+        loss_model: Annotated[str, typer.Option(
+            "--loss-model", metavar="M", help="How --loss falls: bernoulli (each frame on "
+            "its own) or burst (Gilbert-Elliott per link: runs of lost frames, as a radio "
+            "fades; the same mean loss).")] = "bernoulli",
+        burst_len: Annotated[float, typer.Option(
+            "--burst-len", metavar="L", min=1.0, callback=finite, help="--loss-model "
+            "burst: mean length of a loss burst, in frames.")] = 4.0,
         fault: Annotated[list[str] | None, typer.Option(
             "--fault", metavar="SPEC", help=FAULT_HELP)] = None,
         events: Annotated[Path | None, typer.Option(
@@ -175,6 +182,7 @@ def register(app: typer.Typer) -> None:
         try:
             options = SimOptions(
                 swarm=swarm, virtual=virtual, duration=duration, seed=seed, loss=loss,
+                loss_model=loss_model, burst_len=burst_len,
                 faults=tuple(fault or ()), events=events, report=report,
                 physics=not no_physics, craft=craft, transport=transport,
                 live=not json_out, link=link, autopilot=autopilot,
