@@ -277,7 +277,7 @@ class VirtualSwarm:
             # A bursty channel loses whole runs of frames (mean `burst_len`): silence of
             # a few bursts is the channel, not a muted robot.
             bursty = self.channel.loss_model == "burst" and self.channel.loss > 0
-            window = max(10.0, 8 * self.channel.burst_len if bursty else 0.0) * period
+            window = max(10.0, 16 * self.channel.burst_len if bursty else 0.0) * period
             slot = self.plan.slot(sx.function) if active and sx.function is not None else 0
             audience = self._relevant_to.get(slot, ()) if slot else \
                 self._standby_targets.get(x, ())
