@@ -113,6 +113,12 @@ def parse_source(text: str, name: str = "<string>", path: Path | None = None) ->
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
+        if "nesting depth" in (exc.problem or ""):
+            # libyaml from 0.2.6 (PyYAML 6.0.4 wheels) stops deep nesting itself, before
+            # `_check_shape` sees it: the same refusal, in the same words.
+            raise ConfigError([Problem(name, "<yaml>",
+                                       f"nested more than {MAX_DEPTH} levels deep",
+                                       line=line)]) from None
         what = " ".join(s for s in (exc.context, exc.problem) if s)
         raise ConfigError(
             [Problem(name, "<yaml>", f"YAML syntax error: {what}", line=line)]
