@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
-from test_schedules import LINK, schedules, swarm  # noqa: E402
+from test_schedules import LINK, every_schedule, swarm  # noqa: E402
 
 from sim.virtual.simulator import run_virtual  # noqa: E402
 
@@ -30,7 +30,7 @@ def main() -> None:
     ap.add_argument("--auth", choices=("per-robot", "shared", "none"), default="per-robot")
     ap.add_argument("--link", action="store_true", help="only the link-fault schedules")
     a = ap.parse_args()
-    todo = [s for s in schedules() if not a.link or s.kind in LINK]
+    todo = [s for s in every_schedule() if not a.link or s.kind in LINK]
     kinds = collections.Counter(s.kind for s in todo)
     t0 = time.perf_counter()
     bad = 0
