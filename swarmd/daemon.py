@@ -368,6 +368,10 @@ class Daemon:
             assert material is not None
             self.keyring.replace(material.public_keys, material.revoked)
             self.signer.replace(material.private_key)
+            if self.runtime is not None:
+                # A revoked robot's heartbeat chain must not keep it alive: from now on
+                # only its anchors could, and they no longer verify.
+                self.runtime.revoke(material.revoked)
         except Exception as exc:  # IdentityFileError, ValueError: a malformed key
             self.reload_errors += 1
             log.error("SIGHUP: identity keys not reloaded; the old ones stay in use",

@@ -48,6 +48,7 @@ from typing import Any
 
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
+from swarmd.core.chain import PeerChains
 from swarmd.core.drops import DropReason
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -111,6 +112,8 @@ class MonitorState:
         """function -> (epoch, robot) of the newest-epoch ACTIVE heartbeat heard for it."""
         self.signed_claims: set[tuple[str, int, int]] = set()
         """Per-robot mode: (function, epoch, claimant) of every signed CLAIM heard."""
+        self.chains = PeerChains()
+        """Per-robot mode: each robot's heartbeat chain (`swarmd.core.chain`)."""
         self.replay = ReplayFilter()
         """The daemons' filter; unbounded until `start_clock` (`listen` calls it)."""
 
@@ -146,10 +149,19 @@ class MonitorState:
             return
         if isinstance(frame.msg, wire.Cert):
             return  # relays a signed frame; no replay filter, as in the daemons
+        msg = frame.msg
+        if isinstance(msg, wire.Heartbeat) and self.verifier is not None \
+                and not self.chains.check(frame.sender, msg.n, msg.link, anchor=msg.anchor):
+            # As the daemons: a heartbeat counts only if its link is its sender's own
+            # (a monitor started late waits for each robot's next anchor).
+            self._drop(DropReason.UNANCHORED)
+            return
         reason = self.replay.check(frame.sender, frame.seq, now)
         if reason is not None:
             self._drop(reason)
             return
+        if isinstance(msg, wire.Heartbeat) and self.verifier is not None:
+            self.chains.commit(frame.sender, msg.n, msg.link, frame.seq, anchor=msg.anchor)
         seen = self.robots.get(frame.sender)
         if seen is None:
             seen = self.robots[frame.sender] = Heard(frame.sender, now)

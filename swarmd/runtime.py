@@ -40,7 +40,7 @@ import asyncio
 import logging
 import time
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from enum import StrEnum
 from typing import Any
 
@@ -262,6 +262,11 @@ class Runtime:
         verifies; frames already queued are checked against the new list. Raises
         `NodeError` and keeps the old keys if the node refuses them (`Node.set_keys`)."""
         self._node.set_keys(keys)
+
+    def revoke(self, robots: Iterable[int]) -> None:
+        """Robots whose keys were revoked (SIGHUP, per-robot mode): the node forgets
+        their heartbeat chains, so they fall silent to it now (`Node.revoke`)."""
+        self._node.revoke(robots)
 
     # ---------------------------------------------------------------- the step path
     def _step(self, call: Callable[[float], list[Action]]) -> None:

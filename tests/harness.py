@@ -15,6 +15,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
 from swarmd.core.events import Event
@@ -139,3 +140,25 @@ class Net:
         """Events called `name` (of one robot, if given), in order."""
         return [e for e in self.events
                 if e["event"] == name and (robot is None or e["robot"] == robot)]
+
+
+def signed_beat(identity: Identity | None, swarm_id: int, sender: int, seq: int,
+                slot: int, epoch: int, role: int = 1, *, key: bytes | None = None,
+                link: bytes = bytes(8), n: int = 0) -> bytes:
+    """A heartbeat of `sender` as its own radio sends it in per-robot mode: an anchor
+    (signed with `identity`, the sender's own) carrying `link` as its chain position.
+    With `identity` None, the frame a forger without the sender's key can make: the
+    same link, unsigned (swarm key tag if `key`)."""
+    hb = wire.Heartbeat(slot, epoch, role, 0, n, link, anchor=identity is not None)
+    signer = identity.signer if identity is not None else _NoSigner(sender)
+    return wire.encode(wire.Frame(swarm_id, sender, seq, hb), key, signer)
+
+
+class _NoSigner:
+    """Makes `wire.encode` lay a heartbeat out as per-robot mode does; never signs."""
+
+    def __init__(self, robot: int) -> None:
+        self.robot = robot
+
+    def sign(self, data: bytes) -> bytes:
+        raise AssertionError("an unsigned per-robot heartbeat is never signed")

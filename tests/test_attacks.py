@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from harness import signed_beat
 
 from sim.shared.fakeid import FakeVerifier, fake_identities
 from sim.shared.faults import parse_fault
@@ -162,21 +163,25 @@ def test_a_restarted_standby_drops_replayed_heartbeats_of_a_dead_robot(paper: Pa
     ids = fake_identities(plan.robots)
     standby = Node(6, plan, params, 0.0, identity=ids[6])
     standby.tick(0.0)
-    captured = [wire.encode(wire.Frame(plan.swarm_id, 2, 100 + i, wire.Heartbeat(2, 0, 1, 0)))
-                for i in range(10)]
+    # What robot 2's radio sent for a second: anchors and links of its chain.
+    two = Node(2, plan, params, 0.0, identity=ids[2], seq_start=100)
+    captured = [a.frame for i in range(10) for a in two.tick(0.1 * i)
+                if isinstance(a, Broadcast)]
     for i, data in enumerate(captured):
         standby.receive(data, 0.1 * i)
     snap = standby.snapshot()
-    assert snap.peer_seq[2] == 109
+    assert snap.peer_seq[2] == two.snapshot().seq and 2 in snap.heard
     # Robot 2 dies; the standby restarts with what it persisted.
     again = Node(6, plan, params, 5.0, identity=ids[6],
                  restored=Restored(known=dict(snap.known), peer_seq=dict(snap.peer_seq)))
     again.tick(5.0)
     for i, data in enumerate(captured):
         again.receive(data, 5.0 + 0.01 * i)
-    assert again.drops["replay"] == len(captured)
+    # The anchors are replays; the links lead nowhere it knows (no chain yet).
+    assert again.drops["replay"] + again.drops["unanchored"] == len(captured)
+    assert again.drops["replay"] >= 3
     assert 2 not in again.snapshot().heard  # the dead robot does not look alive
-    # Without the persisted seqs, the same replays would be taken (the hole closed).
+    # Without the persisted seqs, a replayed anchor would be taken (the hole closed).
     naive = Node(6, plan, params, 5.0, identity=ids[6])
     naive.tick(5.0)
     naive.receive(captured[0], 5.0)
@@ -233,8 +238,7 @@ def test_per_robot_a_takeover_needs_a_certificate_of_signed_witnesses(paper: Pap
     def claim_and_beat(t: float) -> None:
         """Robot 6's signed CLAIM of f2 at epoch 1, then its heartbeat as the holder."""
         observer.receive(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, slot, 1)), t)
-        observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, next(seq),
-                                                wire.Heartbeat(slot, 1, 1, 0))), t + 0.01)
+        observer.receive(signed_beat(ids[6], plan.swarm_id, 6, next(seq), slot, 1), t + 0.01)
 
     claim_and_beat(1.0)
     assert observer.snapshot().known["f2"] == (2, 0)
@@ -265,8 +269,7 @@ def test_per_robot_a_leave_signed_by_the_holder_is_its_own_certificate(paper: Pa
     slot = plan.slot("f2")
     observer.receive(_signed(ids[2], plan, 2, 500, wire.Leave(slot, 0, 0)), 1.0)
     observer.receive(_signed(ids[6], plan, 6, 900, wire.Claim(2, slot, 1)), 1.01)
-    observer.receive(wire.encode(wire.Frame(plan.swarm_id, 6, 901,
-                                            wire.Heartbeat(slot, 1, 1, 0))), 1.2)
+    observer.receive(signed_beat(ids[6], plan.swarm_id, 6, 901, slot, 1), 1.2)
     assert observer.snapshot().known["f2"] == (6, 1)
     assert observer.drops.get("uncertified", 0) == 0
 
@@ -282,12 +285,26 @@ def test_per_robot_frame_sizes_and_verification(paper: Paper) -> None:
         signer = ids[signer_of or sender].signer
         return wire.encode(wire.Frame(plan.swarm_id, sender, 7, msg), key, signer)
 
-    beat = enc(2, wire.Heartbeat(2, 0, 1, 0))
+    beat = enc(2, wire.Heartbeat(2, 0, 1, 0, 1, bytes(8)))
+    anchor = enc(2, wire.Heartbeat(2, 0, 1, 0, 1, bytes(8), anchor=True))
     warn = enc(3, wire.Warn(2, 2, 0))
     claim = enc(6, wire.Claim(2, 2, 1))
     leave = enc(2, wire.Leave(2, 0, 0))
     relay = enc(6, wire.Cert(2, wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0)), warn))
-    assert [len(x) for x in (beat, warn, claim, leave, relay)] == [23, 80, 80, 79, 92]
+    sizes = [len(x) for x in (beat, anchor, warn, claim, leave, relay)]
+    assert sizes == [32, 88, 80, 80, 79, 92]
+    bare = wire.encode(wire.Frame(plan.swarm_id, 2, 7, wire.Heartbeat(2, 0, 1, 0, 1, bytes(8))),
+                       None, ids[2].signer)
+    assert len(bare) == 24  # per robot without a swarm key: the link alone
+    got_beat = wire.decode(anchor, (key,), verifier).msg
+    assert isinstance(got_beat, wire.Heartbeat) and got_beat.anchor
+    got_beat = wire.decode(beat, (key,), verifier).msg
+    assert isinstance(got_beat, wire.Heartbeat) and not got_beat.anchor
+    # An anchor in robot 2's name signed with robot 6's key is refused.
+    with pytest.raises(wire.CodecError) as exc:
+        wire.decode(enc(2, wire.Heartbeat(2, 0, 1, 0, 1, bytes(8), anchor=True), 6),
+                    (key,), verifier)
+    assert exc.value.reason == "auth"
     got = wire.decode(relay, (key,), verifier)
     assert isinstance(got.msg, wire.Cert) and got.msg.inner.sender == 3
     assert wire.decode(warn, (key,), verifier).raw == warn
@@ -348,8 +365,12 @@ def _mode_node(plan: SwarmPlan, params: Params, mode: str, rid: int, now: float,
 
 def _beat(plan: SwarmPlan, mode: str, sender: int, seq: int) -> bytes:
     """A heartbeat of `sender` (holder of its home slot at epoch 0): what the robot sends,
-    or what an insider with the swarm key (anyone, unsigned) forges in its name."""
+    or what an insider with the swarm key (anyone, unsigned) forges in its name; per
+    robot, an anchor signed with the sender's own key (only it can make one)."""
     key = bytes(32) if mode != "none" else None
+    if mode == "per-robot":
+        return signed_beat(fake_identities(plan.robots)[sender], plan.swarm_id, sender, seq,
+                           sender, 0, key=key)
     return wire.encode(wire.Frame(plan.swarm_id, sender, seq,
                                   wire.Heartbeat(sender, 0, 1, 0)), key)
 
@@ -455,7 +476,7 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     assert again.snapshot().function == "f2"
     assert again.snapshot().certificate == (leave,)
     # The old holder's stale heartbeat gets the certificate and a fresh claim back.
-    stale = wire.encode(wire.Frame(plan.swarm_id, 2, 800, wire.Heartbeat(slot, 0, 1, 0)))
+    stale = signed_beat(res_ids[2], plan.swarm_id, 2, 800, slot, 0)
     out = [wire.decode(a.frame, (), res_ids[1].verifier).msg
            for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
     assert any(isinstance(m, wire.Cert) for m in out)
@@ -700,8 +721,7 @@ def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> 
     seq = iter(range(1000, 2000))
 
     def beat(r: int, slot: int, epoch: int) -> bytes:
-        return wire.encode(wire.Frame(plan.swarm_id, r, next(seq),
-                                      wire.Heartbeat(slot, epoch, 1, 0)), key)
+        return signed_beat(ids[r], plan.swarm_id, r, next(seq), slot, epoch, key=key)
 
     for r in range(1, 5):
         state.feed(beat(r, r, 0), 0.0)

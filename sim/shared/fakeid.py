@@ -35,6 +35,10 @@ class FakeVerifier:
         self._secrets = dict(secrets)
         self._revoked = frozenset(revoked)
 
+    def revoke(self, robots: Iterable[int]) -> None:
+        """Revoke these robots from now on (a SIGHUP with a longer `revoked` list)."""
+        self._revoked = self._revoked | frozenset(robots)
+
     def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
         secret = self._secrets.get(robot)
         if secret is None or robot in self._revoked or len(signature) != SIGNATURE_LEN:

@@ -25,6 +25,7 @@ from collections.abc import Mapping, Sequence
 
 from swarmd.core import wire
 from swarmd.core.auth import Signer
+from swarmd.core.chain import LINK_LEN
 from swarmd.core.node import Snapshot
 from swarmd.core.plan import SwarmPlan
 
@@ -50,6 +51,11 @@ def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequenc
     def frame(sender: int, msg: wire.Message, seq: int | None = None) -> None:
         if seq is None:  # a little ahead of the last one heard, so it is not a replay
             seq = min(seqs.get(sender, snap.seq) + 8 + len(out), wire.SEQ_MAX)
+        if signer is not None and isinstance(msg, wire.Heartbeat):
+            # Per-robot mode: R's key signs a heartbeat of its own as an anchor, on a
+            # chain of its own making (it cannot make another robot's links).
+            msg = wire.Heartbeat(msg.function, msg.epoch, msg.role, msg.health, 0,
+                                 bytes(LINK_LEN), anchor=True)
         out.append(wire.encode(wire.Frame(plan.swarm_id, sender, seq, msg), key, signer))
 
     held = {f for f, (holder, _) in snap.known.items() if holder == me}

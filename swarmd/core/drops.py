@@ -32,6 +32,9 @@ class DropReason(StrEnum):
     """A slot index the plan does not have."""
     UNCERTIFIED = "uncertified"
     """Per-robot mode: a new holder or epoch without a certificate this robot verified."""
+    UNANCHORED = "unanchored"
+    """Per-robot mode: a heartbeat whose chain link this robot cannot tie to its sender
+    (it lost the chain, or the frame is forged): no liveness until the next anchor."""
     STALE_EVIDENCE = "stale_evidence"
     """Per-robot mode: a warning its suspect refuted."""
     NOT_WITNESS = "not_witness"

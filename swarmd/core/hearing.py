@@ -68,6 +68,24 @@ class Hearing(NodeBase):
             # standbys take it over if nobody really holds it).
             self._rejoin_superseded(f, hb.epoch)
 
+    def _unanchored_beat(self, sender: int, hb: wire.Heartbeat, now: float) -> None:
+        """Per-robot mode: a heartbeat whose link we cannot tie to its sender's chain
+        (`chain.py`: we lost the chain, or it is forged). It proves no liveness and moves
+        nothing, but the answers cost nothing to give: a holder shown another view of its
+        slot sends its certificate and, to a stale one, an anchored heartbeat (it may
+        have lost our chain too: rule 2 within a frame); a robot rejoining that slot
+        stays a standby (the cautious side, as for an uncertified heartbeat)."""
+        self._drops[DropReason.UNANCHORED] += 1
+        f = self._plan.function_at(hb.function) if hb.function else None
+        if f is None:
+            return
+        if f == self._function and self._role == Role.ACTIVE:
+            self._relay_cert(f, now)
+            if hb.epoch <= self._epoch:
+                self._heartbeat_now(now)
+        if self._rejoin is not None and self._rejoin.function == f:
+            self._rejoin_superseded(f, hb.epoch)
+
     def _holder_heard(self, f: str, sender: int, epoch: int, before: Holder,
                       now: float) -> None:
         """f's holder (`sender` at `epoch`; `before`: the view until now) heartbeated:

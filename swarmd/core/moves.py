@@ -150,12 +150,19 @@ class Moves(NodeBase):
         self._send(wire.Warn(subject, self._plan.slot(g), epoch))
 
     # ------------------------------------------------------------------ heartbeats
-    def _send_heartbeat(self, now: float) -> None:
+    def _send_heartbeat(self, now: float, *, extra: bool = False) -> None:
         slot = self._plan.slot(self._function) if self._function is not None else 0
         # A rejoining robot is a standby to the others until it resumes (rule 6).
         role = Role.STANDBY if self._role == Role.REJOINING else self._role
-        self._send(wire.Heartbeat(slot, self._epoch if slot else 0, int(role),
-                                  int(self._health)))
+        epoch = self._epoch if slot else 0
+        hb = wire.Heartbeat(slot, epoch, int(role), int(self._health))
+        if self._chain is not None:
+            # Per-robot mode: the next link of our chain; an anchor (signed) where a
+            # receiver may have lost it (`chain.py`).
+            n, link, anchor = self._chain.next(now, (slot, epoch, int(role)),
+                                               self._anchor_every, extra=extra)
+            hb = wire.Heartbeat(slot, epoch, int(role), int(self._health), n, link, anchor)
+        self._send(hb)
         self._beat.sent(now)
 
     def _restart_heartbeats(self, now: float) -> None:
@@ -169,7 +176,7 @@ class Moves(NodeBase):
         at most four per heartbeat period so a flood of warnings cannot amplify."""
         if not self._heartbeating() or not self._beat.extra_allowed(now):
             return False
-        self._send_heartbeat(now)
+        self._send_heartbeat(now, extra=True)
         return True
 
 

@@ -19,13 +19,14 @@ Roles and transitions are the table in `roles.py`; every change of role goes thr
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from types import MappingProxyType
 
 from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Action, Release
 from swarmd.core.auth import Identity
+from swarmd.core.chain import OwnChain, PeerChains, anchor_every
 from swarmd.core.claims import ClaimMemory
 from swarmd.core.drops import DropReason
 from swarmd.core.errors import NodeError
@@ -79,6 +80,10 @@ class Node(Hearing, Moves, Signed):
         self._ev = EvidenceStore(robot_id, plan, params)  # per-robot mode, `evidence.py`
         self._start_time, self._stalled_at = now, -1e18
         self._beat = HeartbeatClock(params, now)
+        self._chain = OwnChain(robot_id, self._signer, seq_start) \
+            if self._signer is not None else None
+        self._chains = PeerChains()
+        self._anchor_every = anchor_every(params)
         self._armed = now
         self._stopped = self._started = False
         self._pending = []
@@ -218,6 +223,12 @@ class Node(Hearing, Moves, Signed):
             return self._drain()
         if sender == self._robot_id:
             return self._own_frame(frame, now)
+        msg = frame.msg
+        if isinstance(msg, wire.Heartbeat) and self._verifier is not None \
+                and not self._chains.check(sender, msg.n, msg.link, anchor=msg.anchor):
+            # Before the replay filter: a heartbeat not from its sender moves no counter.
+            self._unanchored_beat(sender, msg, now)
+            return self._drain()
         reason = self._replay.check(sender, frame.seq, now)
         if reason is not None:
             return self._drop(reason)
@@ -225,6 +236,8 @@ class Node(Hearing, Moves, Signed):
         self._heard_at[sender] = now
         match frame.msg:
             case wire.Heartbeat() as hb:
+                if self._verifier is not None:
+                    self._chains.commit(sender, hb.n, hb.link, frame.seq, anchor=hb.anchor)
                 self._on_heartbeat(sender, hb, now)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
@@ -329,6 +342,13 @@ class Node(Hearing, Moves, Signed):
         `auth`. Raises `NodeError` (and changes nothing) for keys `limits.check_keys`
         refuses: turning signing off takes a restart."""
         self._keys = check_keys(keys, signing=bool(self._keys))
+
+    def revoke(self, robots: Iterable[int]) -> None:
+        """Per-robot mode: these robots' keys were revoked (SIGHUP; docs/operations.md).
+        Their frames no longer verify, and what this node knew of their heartbeat chains
+        is forgotten, so from now on they are silent to it: their slots are taken over
+        as a dead robot's (DESIGN, "Who may say what")."""
+        self._chains.forget(robots)
 
     def next_deadline(self) -> float | None:
         """When `tick` must be called next (absolute, same clock as `now`)."""

@@ -14,6 +14,7 @@ from collections import Counter
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.auth import Identity, Signer, Verifier
+from swarmd.core.chain import OwnChain, PeerChains
 from swarmd.core.claims import ClaimMemory, WaitState
 from swarmd.core.drops import DropReason
 from swarmd.core.events import Event
@@ -66,6 +67,11 @@ class NodeBase:
     _start_time: float
     _stalled_at: float
     _beat: HeartbeatClock
+    _chain: OwnChain | None
+    """Per-robot mode: our heartbeats' hash chain (`chain.py`)."""
+    _chains: PeerChains
+    """Per-robot mode: where each peer's chain stands, as we verified it."""
+    _anchor_every: float
     _armed: float | None
     """The deadline the driver was last given: a call far past it is our own stall,
     not the neighbours' silence (`Node._advance`)."""

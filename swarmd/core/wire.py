@@ -42,6 +42,7 @@ from enum import IntEnum
 from typing import NamedTuple
 
 from swarmd.core.auth import SIGNATURE_LEN, Signer, Verifier
+from swarmd.core.chain import LINK_LEN
 from swarmd.core.errors import CodecError as CodecError
 
 VERSION = 1
@@ -73,12 +74,19 @@ class LeaveReason(IntEnum):
 
 @dataclass(frozen=True, slots=True)
 class Heartbeat:
-    """The paper's health signal. `function` 0 means no function (standby)."""
+    """The paper's health signal. `function` 0 means no function (standby).
+
+    Per-robot mode adds the sender's chain link (`chain.py`): `n` its number modulo 256,
+    `link` its `chain.LINK_LEN` bytes, `anchor` set when the sender's own signature
+    covers the frame (then the link is where its chain stands)."""
 
     function: int
     epoch: int
     role: int
     health: int
+    n: int = 0
+    link: bytes = b""
+    anchor: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,11 +258,17 @@ def encode(frame: Frame, key: bytes | None = None, signer: Signer | None = None)
     mtype = _type_of(frame.msg)
     if mtype == MsgType.CERT:
         key = None
-    strong = signer is not None and mtype in STRONG
+    msg = frame.msg
+    strong = signer is not None and (mtype in STRONG or (
+        isinstance(msg, Heartbeat) and msg.anchor))
     first = (VERSION << 4) | int(mtype) | (_SIGNED if key or strong else 0)
     try:
         head = HEADER.pack(first, frame.swarm_id, frame.sender, frame.seq.to_bytes(6, "big"))
-        body = _body(frame.msg)
+        body = _body(msg)
+        if signer is not None and isinstance(msg, Heartbeat):
+            if len(msg.link) != LINK_LEN or not 0 <= msg.n <= 0xFF:
+                raise ValueError("a per-robot heartbeat carries its chain link")
+            body += bytes((msg.n,)) + msg.link
     except (struct.error, ValueError) as exc:
         raise ValueError(f"field out of range in {frame!r}: {exc}") from exc
     data = head + body
@@ -270,10 +284,12 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     no key is rejected; several keys serve key rotation (accept old and new for a
     window). Without keys, a tagged frame is rejected: it cannot be verified.
 
-    With `verifier` (per-robot mode) a WARN, CLAIM or LEAVE must carry its sender's own
-    valid signature (the swarm key does not vouch for them), and a CERT is accepted only
-    if the WARN or LEAVE it relays does, about the same slot. Without a verifier a CERT
-    is rejected."""
+    With `verifier` (per-robot mode) a WARN, CLAIM, LEAVE or REFUTE must carry its
+    sender's own valid signature (the swarm key does not vouch for them), a HEARTBEAT
+    carries its chain link and, as an anchor, its sender's signature in place of the
+    tag (`chain.py`; whether a link is the sender's is the receiver's to check), and a
+    CERT is accepted only if the frame it relays is, about the same slot. Without a
+    verifier a CERT is rejected."""
     if len(data) < HEADER_LEN + 1:
         raise CodecError("malformed", f"{len(data)} bytes is shorter than any frame")
     first, swarm_id, sender, seq_bytes = HEADER.unpack_from(data)
@@ -293,13 +309,25 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     if mtype == MsgType.CERT:
         return _decode_cert(data, swarm_id, sender, seq_bytes, slot, slot_len, signed,
                             verifier, inner)
-    strong = verifier is not None and mtype in STRONG
+    linked = verifier is not None and mtype == MsgType.HEARTBEAT
+    body_len = _FIXED_BODY[mtype] + slot_len + (1 + LINK_LEN if linked else 0)
+    strong = verifier is not None and (mtype in STRONG or (
+        linked and signed and len(data) == HEADER_LEN + body_len + SIGNATURE_LEN))
     auth_len = SIGNATURE_LEN if strong else TAG_LEN
-    expected = HEADER_LEN + _FIXED_BODY[mtype] + slot_len + (auth_len if signed else 0)
+    expected = HEADER_LEN + body_len + (auth_len if signed else 0)
     if len(data) != expected:
         raise CodecError("malformed", f"{mtype.name} of {len(data)} bytes, expected {expected}")
-    if strong:
-        assert verifier is not None
+    _verify(data, sender, mtype, signed, keys, verifier if strong else None)
+    msg = _message(data, mtype, slot, slot_at + slot_len, strong=strong, linked=linked)
+    return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
+                 data if strong else b"")
+
+
+def _verify(data: bytes, sender: int, mtype: MsgType, signed: bool, keys: Sequence[bytes],
+            verifier: Verifier | None) -> None:
+    """The sender's own signature (`verifier`: a frame that must carry one), else the
+    swarm key's tag (`keys`), else nothing. Raises `CodecError("auth")`."""
+    if verifier is not None:
         if not signed:
             raise CodecError("auth", f"{mtype.name} without its sender's signature")
         if not verifier.verify(sender, data[:-SIGNATURE_LEN], data[-SIGNATURE_LEN:]):
@@ -312,30 +340,36 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
             raise CodecError("auth", "bad authentication tag")
     elif signed:
         raise CodecError("auth", "signed frame but no swarm key configured")
-    after = slot_at + slot_len
-    msg: Message
+
+
+def _message(data: bytes, mtype: MsgType, slot: int, after: int, *, strong: bool,
+             linked: bool) -> Message:
+    """The body of a verified frame; `after`: the offset past its slot field."""
     match mtype:
         case MsgType.HEARTBEAT:
             epoch, rh = _HB_TAIL.unpack_from(data, after)
-            msg = Heartbeat(function=slot, epoch=epoch, role=rh & 0x0F, health=rh >> 4)
+            if not linked:
+                return Heartbeat(function=slot, epoch=epoch, role=rh & 0x0F, health=rh >> 4)
+            return Heartbeat(function=slot, epoch=epoch, role=rh & 0x0F, health=rh >> 4,
+                             n=data[after + 3], link=data[after + 4:after + 4 + LINK_LEN],
+                             anchor=strong)
         case MsgType.WARN:
-            msg = Warn(suspect=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
-                       epoch=_U16.unpack_from(data, after)[0])
-        case MsgType.CLAIM:
-            msg = Claim(failed=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
+            return Warn(suspect=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
                         epoch=_U16.unpack_from(data, after)[0])
+        case MsgType.CLAIM:
+            return Claim(failed=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
+                         epoch=_U16.unpack_from(data, after)[0])
         case MsgType.LEAVE:
             epoch, reason = _HB_TAIL.unpack_from(data, after)
-            msg = Leave(function=slot, epoch=epoch, reason=reason)
+            return Leave(function=slot, epoch=epoch, reason=reason)
         case MsgType.REFUTE:
             if not strong:
                 # Only its sender's own signature gives it meaning (per-robot mode).
                 raise CodecError("auth", "REFUTE outside per-robot mode")
-            msg = Refute(witness=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
-                         epoch=_U16.unpack_from(data, after)[0],
-                         seq=int.from_bytes(data[after + 2:after + 8], "big"))
-    return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
-                 data if strong else b"")
+            return Refute(witness=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
+                          epoch=_U16.unpack_from(data, after)[0],
+                          seq=int.from_bytes(data[after + 2:after + 8], "big"))
+    raise CodecError("malformed", f"{mtype.name} has no body of its own")  # pragma: no cover
 
 
 def _decode_cert(data: bytes, swarm_id: int, sender: int, seq_bytes: bytes, slot: int,

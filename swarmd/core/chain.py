@@ -1,0 +1,156 @@
+"""A robot's heartbeats only from that robot, per-robot mode: hash chains with signed
+anchors (DESIGN section 2, "Who may say what", "Heartbeats").
+
+A heartbeat must stay small (it is almost all of the airtime) and cheap to check (a
+robot hears ten of them a second from each neighbour), so it cannot carry a 64-byte
+signature every time. Each robot draws a chain of `CHAIN_LEN` secret links, each the
+hash of the next (`step`), and reveals them one per heartbeat, last-made first: a
+receiver that holds link `x` accepts a heartbeat carrying `y` only if hashing `y` a few
+times (`(n_y - n_x) mod 256`, at most `WALK`) gives `x`. Nobody but the robot knows the
+next link until it sends it, so a dead robot's heartbeats cannot be forged from what
+was heard: a forger can only repeat a link already revealed, which is refused. Where
+a chain starts — a receiver that just started, one that lost more than `WALK` links,
+a new chain — the robot's Ed25519 signature over the whole heartbeat (an *anchor*)
+says which link is current. A robot sends an anchor as the first `ANCHOR_RUN`
+heartbeats of each chain and after each change of what it heartbeats (slot, epoch,
+role), as every extra heartbeat (a refutation, an answer to a stale view: whoever it
+answers may have lost the chain), and at least every `anchor_every(params)`.
+
+A link binds liveness, not content: an outsider that hears a fresh link first can
+repeat it with other fields to a receiver that has not heard it yet (a race in radio
+range, once per link). What a heartbeat says is believed only as far as DESIGN allows
+an unsigned heartbeat anyway (never a new epoch or holder without a certificate); the
+swarm key's tag, when there is one, binds the content too.
+
+Pure and stdlib-only: the chain's seed is the robot's own signature over its run
+(deterministic, unpredictable without its key), so a simulation is reproducible.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from collections.abc import Iterable
+
+from swarmd.core.auth import Signer
+from swarmd.core.params import Params
+
+LINK_LEN = 8
+"""bytes. A 64-bit link: finding a preimage before the next heartbeat is out of reach,
+and it costs a heartbeat one byte more than the swarm key's tag."""
+CHAIN_LEN = 1024
+"""Links per chain: 102 s at 10 Hz, 10 min at `radio()`; drawn in about half a
+millisecond, so a simulator with many robots pays little for each."""
+WALK = 32
+"""The most links a receiver hashes to catch up (bounds a forged frame's cost to 32
+hashes; more lost heartbeats than that and it waits for the next anchor)."""
+ANCHOR_RUN = 3
+"""Anchors in a row where a chain starts, so one lost frame leaves nobody unanchored."""
+_WRAP = 256
+"""The link number on the wire is one byte, counted modulo 256."""
+_SEED_DOMAIN = b"swarmd heartbeat chain v1"
+
+
+def step(robot: int, link: bytes) -> bytes:
+    """The link before `link` in `robot`'s chain (its hash, personalised per robot so a
+    table built for one robot's chains is no use on another's)."""
+    return hashlib.blake2b(link, digest_size=LINK_LEN,
+                           person=b"swarmd-hb" + robot.to_bytes(2, "big")).digest()
+
+
+def anchor_every(params: Params) -> float:
+    """Seconds between two scheduled anchors at most: a receiver that starts (its
+    watchdogs wait `startup_grace`) or lost a standby's chain (it waits
+    `standby_timeout`) is anchored again well before it would suspect anyone."""
+    return min(params.startup_grace, params.standby_timeout) / 2
+
+
+class OwnChain:
+    """This robot's links, revealed one per heartbeat (`next`)."""
+
+    __slots__ = ("_anchor_due", "_count", "_last_anchor", "_links", "_n", "_robot", "_run",
+                 "_signer", "_what")
+
+    def __init__(self, robot: int, signer: Signer, run: int) -> None:
+        self._robot, self._signer, self._run = robot, signer, run
+        self._links: list[bytes] = []
+        self._count = 0  # chains drawn
+        self._n = 0
+        self._anchor_due = 0
+        self._last_anchor = float("-inf")
+        self._what: tuple[int, int, int] | None = None
+
+    def next(self, now: float, what: tuple[int, int, int], every: float, *,
+             extra: bool = False) -> tuple[int, bytes, bool]:
+        """(link number, link, anchor?) for the heartbeat sent at `now` saying `what`
+        (slot, epoch, role)."""
+        if not self._links:
+            self._draw()
+        if what != self._what:
+            self._what = what
+            self._anchor_due = ANCHOR_RUN
+        self._n = (self._n + 1) % _WRAP
+        link = self._links.pop()
+        anchor = extra or self._anchor_due > 0 or now - self._last_anchor >= every
+        if anchor:
+            self._anchor_due = max(0, self._anchor_due - 1)
+            self._last_anchor = now
+        return self._n, link, anchor
+
+    def _draw(self) -> None:
+        self._count += 1
+        stamp = self._run.to_bytes(6, "big") + self._count.to_bytes(4, "big")
+        seed = hashlib.blake2b(
+            self._signer.sign(_SEED_DOMAIN + self._robot.to_bytes(2, "big") + stamp),
+            digest_size=LINK_LEN).digest()
+        links = [seed]
+        for _ in range(CHAIN_LEN - 1):
+            links.append(step(self._robot, links[-1]))
+        self._links = links  # popped from the end: the last one made goes out first
+        self._anchor_due = ANCHOR_RUN
+
+
+class PeerChains:
+    """Where each peer's chain stands, as this robot verified it. `check` is pure (a
+    frame the replay filter then refuses moves nothing); `commit` records an accepted
+    heartbeat."""
+
+    __slots__ = ("_at",)
+
+    def __init__(self) -> None:
+        self._at: dict[int, tuple[int, bytes, int]] = {}
+        """robot -> (link number, link, seq of the frame that carried it)."""
+
+    def check(self, robot: int, n: int, link: bytes, *, anchor: bool) -> bool:
+        """Is this heartbeat `robot`'s own? An anchor is (its signature was verified);
+        a link is if it hashes to the last one accepted within `WALK` steps."""
+        if anchor:
+            return True
+        at = self._at.get(robot)
+        if at is None or len(link) != LINK_LEN:
+            return False
+        gap = (n - at[0]) % _WRAP
+        if not 0 < gap <= WALK:
+            return False  # a link already revealed, or too far: wait for an anchor
+        for _ in range(gap):
+            link = step(robot, link)
+        return hmac.compare_digest(link, at[1])
+
+    def commit(self, robot: int, n: int, link: bytes, seq: int, *, anchor: bool) -> None:
+        at = self._at.get(robot)
+        if anchor and at is not None and seq < at[2]:
+            return  # an older anchor a reordering channel brought late: keep the newer
+        self._at[robot] = (n, link, seq)
+
+    def forget(self, robots: Iterable[int]) -> None:
+        """Revoked robots: only an anchor (which their revoked key cannot sign any more)
+        makes them heard again."""
+        for r in robots:
+            self._at.pop(r, None)
+
+    def __contains__(self, robot: object) -> bool:
+        return robot in self._at
+
+
+__all__ = ["ANCHOR_RUN", "CHAIN_LEN", "LINK_LEN", "WALK", "OwnChain", "PeerChains",
+           "anchor_every", "step"]
