@@ -13,8 +13,9 @@ and the 802.15.4 budget (DESIGN section 2, "Who may say what").
    robot-second (what one daemon's protocol core costs, the simulator's own work
    included, so an upper bound).
 4. The `radio()` preset on one 802.15.4 channel: airtime at 60 robots and the largest
-   swarm below 30%, shared-key and per-robot (heartbeats are the same; a failover
-   costs more).
+   swarm below 30%, shared-key and per-robot (as shipped: robot keys only; and with a
+   swarm key beside them). Per robot a heartbeat carries its chain link and some are
+   signed anchors (`swarmd.core.chain`); a failover costs more.
 """
 
 from __future__ import annotations
@@ -87,11 +88,22 @@ def frame_sizes() -> None:
     warn = b""
     for name, msg in messages:
         frame = wire.Frame(1, 1, 1, msg)
+        if name == "HEARTBEAT":
+            print(f"  {name:<10} {len(wire.encode(frame)):>9} "
+                  f"{len(wire.encode(frame, KEY)):>11} {'':>10}")
+            continue
         per_robot = wire.encode(frame, KEY, ids[1].signer)
         if name == "WARN":
             warn = per_robot
         print(f"  {name:<10} {len(wire.encode(frame)):>9} {len(wire.encode(frame, KEY)):>11} "
               f"{len(per_robot):>10}")
+    link = wire.Frame(1, 1, 1, wire.Heartbeat(1, 0, 1, 0, 1, bytes(8)))
+    anchor = wire.Frame(1, 1, 1, wire.Heartbeat(1, 0, 1, 0, 1, bytes(8), anchor=True))
+    print(f"  {'  link':<10} {'-':>9} {'-':>11} {len(wire.encode(link, None, ids[1].signer)):>10}"
+          f"   (per robot: the chain link; {len(wire.encode(link, KEY, ids[1].signer))} B "
+          f"with a swarm key's tag beside)")
+    print(f"  {'  anchor':<10} {'-':>9} {'-':>11} {len(wire.encode(anchor, KEY, ids[1].signer)):>10}"
+          f"   (per robot: signed, one a second at udp(), one in 5 s at radio())")
     blank = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
     cert = wire.encode(wire.Frame(1, 1, 1, wire.Cert(1, blank, warn)), KEY, ids[1].signer)
     print(f"  {'CERT':<10} {'-':>9} {'-':>11} {len(cert):>10}   (one per witness, with a claim)")
@@ -142,7 +154,7 @@ def cpu_at_100(seconds: float, verifies_per_s: float) -> None:
     print(f"{len(robots)} robots (configs/grid100.yaml, udp preset), per-robot mode, "
           f"real Ed25519:")
     print(f"  steady state: {calls_steady / (half * len(robots)):.3f} verifies per robot per s "
-          f"(heartbeats carry the swarm key's tag, not a signature)")
+          f"(the heartbeat anchors: one a second per robot; links are hash checks)")
     print(f"  with a crash at {half:.0f} s: {verifier.calls} signed frames in {seconds:.0f} s "
           f"(the simulator verifies a broadcast once; a daemon verifies each one it hears: "
           f"at most {verifier.calls} verifies, "
@@ -155,14 +167,14 @@ def cpu_at_100(seconds: float, verifies_per_s: float) -> None:
 def radio_budget() -> None:
     params = radio()
     print("802.15.4 channel at the radio() preset (2/3 active, 1/3 standby, ring):")
-    for per_robot in (False, True):
-        b = budget.budget_for(40, 20, 2, params, medium="802.15.4", signed=True,
+    for mode, signed, per_robot in (("shared key", True, False), ("per-robot", False, True),
+                                    ("per-robot+key", True, True)):
+        b = budget.budget_for(40, 20, 2, params, medium="802.15.4", signed=signed,
                               per_robot=per_robot)
-        most = budget.largest_swarm(params, per_robot=per_robot)
-        mode = "per-robot" if per_robot else "shared key"
+        most = budget.largest_swarm(params, per_robot=per_robot, signed=signed)
         share = b.airtime_share or 0.0
         peak = b.peak_airtime_share or 0.0
-        print(f"  {mode:<10}: 60 robots {share:.1%} airtime steady, {peak:.1%} during a "
+        print(f"  {mode:<13}: 60 robots {share:.1%} airtime steady, {peak:.1%} during a "
               f"failover; largest swarm below 30%: {most} robots")
 
 

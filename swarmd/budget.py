@@ -20,11 +20,15 @@ timing parameters, not from measurement:
   per second (docs/radios.md, Digi 90001539): 3 x robots transmissions, worst case.
   A DigiMesh broadcast goes out MT + 1 = 4 times (MT default 3); with every robot in
   one hop and NH=1 nobody relays it (more hops add relays: not counted here).
-- per-robot mode (DESIGN section 2, "Who may say what"): heartbeats stay as they are
-  (the swarm key's 8-byte tag, or none), so the steady state does not change; WARN,
-  CLAIM and LEAVE carry a 64-byte Ed25519 signature instead of the tag (80, 80 and 79 B
-  below 128 functions), and a claim goes out with its certificate: one CERT frame (92 B)
-  per witness backing it, with every claim (re)sent.
+- per-robot mode (DESIGN section 2, "Who may say what"): a heartbeat carries its hash
+  chain's next link (`core/chain.py`: 1 + 8 B, so 24 B below 128 functions, 32 B with a
+  swarm key's tag beside), and some are anchors signed with the robot's own key (88 B):
+  an active robot's at most one each `chain.anchor_every` (1 s at `udp()`, 5 s at
+  `radio()`) plus `ANCHOR_RUN` per chain of `CHAIN_LEN` heartbeats, a standby's every
+  one when its period is as long; WARN, CLAIM and LEAVE carry a 64-byte Ed25519
+  signature instead of the tag (80, 80 and 79 B below 128 functions), and a claim goes
+  out with its certificate: one CERT frame (92 B) per witness backing it, with every
+  claim (re)sent.
 - fragments: a frame larger than the medium's payload goes out in fragments
   (transport/fragment.py: 6 B of header each, at most 8), every fragment a transmission
   of its own with the radio's full per-frame overhead. On DigiMesh (73 B) a per-robot
@@ -37,6 +41,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from swarmd.core import chain
 from swarmd.core.auth import SIGNATURE_LEN
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -142,6 +147,12 @@ class Budget:
     """Transmissions a WARN or CLAIM takes (>1: split, fragment.py; 0: cannot be sent)."""
     cert_fragments: int = 0
     """Transmissions a CERT frame takes (per-robot mode; 0 otherwise or if it cannot)."""
+    anchor_bytes: int = 0
+    """Bytes of an anchor heartbeat (per-robot mode, `core/chain.py`; 0 otherwise)."""
+    anchor_fragments: int = 0
+    """Transmissions an anchor takes (per-robot mode; 0 otherwise or if it cannot)."""
+    anchors_per_s: float = 0.0
+    """Of `frames_per_s`, the anchors (per-robot mode)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -162,6 +173,9 @@ class Budget:
             + ("fits" if self.heartbeat_fits else "DOES NOT FIT"),
         ]
         if self.per_robot:
+            out.append(f"  heartbeat chain: anchors {self.anchor_bytes} B"
+                       + _in_fragments(self.anchor_fragments)
+                       + f", {self.anchors_per_s:.2f}/s of the heartbeats")
             out.append(f"  per-robot signatures: warning/claim {self.warn_bytes} B"
                        + _in_fragments(self.warn_fragments)
                        + f", certificate frame {self.cert_bytes} B"
@@ -177,9 +191,22 @@ def _in_fragments(n: int) -> str:
     return f" ({n} fragments)" if n > 1 else ""
 
 
-def heartbeat_size(signed: bool, slot_bytes: int = 1) -> int:
-    """Bytes of a heartbeat; `slot_bytes` 1 below 128 functions, 2 or 3 above (wire.py)."""
-    return HEADER_LEN + HEARTBEAT_BODY + slot_bytes + (TAG_LEN if signed else 0)
+def heartbeat_size(signed: bool, slot_bytes: int = 1, *, per_robot: bool = False,
+                   anchor: bool = False) -> int:
+    """Bytes of a heartbeat; `slot_bytes` 1 below 128 functions, 2 or 3 above (wire.py).
+    Per robot it carries its chain link; an anchor a signature in place of the tag."""
+    link = 1 + chain.LINK_LEN if per_robot else 0
+    auth = SIGNATURE_LEN if per_robot and anchor else TAG_LEN if signed else 0
+    return HEADER_LEN + HEARTBEAT_BODY + slot_bytes + link + auth
+
+
+def anchor_rates(active: int, standby: int, params: Params) -> float:
+    """Anchors a second a per-robot swarm sends in steady state (`core/chain.py`)."""
+    every = chain.anchor_every(params)
+    per_active = 1 / max(every, params.heartbeat_interval) \
+        + chain.ANCHOR_RUN / (chain.CHAIN_LEN * params.heartbeat_interval)
+    per_standby = 1 / max(every, params.standby_heartbeat_interval)
+    return active * per_active + standby * per_standby
 
 
 def warn_size(signed: bool, slot_bytes: int = 1, *, per_robot: bool = False) -> int:
@@ -209,21 +236,26 @@ def budget_for(
     robots = active + standby
     overhead = frame_overhead(medium)
     copies = broadcast_copies(medium, robots)
-    hb = heartbeat_size(signed, slot_bytes)
+    hb = heartbeat_size(signed, slot_bytes, per_robot=per_robot)
+    anchor = heartbeat_size(signed, slot_bytes, per_robot=True, anchor=True)
     warn = warn_size(signed, slot_bytes, per_robot=per_robot)
     cert = cert_size(slot_bytes) if per_robot else 0
     backers = max_watchers + 1 if per_robot else 0  # the witnesses and rule 9's own ears
     hb_rate = active / params.heartbeat_interval + standby / params.standby_heartbeat_interval
+    anchor_rate = min(hb_rate, anchor_rates(active, standby, params)) if per_robot else 0.0
+    link_rate = hb_rate - anchor_rate
     warn_rate = max_watchers / params.warn_interval
     claim_rate = 1 / params.claim_hold  # at most one CLAIM per hold, counted as a rate
     peak_rate = hb_rate + warn_rate + claim_rate * (1 + backers)
-    bytes_per_s = hb_rate * (hb + overhead) * copies
+    bytes_per_s = (link_rate * (hb + overhead) + anchor_rate * sum(
+        n + overhead for n in _transmissions(medium, anchor))) * copies
     airtime_share: float | None = None
     peak_share: float | None = None
     if medium != "udp":
-        airtime_share = hb_rate * airtime(medium, hb) * copies
+        beats = link_rate * airtime(medium, hb) + anchor_rate * frame_airtime(medium, anchor)
+        airtime_share = beats * copies
         peak_share = (
-            hb_rate * airtime(medium, hb)
+            beats
             + (warn_rate + claim_rate) * frame_airtime(medium, warn)
             + (claim_rate * backers * frame_airtime(medium, cert) if per_robot else 0.0)
         ) * copies
@@ -234,9 +266,9 @@ def budget_for(
         warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
     warn_parts = fragments(medium, warn)
     cert_parts = fragments(medium, cert) if per_robot else 0
-    if warn_parts == 0 or (per_robot and cert_parts == 0):
+    if warn_parts == 0 or (per_robot and (cert_parts == 0 or fragments(medium, anchor) == 0)):
         warnings.append(
-            f"a {max(warn, cert)} B frame needs more than {fragment.MAX_FRAGMENTS} "
+            f"a {max(warn, cert, anchor if per_robot else 0)} B frame needs more than {fragment.MAX_FRAGMENTS} "
             f"fragments of the {max_payload} B payload limit: it cannot be sent")
     if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
         needed = robots / ZIGBEE_BROADCASTS_PER_S
@@ -262,6 +294,9 @@ def budget_for(
         max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
         per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
         warn_fragments=warn_parts, cert_fragments=cert_parts,
+        anchor_bytes=anchor if per_robot else 0,
+        anchor_fragments=fragments(medium, anchor) if per_robot else 0,
+        anchors_per_s=anchor_rate,
     )
 
 

@@ -175,7 +175,9 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
         plan = cfg.to_plan()
     except ConfigError:
         return None
-    signed = cfg.auth_mode != "none"
+    # The swarm key's tag: shared mode, or per robot with a key_file beside the robot keys.
+    signed = cfg.auth_mode == "shared" or (cfg.auth_mode == "per-robot"
+                                           and cfg.key_path is not None)
     rows = []
     data = []
     notes: list[str] = []
@@ -194,11 +196,12 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
         ))
         data.append(b.as_dict())
         warnings += [f"{medium}: {w}" for w in b.warnings]
-        if b.warn_fragments > 1 or b.cert_fragments > 1:
+        if b.warn_fragments > 1 or b.cert_fragments > 1 or b.anchor_fragments > 1:
             split = [f"{what} ({size} B) in {n}" for what, size, n in (
                 ("warning/claim", b.warn_bytes, b.warn_fragments),
-                ("certificate", b.cert_bytes, b.cert_fragments)) if n > 1]
-            notes.append(f"{medium}: {' and '.join(split)} fragments of <= {b.max_payload} B "
+                ("certificate", b.cert_bytes, b.cert_fragments),
+                ("heartbeat anchor", b.anchor_bytes, b.anchor_fragments)) if n > 1]
+            notes.append(f"{medium}: {', '.join(split)} fragments of <= {b.max_payload} B "
                          "(transport/fragment.py; counted in the airtime)")
     return Section(
         key="channel_budget",

@@ -176,3 +176,68 @@ def test_shared_key_what_is_still_stopped(runs: dict[tuple[str, str], Run],
     if attack != "warn":
         hit = {r for r, d in out["drops"].items() if d.get(DROPS[attack], 0) > 0}
         assert len(hit) >= 3, out["drops"]
+
+
+# ---------------------------------------------------------------- revocation, real daemons
+async def test_per_robot_a_revoked_robot_is_taken_over_on_real_daemons(
+        tmp_path: Path) -> None:
+    """The paper swarm as six `run_daemon` tasks over UDP on loopback, signed per robot.
+    Robot 2 is stolen: it keeps running, healthy, while `revoked: [2]` goes into the
+    swarm file and every other daemon reloads it (SIGHUP). Its heartbeats count for
+    nothing from then on, so standby 6 takes f2 over as from a silent robot, within
+    T_max and the usual takeover (plus the channel's scheduling slack)."""
+    import asyncio
+    import time
+
+    from swarms import signed_paper
+
+    from sim.realtime.robotfiles import free_udp_port
+    from swarmd.config import load_robot
+    from swarmd.daemon import Daemon, run_daemon
+
+    swarm, _keys = signed_paper(tmp_path)
+    port = free_udp_port()
+    events: list[dict[str, Any]] = []
+    daemons: dict[int, Daemon] = {}
+    stop = asyncio.Event()
+    tasks = []
+    for r in range(1, 7):
+        path = tmp_path / f"robot{r}.yaml"
+        path.write_text(f"robot: {r}\nswarm: {swarm}\nstate_dir: {tmp_path / 'state'}\n"
+                        f"identity_file: keys/robot-{r}.key\n"
+                        f"transport: {{kind: udp, port: {port}}}\n")
+        tasks.append(asyncio.create_task(run_daemon(
+            load_robot(path), event_sink=events.append, stop_event=stop,
+            on_ready=lambda d, r=r: daemons.__setitem__(r, d))))  # type: ignore[misc]
+    params = load_swarm(swarm).params()
+
+    async def until(cond: Any, timeout: float, what: str) -> None:
+        end = time.monotonic() + timeout
+        while not cond():
+            assert time.monotonic() < end, f"timed out waiting for {what}"
+            await asyncio.sleep(0.02)
+
+    try:
+        await until(lambda: len(daemons) == 6, 20.0, "six daemons ready")
+        await asyncio.sleep(3 * params.startup_grace / 2)  # the swarm settles
+        assert not [e for e in events if e["event"] in ("takeover", "suspect")]
+        swarm.write_text(swarm.read_text().replace(
+            "{mode: per-robot, keys_dir: keys}",
+            "{mode: per-robot, keys_dir: keys, revoked: [2]}"))
+        for r, d in daemons.items():
+            if r != 2:
+                d.config_path = tmp_path / f"robot{r}.yaml"
+                d.reload()
+        revoked_at = time.monotonic()
+        await until(lambda: any(e["event"] == "takeover" for e in events), 20.0,
+                    "takeover of f2")
+        took = time.monotonic() - revoked_at
+        take = [e for e in events if e["event"] == "takeover"]
+        assert [(e["robot"], e["function"]) for e in take] == [(6, "f2")]
+        # Bounded, not timed to the millisecond: a loaded machine schedules late.
+        assert took < params.t_max + params.takeover_bound(lossy=True) + 5.0
+        assert all(d.keyring is not None and d.keyring.revoked == {2}
+                   for r, d in daemons.items() if r != 2)
+    finally:
+        stop.set()
+        await asyncio.wait_for(asyncio.gather(*tasks, return_exceptions=True), 30.0)

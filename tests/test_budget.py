@@ -107,12 +107,18 @@ def test_per_robot_frames_on_digimesh_are_counted_in_fragments() -> None:
     assert (b.warn_bytes, b.cert_bytes) == (80, 92)
     assert (b.warn_fragments, b.cert_fragments) == (2, 2)
     assert not any("payload limit" in w for w in b.warnings)
-    # The peak by hand: heartbeats, WARNs of 2 watchers and the CLAIM, and a CERT per
+    # The peak by hand: heartbeats (links of 32 B, and anchors of 88 B in 2 fragments of
+    # 6 + 44 B: each active robot's every 5 s and its chain's first 3 in 1024, each
+    # standby's every one at 8 s), WARNs of 2 watchers and the CLAIM, and a CERT per
     # backer (2 watchers + the claimant's own ears), all sent MT + 1 = 4 times.
     p = radio()
+    assert (b.anchor_bytes, b.anchor_fragments) == (88, 2)
     hb_rate = 4 / p.heartbeat_interval + 2 / p.standby_heartbeat_interval
+    anchors = 4 * (1 / 5.0 + 3 / (1024 * p.heartbeat_interval)) + 2 / p.standby_heartbeat_interval
+    assert b.anchors_per_s == pytest.approx(anchors)
     claim_rate = 1 / p.claim_hold
-    peak = (hb_rate * airtime("digimesh", 23)
+    peak = ((hb_rate - anchors) * airtime("digimesh", 32)
+            + anchors * 2 * airtime("digimesh", 50)
             + (2 / p.warn_interval + claim_rate) * 2 * airtime("digimesh", 46)
             + claim_rate * 3 * 2 * airtime("digimesh", 52)) * 4
     assert b.peak_airtime_share == pytest.approx(peak)
