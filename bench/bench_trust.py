@@ -102,7 +102,8 @@ def frame_sizes() -> None:
     print(f"  {'  link':<10} {'-':>9} {'-':>11} {len(wire.encode(link, None, ids[1].signer)):>10}"
           f"   (per robot: the chain link; {len(wire.encode(link, KEY, ids[1].signer))} B "
           f"with a swarm key's tag beside)")
-    print(f"  {'  anchor':<10} {'-':>9} {'-':>11} {len(wire.encode(anchor, KEY, ids[1].signer)):>10}"
+    anchor_len = len(wire.encode(anchor, KEY, ids[1].signer))
+    print(f"  {'  anchor':<10} {'-':>9} {'-':>11} {anchor_len:>10}"
           f"   (per robot: signed, one a second at udp(), one in 5 s at radio())")
     blank = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
     cert = wire.encode(wire.Frame(1, 1, 1, wire.Cert(1, blank, warn)), KEY, ids[1].signer)

@@ -268,7 +268,8 @@ def budget_for(
     cert_parts = fragments(medium, cert) if per_robot else 0
     if warn_parts == 0 or (per_robot and (cert_parts == 0 or fragments(medium, anchor) == 0)):
         warnings.append(
-            f"a {max(warn, cert, anchor if per_robot else 0)} B frame needs more than {fragment.MAX_FRAGMENTS} "
+            f"a {max(warn, cert, anchor if per_robot else 0)} B frame needs more than "
+            f"{fragment.MAX_FRAGMENTS} "
             f"fragments of the {max_payload} B payload limit: it cannot be sent")
     if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
         needed = robots / ZIGBEE_BROADCASTS_PER_S
