@@ -112,7 +112,7 @@ class MonitorState:
         """function -> (epoch, robot) of the newest-epoch ACTIVE heartbeat heard for it."""
         self.signed_claims: set[tuple[str, int, int]] = set()
         """Per-robot mode: (function, epoch, claimant) of every signed CLAIM heard."""
-        self.chains = PeerChains()
+        self.chains = PeerChains(1 / params.heartbeat_interval)
         """Per-robot mode: each robot's heartbeat chain (`swarmd.core.chain`)."""
         self.replay = ReplayFilter()
         """The daemons' filter; unbounded until `start_clock` (`listen` calls it)."""
@@ -151,7 +151,8 @@ class MonitorState:
             return  # relays a signed frame; no replay filter, as in the daemons
         msg = frame.msg
         if isinstance(msg, wire.Heartbeat) and self.verifier is not None \
-                and not self.chains.check(frame.sender, msg.n, msg.link, anchor=msg.anchor):
+                and not self.chains.check(frame.sender, msg.n, msg.link, now,
+                                          anchor=msg.anchor):
             # As the daemons: a heartbeat counts only if its link is its sender's own
             # (a monitor started late waits for each robot's next anchor).
             self._drop(DropReason.UNANCHORED)
@@ -161,7 +162,8 @@ class MonitorState:
             self._drop(reason)
             return
         if isinstance(msg, wire.Heartbeat) and self.verifier is not None:
-            self.chains.commit(frame.sender, msg.n, msg.link, frame.seq, anchor=msg.anchor)
+            self.chains.commit(frame.sender, msg.n, msg.link, frame.seq, now,
+                               anchor=msg.anchor)
         seen = self.robots.get(frame.sender)
         if seen is None:
             seen = self.robots[frame.sender] = Heard(frame.sender, now)

@@ -17,7 +17,14 @@ from sim.shared.fakeid import FakeVerifier, fake_identities
 from swarmd.core import wire
 from swarmd.core.actions import Broadcast
 from swarmd.core.auth import Identity
-from swarmd.core.chain import ANCHOR_RUN, CHAIN_LEN, WALK, OwnChain, PeerChains, anchor_every
+from swarmd.core.chain import (
+    ANCHOR_RUN,
+    CHAIN_LEN,
+    WALK,
+    OwnChain,
+    PeerChains,
+    anchor_every,
+)
 from swarmd.core.node import Node
 from swarmd.core.params import Params, radio, udp
 from swarmd.core.plan import SwarmPlan
@@ -57,30 +64,34 @@ def _links(count: int) -> list[tuple[int, bytes, bool]]:
 
 
 def test_links_are_accepted_forward_only_and_within_the_walk() -> None:
-    links = _links(100)
+    links = _links(400)
     assert [a for _, _, a in links[:ANCHOR_RUN + 1]] == [True] * ANCHOR_RUN + [False]
-    peers = PeerChains()
+    peers = PeerChains(10.0)  # 10 Hz
     n0, l0, _ = links[0]
-    assert not peers.check(2, n0, l0, anchor=False)  # nothing to tie it to yet
-    assert peers.check(2, n0, l0, anchor=True)
-    peers.commit(2, n0, l0, 10, anchor=True)
+    assert not peers.check(2, n0, l0, 0.0, anchor=False)  # nothing to tie it to yet
+    assert peers.check(2, n0, l0, 0.0, anchor=True)
+    peers.commit(2, n0, l0, 10, 0.0, anchor=True)
     n1, l1, _ = links[1]
-    assert peers.check(2, n1, l1, anchor=False)
-    assert not peers.check(2, n0, l0, anchor=False)  # revealed already: anyone has it
-    assert not peers.check(2, n1, bytes(8), anchor=False)  # made up
-    assert not peers.check(3, n1, l1, anchor=False)  # another robot's chain
-    # Up to WALK lost links are caught up; beyond, only the next anchor helps.
+    assert peers.check(2, n1, l1, 0.1, anchor=False)
+    assert not peers.check(2, n0, l0, 0.1, anchor=False)  # revealed already: anyone has it
+    assert not peers.check(2, n1, bytes(8), 0.1, anchor=False)  # made up
+    assert not peers.check(3, n1, l1, 0.1, anchor=False)  # another robot's chain
+    # No further ahead than the time since allows (a period's worth, twice, plus slack) ...
+    n40, l40, _ = links[40]
+    assert not peers.check(2, n40, l40, 0.5, anchor=False)
+    assert peers.check(2, n40, l40, 2.0, anchor=False)
+    # ... and never more than WALK: beyond, only the next anchor helps.
     nw, lw, _ = links[WALK]
-    assert peers.check(2, nw, lw, anchor=False)
+    assert peers.check(2, nw, lw, 100.0, anchor=False)
     nf, lf, _ = links[WALK + 1]
-    assert not peers.check(2, nf, lf, anchor=False)
-    peers.commit(2, nw, lw, 20, anchor=False)
-    assert peers.check(2, nf, lf, anchor=False)
+    assert not peers.check(2, nf, lf, 100.0, anchor=False)
+    peers.commit(2, nw, lw, 20, 100.0, anchor=False)
+    assert peers.check(2, nf, lf, 100.1, anchor=False)
     # An anchor older than what was accepted (a reordering channel) moves nothing back.
-    peers.commit(2, n0, l0, 15, anchor=True)
-    assert peers.check(2, nf, lf, anchor=False)
+    peers.commit(2, n0, l0, 15, 100.1, anchor=True)
+    assert peers.check(2, nf, lf, 100.1, anchor=False)
     peers.forget([2])
-    assert not peers.check(2, nf, lf, anchor=False)
+    assert not peers.check(2, nf, lf, 100.1, anchor=False)
 
 
 def test_chains_follow_each_other_and_each_starts_with_anchors() -> None:
@@ -245,3 +256,53 @@ def test_an_extra_heartbeat_is_an_anchor(paper: Paper) -> None:
     msgs = [wire.decode(d, (), ids[1].verifier).msg for d in out]
     hb = [m for m in msgs if isinstance(m, wire.Heartbeat)]
     assert len(hb) == 1 and hb[0].anchor
+
+
+def test_a_peer_back_from_a_long_silence_gets_anchors(paper: Paper) -> None:
+    """Robot 2 hears robot 3 for a while, then nothing for longer than robot 3 could
+    walk its chain, then a heartbeat it cannot check (3 lost 2's chain too, as on both
+    sides of a partition): 2's next heartbeats are anchors, not the next scheduled
+    anchor's second later; a flood of such frames does not make it sign at will."""
+    plan = paper[0]
+    # Scheduled anchors a minute apart, so that any anchor seen here is the answer.
+    params = paper[1].with_overrides(startup_grace=120.0, standby_timeout=120.0)
+    ids = fake_identities(plan.robots)
+    two = Node(2, plan, params, 0.0, identity=ids[2])
+    three = Node(3, plan, params, 0.0, identity=ids[3])
+
+    def beats_of(node: Node, t: float) -> list[wire.Heartbeat]:
+        out = [wire.decode(a.frame, (), ids[1].verifier).msg
+               for a in node.tick(t) if isinstance(a, Broadcast)]
+        return [m for m in out if isinstance(m, wire.Heartbeat)]
+
+    t = 0.0
+    while t < 3.0:
+        for a in three.tick(t):
+            if isinstance(a, Broadcast):
+                two.receive(a.frame, t)
+        beats_of(two, t)
+        t = round(t + params.heartbeat_interval, 6)
+    silence = WALK * params.heartbeat_interval + 2.0  # 3 lost what 2 knew of its chain
+    while t < 3.0 + silence:  # both sides go on, unheard by each other
+        three.tick(t)
+        beats_of(two, t)
+        t = round(t + params.heartbeat_interval, 6)
+    assert [m.anchor for m in beats_of(two, t)] == [False]  # the second in between
+    t = round(t + params.heartbeat_interval, 6)
+    frames = [a.frame for a in three.tick(t) if isinstance(a, Broadcast)
+              and isinstance(wire.decode(a.frame, (), ids[1].verifier).msg, wire.Heartbeat)]
+    two.receive(frames[0], t)
+    assert two.drops["unanchored"] == 1
+    t = round(t + params.heartbeat_interval, 6)
+    assert [m.anchor for m in beats_of(two, t)] == [True]
+    for _ in range(ANCHOR_RUN):  # the run, then links again however often 3 is heard
+        for a in three.tick(t):
+            if isinstance(a, Broadcast):
+                two.receive(a.frame, t)
+        t = round(t + params.heartbeat_interval, 6)
+        beats_of(two, t)
+    got = []
+    for _ in range(5):
+        t = round(t + params.heartbeat_interval, 6)
+        got += [m.anchor for m in beats_of(two, t)]
+    assert got == [False] * 5

@@ -6,15 +6,17 @@ robot hears ten of them a second from each neighbour), so it cannot carry a 64-b
 signature every time. Each robot draws a chain of `CHAIN_LEN` secret links, each the
 hash of the next (`step`), and reveals them one per heartbeat, last-made first: a
 receiver that holds link `x` accepts a heartbeat carrying `y` only if hashing `y` a few
-times (`(n_y - n_x) mod 256`, at most `WALK`) gives `x`. Nobody but the robot knows the
+times (`(n_y - n_x) mod 256`, at most `WALK` and what the time since `x` allows)
+gives `x`. Nobody but the robot knows the
 next link until it sends it, so a dead robot's heartbeats cannot be forged from what
 was heard: a forger can only repeat a link already revealed, which is refused. Where
 a chain starts — a receiver that just started, one that lost more than `WALK` links,
 a new chain — the robot's Ed25519 signature over the whole heartbeat (an *anchor*)
 says which link is current. A robot sends an anchor as the first `ANCHOR_RUN`
-heartbeats of each chain and after each change of what it heartbeats (slot, epoch,
-role), as every extra heartbeat (a refutation, an answer to a stale view: whoever it
-answers may have lost the chain), and at least every `anchor_every(params)`.
+heartbeats of each chain, after each change of what it heartbeats (slot, epoch, role)
+and when it hears a peer again after `resync_after(params)` of silence (a healed
+partition), as every extra heartbeat (a refutation, an answer to a stale view: whoever
+it answers may have lost the chain), and at least every `anchor_every(params)`.
 
 A link binds liveness, not content: an outsider that hears a fresh link first can
 repeat it with other fields to a receiver that has not heard it yet (a race in radio
@@ -41,9 +43,14 @@ and it costs a heartbeat one byte more than the swarm key's tag."""
 CHAIN_LEN = 1024
 """Links per chain: 102 s at 10 Hz, 10 min at `radio()`; drawn in about half a
 millisecond, so a simulator with many robots pays little for each."""
-WALK = 32
-"""The most links a receiver hashes to catch up (bounds a forged frame's cost to 32
-hashes; more lost heartbeats than that and it waits for the next anchor)."""
+WALK = 255
+"""The most links a receiver hashes to catch up (the link number is one byte): 25 s of
+lost heartbeats at `udp()`, 2.5 min at `radio()`; more, and it waits for an anchor. A
+receiver also walks no further than its sender can have sent since the last link
+accepted (`PeerChains`), so a forged link of a robot heard lately costs a few hashes."""
+SLACK = 8
+"""Links allowed beyond what the sender's heartbeat period explains (extra heartbeats:
+refutations, answers; at most four a period, `heartbeat.py`)."""
 ANCHOR_RUN = 3
 """Anchors in a row where a chain starts, so one lost frame leaves nobody unanchored."""
 _WRAP = 256
@@ -58,6 +65,12 @@ def step(robot: int, link: bytes) -> bytes:
                            person=b"swarmd-hb" + robot.to_bytes(2, "big")).digest()
 
 
+def resync_after(params: Params) -> float:
+    """Seconds of silence after which a peer may have lost our chain (half of `WALK`
+    heartbeat periods): hearing it again, we anchor (`OwnChain.reanchor`)."""
+    return WALK * params.heartbeat_interval / 2
+
+
 def anchor_every(params: Params) -> float:
     """Seconds between two scheduled anchors at most: a receiver that starts (its
     watchdogs wait `startup_grace`) or lost a standby's chain (it waits
@@ -68,8 +81,8 @@ def anchor_every(params: Params) -> float:
 class OwnChain:
     """This robot's links, revealed one per heartbeat (`next`)."""
 
-    __slots__ = ("_anchor_due", "_count", "_last_anchor", "_links", "_n", "_robot", "_run",
-                 "_signer", "_what")
+    __slots__ = ("_anchor_due", "_count", "_last_anchor", "_links", "_n", "_reanchored",
+                 "_robot", "_run", "_signer", "_what")
 
     def __init__(self, robot: int, signer: Signer, run: int) -> None:
         self._robot, self._signer, self._run = robot, signer, run
@@ -79,6 +92,7 @@ class OwnChain:
         self._anchor_due = 0
         self._last_anchor = float("-inf")
         self._what: tuple[int, int, int] | None = None
+        self._reanchored = float("-inf")
 
     def next(self, now: float, what: tuple[int, int, int], every: float, *,
              extra: bool = False) -> tuple[int, bytes, bool]:
@@ -97,6 +111,15 @@ class OwnChain:
             self._last_anchor = now
         return self._n, link, anchor
 
+    def reanchor(self, now: float, every: float) -> None:
+        """A peer is back after a silence long enough to have lost our chain (a
+        partition that healed cut it off from us too): our next `ANCHOR_RUN` heartbeats
+        are anchors, at most once every `every` seconds (a forged frame in a dead
+        robot's name must not make us sign at will)."""
+        if now - self._reanchored >= every:
+            self._reanchored = now
+            self._anchor_due = ANCHOR_RUN
+
     def _draw(self) -> None:
         self._count += 1
         stamp = self._run.to_bytes(6, "big") + self._count.to_bytes(4, "big")
@@ -113,34 +136,38 @@ class OwnChain:
 class PeerChains:
     """Where each peer's chain stands, as this robot verified it. `check` is pure (a
     frame the replay filter then refuses moves nothing); `commit` records an accepted
-    heartbeat."""
+    heartbeat. `rate`: the most heartbeats a second a robot sends on schedule (the
+    active period's), which bounds how far a link may be ahead."""
 
-    __slots__ = ("_at",)
+    __slots__ = ("_at", "_rate")
 
-    def __init__(self) -> None:
-        self._at: dict[int, tuple[int, bytes, int]] = {}
-        """robot -> (link number, link, seq of the frame that carried it)."""
+    def __init__(self, rate: float) -> None:
+        self._rate = 2 * rate  # margin: a late sender catching up, clocks that differ
+        self._at: dict[int, tuple[int, bytes, int, float]] = {}
+        """robot -> (link number, link, seq of the frame that carried it, when)."""
 
-    def check(self, robot: int, n: int, link: bytes, *, anchor: bool) -> bool:
+    def check(self, robot: int, n: int, link: bytes, now: float, *, anchor: bool) -> bool:
         """Is this heartbeat `robot`'s own? An anchor is (its signature was verified);
-        a link is if it hashes to the last one accepted within `WALK` steps."""
+        a link is if it hashes to the last one accepted within as many steps as the
+        time since allows (at most `WALK`)."""
         if anchor:
             return True
         at = self._at.get(robot)
         if at is None or len(link) != LINK_LEN:
             return False
         gap = (n - at[0]) % _WRAP
-        if not 0 < gap <= WALK:
+        if not 0 < gap <= min(WALK, SLACK + int((now - at[3]) * self._rate)):
             return False  # a link already revealed, or too far: wait for an anchor
         for _ in range(gap):
             link = step(robot, link)
         return hmac.compare_digest(link, at[1])
 
-    def commit(self, robot: int, n: int, link: bytes, seq: int, *, anchor: bool) -> None:
+    def commit(self, robot: int, n: int, link: bytes, seq: int, now: float, *,
+               anchor: bool) -> None:
         at = self._at.get(robot)
         if anchor and at is not None and seq < at[2]:
             return  # an older anchor a reordering channel brought late: keep the newer
-        self._at[robot] = (n, link, seq)
+        self._at[robot] = (n, link, seq, now)
 
     def forget(self, robots: Iterable[int]) -> None:
         """Revoked robots: only an anchor (which their revoked key cannot sign any more)
@@ -152,5 +179,5 @@ class PeerChains:
         return robot in self._at
 
 
-__all__ = ["ANCHOR_RUN", "CHAIN_LEN", "LINK_LEN", "WALK", "OwnChain", "PeerChains",
-           "anchor_every", "step"]
+__all__ = ["ANCHOR_RUN", "CHAIN_LEN", "LINK_LEN", "SLACK", "WALK", "OwnChain", "PeerChains",
+           "anchor_every", "resync_after", "step"]

@@ -76,6 +76,7 @@ class Hearing(NodeBase):
         have lost our chain too: rule 2 within a frame); a robot rejoining that slot
         stays a standby (the cautious side, as for an uncertified heartbeat)."""
         self._drops[DropReason.UNANCHORED] += 1
+        self._peer_back(sender, now)  # it may have lost our chain as we lost its
         f = self._plan.function_at(hb.function) if hb.function else None
         if f is None:
             return

@@ -26,7 +26,7 @@ from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Action, Release
 from swarmd.core.auth import Identity
-from swarmd.core.chain import OwnChain, PeerChains, anchor_every
+from swarmd.core.chain import OwnChain, PeerChains, anchor_every, resync_after
 from swarmd.core.claims import ClaimMemory
 from swarmd.core.drops import DropReason
 from swarmd.core.errors import NodeError
@@ -82,8 +82,9 @@ class Node(Hearing, Moves, Signed):
         self._beat = HeartbeatClock(params, now)
         self._chain = OwnChain(robot_id, self._signer, seq_start) \
             if self._signer is not None else None
-        self._chains = PeerChains()
+        self._chains = PeerChains(1 / params.heartbeat_interval)
         self._anchor_every = anchor_every(params)
+        self._resync_after = resync_after(params)
         self._armed = now
         self._stopped = self._started = False
         self._pending = []
@@ -225,7 +226,7 @@ class Node(Hearing, Moves, Signed):
             return self._own_frame(frame, now)
         msg = frame.msg
         if isinstance(msg, wire.Heartbeat) and self._verifier is not None \
-                and not self._chains.check(sender, msg.n, msg.link, anchor=msg.anchor):
+                and not self._chains.check(sender, msg.n, msg.link, now, anchor=msg.anchor):
             # Before the replay filter: a heartbeat not from its sender moves no counter.
             self._unanchored_beat(sender, msg, now)
             return self._drain()
@@ -233,11 +234,13 @@ class Node(Hearing, Moves, Signed):
         if reason is not None:
             return self._drop(reason)
         self._frames_in += 1
+        self._peer_back(sender, now)
         self._heard_at[sender] = now
         match frame.msg:
             case wire.Heartbeat() as hb:
                 if self._verifier is not None:
-                    self._chains.commit(sender, hb.n, hb.link, frame.seq, anchor=hb.anchor)
+                    self._chains.commit(sender, hb.n, hb.link, frame.seq, now,
+                                        anchor=hb.anchor)
                 self._on_heartbeat(sender, hb, now)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)

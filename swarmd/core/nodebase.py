@@ -72,6 +72,7 @@ class NodeBase:
     _chains: PeerChains
     """Per-robot mode: where each peer's chain stands, as we verified it."""
     _anchor_every: float
+    _resync_after: float
     _armed: float | None
     """The deadline the driver was last given: a call far past it is our own stall,
     not the neighbours' silence (`Node._advance`)."""
@@ -94,6 +95,13 @@ class NodeBase:
 
     def _emit(self, event: Event) -> None:
         self._pending.append(event)
+
+    def _peer_back(self, sender: int, now: float) -> None:
+        """Per-robot mode: a frame of `sender`, verified or not. Back after a silence
+        long enough to have lost our chain, it gets anchors from us (`chain.py`)."""
+        last = self._heard_at.get(sender)
+        if self._chain is not None and last is not None and now - last > self._resync_after:
+            self._chain.reanchor(now, self._resync_after)
 
     def _slot(self, index: int) -> str | None:
         """The function at wire slot `index`; None (and a `bad_function` drop) if the
