@@ -306,3 +306,44 @@ def test_a_peer_back_from_a_long_silence_gets_anchors(paper: Paper) -> None:
         t = round(t + params.heartbeat_interval, 6)
         got += [m.anchor for m in beats_of(two, t)]
     assert got == [False] * 5
+
+
+class _Ring:
+    """A keyring that accepts each robot's listed secrets (old and new during a
+    rotation), as `swarmd.identity.Keyring` does with several public keys."""
+
+    def __init__(self, secrets: dict[int, list[bytes]]) -> None:
+        self.secrets = secrets
+
+    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
+        return any(FakeVerifier({robot: s}).verify(robot, data, signature)
+                   for s in self.secrets.get(robot, []))
+
+
+def test_rotating_a_robots_key_keeps_the_swarm_running(paper: Paper) -> None:
+    """docs/operations.md: the new public key goes to every robot (both accepted), then
+    the robot signs with its new key, then the old one is dropped. Robot 2's chain goes
+    on across it (links need no key) and its anchors verify all along: nobody is
+    suspected, and robot 2's crash afterwards is taken over as usual."""
+    import hashlib
+
+    from sim.shared.fakeid import FakeSigner
+
+    plan, params = paper
+    secrets = {r: [hashlib.sha256(b"old-%d" % r).digest()] for r in plan.robots}
+    ring = _Ring(secrets)
+    signers = {r: FakeSigner(r, secrets[r][0]) for r in plan.robots}
+    n = Net(plan, params, identities={r: Identity(signers[r], ring) for r in plan.robots})
+    n.run_until(4.0)
+    new = hashlib.sha256(b"new-2").digest()
+    secrets[2].append(new)  # installed everywhere, SIGHUP
+    n.run_until(6.0)
+    signers[2]._secret = new  # robot 2 signs with its new key, SIGHUP
+    n.run_until(8.0)
+    secrets[2].pop(0)  # the old key dropped everywhere
+    n.run_until(12.0)
+    assert n.named("suspect") == [] and n.named("takeover") == []
+    n.crash(2)
+    n.run_until(12.0 + params.takeover_bound(lossy=True) + 1.0)
+    take = n.named("takeover")
+    assert [(e["robot"], e["function"]) for e in take] == [(6, "f2")]
