@@ -163,3 +163,26 @@ def test_a_robot_that_left_and_restarts_is_heard_again(paper: Paper, auth: str,
     assert res.violations == []
     assert sum(d.get("replay", 0) for d in res.drops.values()) == 0
     assert res.holders()["f2"] == [6 if who == 2 else 2]
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize("pause_s", [2.2, 2.6, 3.0])
+def test_a_handover_that_ends_past_alert_after_still_alerts(paper: Paper, auth: str,
+                                                            pause_s: float) -> None:
+    """Standby 5 is dead; robots 2 and 3 report faults at once (two LEAVEs), and standby
+    6 can take only one slot: f3 stays unheld. Its watcher 4 heard 3's LEAVE (a
+    handover, with a live standby then) and freezes for longer than alert_after: the
+    handover's deadline fires on resume as a new suspicion that is past alert_after
+    already. The alert comes with it, so the warning ends in one (rule 8; invariant 4)
+    instead of in nothing."""
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+
+    plan, params = paper
+    res = run_virtual(plan, params, duration=14.0, auth=auth, faults=[
+        parse_fault("crash:5@2.5"), parse_fault("unhealthy:2,3@3"),
+        parse_fault(f"pause:4@3.1+{pause_s}")])
+    assert [v.kind for v in res.violations] == []
+    alerts = [e for e in res.events if e["event"] == "alert" and e["robot"] == 4]
+    assert [(e["function"], e["reason"]) for e in alerts] == [("f3", "no claim")]
+    assert alerts[0]["t"] == pytest.approx(3.1 + pause_s)
