@@ -163,3 +163,64 @@ def test_a_robot_that_left_and_restarts_is_heard_again(paper: Paper, auth: str,
     assert res.violations == []
     assert sum(d.get("replay", 0) for d in res.drops.values()) == 0
     assert res.holders()["f2"] == [6 if who == 2 else 2]
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize("pause_s", [2.2, 2.6, 3.0])
+def test_a_handover_that_ends_past_alert_after_still_alerts(paper: Paper, auth: str,
+                                                            pause_s: float) -> None:
+    """Standby 5 is dead; robots 2 and 3 report faults at once (two LEAVEs), and standby
+    6 can take only one slot: f3 stays unheld. Its watcher 4 heard 3's LEAVE (a
+    handover, with a live standby then) and freezes for longer than alert_after: the
+    handover's deadline fires on resume as a new suspicion that is past alert_after
+    already. The alert comes with it, so the warning ends in one (rule 8; invariant 4)
+    instead of in nothing."""
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+
+    plan, params = paper
+    res = run_virtual(plan, params, duration=14.0, auth=auth, faults=[
+        parse_fault("crash:5@2.5"), parse_fault("unhealthy:2,3@3"),
+        parse_fault(f"pause:4@3.1+{pause_s}")])
+    assert [v.kind for v in res.violations] == []
+    alerts = [e for e in res.events if e["event"] == "alert" and e["robot"] == 4]
+    assert [(e["function"], e["reason"]) for e in alerts] == [("f3", "no claim")]
+    assert alerts[0]["t"] == pytest.approx(3.1 + pause_s)
+
+
+def two_standbys() -> SwarmPlan:
+    """The paper's ring of four, with standbys 5 and 6 both covering f2 (rule 6)."""
+    from swarmd.core.plan import RobotPlan
+
+    fs = ("f1", "f2", "f3", "f4")
+    robots = {i + 1: RobotPlan(i + 1, f) for i, f in enumerate(fs)}
+    robots[5], robots[6] = RobotPlan(5, None, ("f2",)), RobotPlan(6, None, ("f2",))
+    return SwarmPlan(1544, fs, robots, {f: (fs[i - 1], fs[(i + 1) % 4])
+                                        for i, f in enumerate(fs)})
+
+
+@pytest.mark.parametrize("auth", MODES)
+@pytest.mark.parametrize(("lower", "holder"), [
+    ("unhealthy:5@4", 6),                       # 5 reports a fault; 1 hears its LEAVE
+    ("deaf:1:5@3.9+3 unhealthy:5@4", 6),        # ... and nobody hears it
+    ("deaf:1:5@3.9+1.5", 5),                    # 5 lives on, unheard by 1 for a while
+])
+def test_two_holders_of_one_epoch_end_with_the_one_that_executes(
+        paper: Paper, auth: str, lower: str, holder: int) -> None:
+    """Robots 2, 3, 4 and 6 do not hear 1 and 5 for 2 s (1 and 5 hear them). Robot 2
+    leaves: standbys 5 and 6 both take f2 over at epoch 1, each on its side (6 never
+    hears 5's claim; 5 hears 6's but wins the race by its lower id). If 5 stops before
+    the heal, 6 never hears it and executes on: 1, which took 5 as the holder (rule 2's
+    lower id), must come to 6 too, not keep a holder it no longer hears. If 5 lives,
+    6 fences itself on hearing it, and every view names 5."""
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+
+    _, params = paper
+    specs = ["partition:1,5>2,3,4,6@3+2", "leave:2@3.2", *lower.split()]
+    res = run_virtual(two_standbys(), params, duration=14.0, auth=auth,
+                      faults=[parse_fault(s) for s in specs])
+    assert sorted((e["robot"], e["epoch"]) for e in res.events
+                  if e["event"] == "takeover") == [(5, 1), (6, 1)]
+    assert [v.kind for v in res.violations] == []
+    assert res.holders()["f2"] == [holder]

@@ -29,6 +29,7 @@ class Hearing(NodeBase):
             return
         holder, epoch = self._known[f]
         newer = hb.epoch > epoch or (hb.epoch == epoch and (sender == holder or sender < holder))
+        newer = newer or (hb.epoch == epoch and self._holder_silent(f, holder, epoch, now))
         if newer and self._identity is not None and (sender, hb.epoch) != (holder, epoch) \
                 and not self._ev.is_certified(f, sender, hb.epoch):
             self._uncertified_beat(f, hb, now)
@@ -116,6 +117,23 @@ class Hearing(NodeBase):
                 self._to(Trigger.REFUTED)
         if self._rejoin is not None and self._rejoin.function == f and sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
+
+    def _holder_silent(self, f: str, holder: int, epoch: int, now: float) -> bool:
+        """Does f's holder at `epoch` as we know it yield to another robot heartbeating
+        f at that same epoch? Rule 2 orders two holders of one epoch (two claimants
+        each won the race on its side of a partition) by the lower id, because the
+        higher one hears the lower and fences itself. A lower one that stopped before
+        the higher one heard it (it left, became faulty, or was cut off) fences nobody,
+        and the higher one executes on; views that keep the lower one would never meet
+        the others' (DESIGN, "Convergence"). So a holder whose heartbeat for f we have
+        not heard for T_max — Fig. 7's measure of a silent robot — yields to a rival
+        that heartbeats f at its epoch (per robot, only to a certified one: `newer` is
+        still judged by the certificate). It gets the slot back by heartbeating it
+        again, and the rival fences itself on hearing it (rule 2). Never our own hold:
+        we are alive."""
+        if f == self._function and self._role == Role.ACTIVE:
+            return False
+        return not self._ears.heard_lately(f, holder, epoch, now, self._params.t_max)
 
     # ------------------------------------------------------------------ WARN
     def _on_warn(self, sender: int, w: wire.Warn, now: float, raw: bytes = b"",

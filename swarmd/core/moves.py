@@ -138,9 +138,14 @@ class Moves(NodeBase):
         if fired.first:
             self._emit(ev.Suspect(subject=subject, function=g))
             self._emit(ev.Warn(subject=subject, function=g))
-        elif fired.alert:
+        if fired.alert:
+            # Also on a first fire: a handover that brought no holder is logged as a new
+            # suspicion, and it may end past alert_after (a claim late in the episode, a
+            # stall of our own over the hold). `fire` marked the episode alerted, so an
+            # alert not logged here never comes: the warning would end in nothing (rule
+            # 8; the paper's property that every warning ends somewhere).
             self._emit(ev.Alert(function=g, reason="no claim"))
-        elif (not watch.alerted and watch.since is not None
+        elif (not fired.first and not watch.alerted and watch.since is not None
               and now - watch.since >= self._params.t_max
               and not self._ears.live_standby(g, subject, now)):
             # Rule 8, without waiting for alert_after: nobody can take over. Not on the
