@@ -58,10 +58,8 @@ class Node(Hearing, Moves, Signed):
             raise NodeError(f"robot {robot_id} is not in the swarm plan")
         check_restored(restored, seq_start)  # out-of-range state: refuse, never loop
         self._robot_id, self._plan, self._params = robot_id, plan, params
-        self._keys = tuple(keys)
-        self._identity = identity
-        self._signer = identity.signer if identity is not None else None
-        self._verifier = identity.verifier if identity is not None else None
+        self._keys, self._identity = tuple(keys), identity
+        self._signer, self._verifier = identity if identity is not None else (None, None)
         self._seq = self._seq_start = seq_start
         self._health = Health.OK
         self._drops = Counter()
@@ -80,11 +78,9 @@ class Node(Hearing, Moves, Signed):
         self._ev = EvidenceStore(robot_id, plan, params)  # per-robot mode, `evidence.py`
         self._start_time, self._stalled_at = now, -1e18
         self._beat = HeartbeatClock(params, now)
-        self._chain = OwnChain(robot_id, self._signer, seq_start) \
-            if self._signer is not None else None
+        self._chain = OwnChain(robot_id, self._signer, seq_start) if self._signer else None
         self._chains = PeerChains(1 / params.heartbeat_interval)
-        self._anchor_every = anchor_every(params)
-        self._resync_after = resync_after(params)
+        self._anchor_every, self._resync_after = anchor_every(params), resync_after(params)
         self._armed = now
         self._stopped = self._started = False
         self._pending = []

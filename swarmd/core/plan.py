@@ -69,22 +69,7 @@ class SwarmPlan:
             raise PlanError(f"a swarm has 1 to {MAX_FUNCTIONS} functions (a 16-bit slot on "
                             "the wire)")
         index = {name: i + 1 for i, name in enumerate(self.functions)}
-        holders: dict[str, int] = {}
-        for rid, robot in self.robots.items():
-            if rid != robot.robot_id or not 1 <= rid <= 0xFFFF:
-                raise PlanError(f"robot id {rid} is not a 16-bit id matching its entry")
-            if robot.function is not None:
-                if robot.function not in index:
-                    raise PlanError(f"robot {rid} holds unknown function {robot.function!r}")
-                if robot.function in holders:
-                    raise PlanError(
-                        f"function {robot.function} held by robots {holders[robot.function]} "
-                        f"and {rid}"
-                    )
-                holders[robot.function] = rid
-            for f in robot.subs:
-                if f not in index:
-                    raise PlanError(f"robot {rid} substitutes unknown function {f!r}")
+        holders = self._check_robots(index)
         for f, watched in self.watches.items():
             if f not in index or any(w not in index for w in watched):
                 raise PlanError(f"watches names an unknown function: {f} -> {watched}")
@@ -103,6 +88,26 @@ class SwarmPlan:
         object.__setattr__(self, "_holders", holders)
         object.__setattr__(self, "_watchers", {f: tuple(v) for f, v in watchers.items()})
         object.__setattr__(self, "_covers", {f: tuple(sorted(v)) for f, v in covers.items()})
+
+    def _check_robots(self, index: Mapping[str, int]) -> dict[str, int]:
+        """Every robot's id, function and substitutes valid; function -> its holder."""
+        holders: dict[str, int] = {}
+        for rid, robot in self.robots.items():
+            if rid != robot.robot_id or not 1 <= rid <= 0xFFFF:
+                raise PlanError(f"robot id {rid} is not a 16-bit id matching its entry")
+            if robot.function is not None:
+                if robot.function not in index:
+                    raise PlanError(f"robot {rid} holds unknown function {robot.function!r}")
+                if robot.function in holders:
+                    raise PlanError(
+                        f"function {robot.function} held by robots {holders[robot.function]} "
+                        f"and {rid}"
+                    )
+                holders[robot.function] = rid
+            for f in robot.subs:
+                if f not in index:
+                    raise PlanError(f"robot {rid} substitutes unknown function {f!r}")
+        return holders
 
     # -- queries -------------------------------------------------------------------------
     def slot(self, function: str) -> int:

@@ -283,15 +283,12 @@ def encode(frame: Frame, key: bytes | None = None, signer: Signer | None = None)
 def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = None,
            *, inner: bool = False) -> Frame:
     """Parse and verify a frame. With `keys`, an unsigned frame or one whose tag matches
-    no key is rejected; several keys serve key rotation (accept old and new for a
-    window). Without keys, a tagged frame is rejected: it cannot be verified.
-
+    no key is rejected (several keys: a rotation window); without, a tagged one is.
     With `verifier` (per-robot mode) a WARN, CLAIM, LEAVE or REFUTE must carry its
-    sender's own valid signature (the swarm key does not vouch for them), a HEARTBEAT
-    carries its chain link and, as an anchor, its sender's signature in place of the
-    tag (`chain.py`; whether a link is the sender's is the receiver's to check), and a
-    CERT is accepted only if the frame it relays is, about the same slot. Without a
-    verifier a CERT is rejected."""
+    sender's own signature, a HEARTBEAT its chain link (an anchor: the signature in
+    place of the tag; whether a link is the sender's is the receiver's to check,
+    `chain.py`), and a CERT what it relays, about its slot. Without one a CERT is
+    rejected."""
     if len(data) < HEADER_LEN + 1:
         raise CodecError("malformed", f"{len(data)} bytes is shorter than any frame")
     first, swarm_id, sender, seq_bytes = HEADER.unpack_from(data)
