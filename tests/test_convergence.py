@@ -224,3 +224,22 @@ def test_two_holders_of_one_epoch_end_with_the_one_that_executes(
                   if e["event"] == "takeover") == [(5, 1), (6, 1)]
     assert [v.kind for v in res.violations] == []
     assert res.holders()["f2"] == [holder]
+
+
+@pytest.mark.parametrize("seed", [45, 51, 0, 1, 2, 3])
+def test_two_holders_of_one_epoch_on_a_lossy_channel_end_within_the_bound(
+        paper: Paper, seed: int) -> None:
+    """The race above at 25% loss, 5 living on (per robot: 6 fences itself only once it
+    has 5's CLAIM, which its own evidence then certifies). 5 relays its claim to a rival
+    of its own epoch every other heartbeat period, not every T_max: seeds 45 and 51 kept
+    both executing past the checker's bound when it relayed once per T_max. (Unsigned
+    and with a shared key, 6 fences on 5's first heartbeat: no certificate to wait for.)"""
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+
+    _, params = paper
+    specs = ["partition:1,5>2,3,4,6@3+2", "leave:2@3.2"]
+    res = run_virtual(two_standbys(), params, duration=12.0, auth="per-robot", loss=0.25,
+                      seed=seed, faults=[parse_fault(s) for s in specs])
+    assert [v.kind for v in res.violations] == []
+    assert res.holders()["f2"] == [5]

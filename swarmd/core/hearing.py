@@ -38,7 +38,13 @@ class Hearing(NodeBase):
             # A stale holder (e.g. back from a pause): if it is our slot, answer at once
             # so it hears the newer epoch and fences itself (rule 2) within a frame.
             if f == self._function and self._role == Role.ACTIVE:
-                self._relay_cert(f, now)
+                # A rival holding it at our epoch (the race won on each side of a
+                # partition) lacks only our CLAIM, most likely (its own evidence backs
+                # ours): every other heartbeat period rather than every T_max, so a
+                # lossy channel does not keep two robots executing one slot (rule 2).
+                rival = hb.epoch == self._epoch
+                self._relay_cert(f, now, 2 * self._params.heartbeat_interval if rival
+                                 else None)
                 self._heartbeat_now(now)
             elif self._identity is not None and hb.epoch < epoch:
                 # Per-robot mode, a takeover it missed whose new holder may be gone:
