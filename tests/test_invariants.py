@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import Checker, check_events
 from swarmd.core.params import Params
@@ -147,3 +149,57 @@ def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace
     took = takeover(3.0 + params.startup_grace + 1.0, 6, "f2", 2)
     assert kinds(judge(paper, ["restart:6@2.9", "crash:2@3.2"], [restart, took])) == []
     assert kinds(judge(paper, ["restart:6@2.9", "crash:2@3.2"], [restart])) != []
+
+
+def _two_holders(paper: tuple[SwarmPlan, Params],
+                 outage: tuple[int, int, float, float] | None) -> Checker:
+    # 2 crashes; standbys 5 and 6 both take f2 over (each missed the other's claim) and
+    # 6 yields 2.0 s later: past the single-holder bound on a clean channel (0.7 s).
+    plan, params = paper
+    checker = Checker(plan, params)
+    for rec in boot(plan):
+        checker.event(rec)
+    checker.fault(3.0, parse_fault("crash:2@3"), "begin")
+    checker.event(takeover(3.6, 5, "f2", 2))
+    checker.event(takeover(3.6, 6, "f2", 2))
+    if outage is not None:  # the simulator reports a fade once the link heals
+        checker.outage(*outage)
+    checker.event({"t": 5.6, "robot": 6, "event": "fenced", "function": "f2", "epoch": 1})
+    checker.finish([], 8.0)
+    return checker
+
+
+def test_two_holders_past_the_bound_are_a_dual_execution(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(_two_holders(paper, None)) == [("dual_execution", None)]
+
+
+def test_a_link_the_channel_faded_between_the_two_holders_counts_as_a_fade(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Everything 5 sent to 6 was lost from 3.5 to 4.5 s: converging within the bound
+    # after that heal (4.5 + 1.2 s) is what invariant 2 asks, as after a `fade`.
+    assert kinds(_two_holders(paper, (5, 6, 3.5, 4.5))) == []
+    assert kinds(_two_holders(paper, (6, 5, 3.5, 4.5))) == []
+
+
+def test_a_fade_elsewhere_or_healed_long_before_excuses_nothing(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    assert kinds(_two_holders(paper, (5, 1, 3.5, 4.5))) == [("dual_execution", None)]
+    assert kinds(_two_holders(paper, (5, 6, 1.0, 2.0))) == [("dual_execution", None)]
+
+
+@pytest.mark.parametrize("model", ["bernoulli", "burst"])
+def test_the_simulator_reports_the_channels_fades_and_only_those(
+        paper: tuple[SwarmPlan, Params], model: str) -> None:
+    from sim.virtual.simulator import Channel, VirtualSwarm
+
+    plan, params = paper
+    heavy = VirtualSwarm(plan, params, duration=6.0, seed=3,
+                         channel=Channel(loss=0.8, loss_model=model, burst_len=8.0))
+    heavy.run()
+    assert heavy.checker.outages, "80 % loss must fade some link for T_max"
+    for sender, receiver, start, heal in heavy.checker.outages:
+        assert sender != receiver and heal - start >= params.t_max
+    clean = VirtualSwarm(plan, params, duration=6.0, seed=3, channel=Channel(loss=0.05))
+    clean.run()
+    assert clean.checker.outages == []

@@ -28,7 +28,11 @@ Invariants (each violation names the time, robot and what went wrong):
    and its quorum of two distinct witnesses cannot be met when a witness fails too;
 2. single holder: outside partitions and link faults (`partition`, `fade`, `deaf`), no
    slot is executed by two running robots for longer than `bounds.dual`; after the
-   fault heals, within `bounds.converge`;
+   fault heals, within `bounds.converge`. The channel can fade a link too: a directed
+   link between two of the robots that lost every frame for `t_max` or longer (a loss
+   burst, or a run of independent losses; the simulator reports it through `outage`)
+   is judged as a fade of that link, since no protocol converges over a link that
+   carries nothing, and `t_max` of silence is what the protocol itself calls gone;
 3. liars: a takeover of a healthy, reachable robot is a false takeover; without loss it
    is a violation (a single liar can never get a healthy robot replaced). A robot is
    healthy only once its node has logged `started`: a process the machine could not
@@ -153,6 +157,13 @@ class Checker:
     _open_links: dict[str, int] = field(default_factory=dict)
     """SPEC of a link fault in force -> its index in `partitions`."""
     dual_since: dict[str, float] = field(default_factory=dict)
+    dual_robots: dict[str, set[int]] = field(default_factory=dict)
+    """function -> every robot that executed it during its current dual episode."""
+    outages: list[tuple[int, int, float, float]] = field(default_factory=list)
+    """(sender, receiver, start, heal) of a link the channel faded (`outage`)."""
+    duals: list[tuple[str, float, float, set[int]]] = field(default_factory=list)
+    """Ended dual episodes (function, since, until, robots), judged at `finish`: an
+    outage is known only once its link heals, which may come after the episode ended."""
     episodes: dict[tuple[int, str], tuple[float, int]] = field(default_factory=dict)
     held_since: dict[tuple[str, int], float] = field(default_factory=dict)
     """(function, robot) -> when the robot last began to execute the function."""
@@ -301,6 +312,10 @@ class Checker:
                             self.episodes.pop(key, None)
         self._dual_update(t)
 
+    def outage(self, sender: int, receiver: int, start: float, heal: float) -> None:
+        """The channel lost every frame from `sender` to `receiver` in [start, heal)."""
+        self.outages.append((sender, receiver, start, heal))
+
     # ------------------------------------------------------------------ rules
     def _close_watcher(self, r: int) -> None:
         for key in [k for k in self.episodes if k[0] == r]:
@@ -317,6 +332,7 @@ class Checker:
         for f, robots in by_function.items():
             if len(robots) > 1:
                 self.dual_since.setdefault(f, t)
+                self.dual_robots.setdefault(f, set()).update(robots)
             else:
                 self._dual_end(f, t)
         for f in [f for f in self.dual_since if f not in by_function]:
@@ -324,12 +340,15 @@ class Checker:
 
     def _dual_end(self, f: str, t: float) -> None:
         since = self.dual_since.pop(f, None)
+        robots = self.dual_robots.pop(f, set())
         if since is not None:
-            self._judge_dual(f, since, t)
+            self.duals.append((f, since, t, robots))
 
-    def _judge_dual(self, f: str, since: float, until: float) -> None:
+    def _judge_dual(self, f: str, since: float, until: float, robots: set[int]) -> None:
         allowed = self.bounds.dual
-        for start, heal in self.partitions:
+        faded = [(start, heal) for a, b, start, heal in self.outages
+                 if a in robots and b in robots]
+        for start, heal in self.partitions + faded:
             if start <= until and since <= heal + self.bounds.converge:
                 allowed = max(allowed, heal + self.bounds.converge - since)
         if until - since > allowed:
@@ -443,8 +462,12 @@ class Checker:
     def finish(self, events: Iterable[dict[str, Any]], duration: float) -> list[Violation]:
         """Close the run at `duration` and return every violation, oldest first."""
         for f, since in list(self.dual_since.items()):
-            self._judge_dual(f, since, duration)
+            self.duals.append((f, since, duration, self.dual_robots.get(f, set())))
+        for dual in self.duals:
+            self._judge_dual(*dual)
+        self.duals = []
         self.dual_since.clear()
+        self.dual_robots.clear()
         for e in self.expects:
             v = self._judge_expect(e, duration)
             if v is not None:

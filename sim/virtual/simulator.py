@@ -143,6 +143,9 @@ class VirtualSwarm:
         self.partition: dict[int, int] | None = None  # robot -> group while partitioned
         self.cuts: list[LinkCut] = []  # one-way link faults in force (fade, deaf, A>B)
         self.cuts_seen: list[LinkCut] = []
+        self._losing: dict[tuple[int, int], tuple[float, float]] = {}
+        """(sender, receiver) -> the first and last frame the channel lost in the link's
+        current run of losses: a run spanning `t_max` or more is an outage to the checker."""
         if self.channel.loss_model not in LOSS_MODELS:
             raise ValueError(f"loss model must be one of {', '.join(LOSS_MODELS)}")
         self._burst = GilbertElliott(self.channel.loss, self.channel.burst_len, self.rng) \
@@ -235,6 +238,8 @@ class VirtualSwarm:
                     self.deliveries += 1
                     self._call(a, _OP_RAW, b)
         self.now = self.duration
+        for link, run in self._losing.items():
+            self._outage(link, run, self.duration)
         violations = self.checker.finish(self.events, self.duration) + self._muted() \
             + self._views()
         violations.sort(key=lambda v: v.t)
@@ -427,8 +432,22 @@ class VirtualSwarm:
         if self.cuts and any(c.cuts(sender, receiver, self.now) for c in self.cuts):
             return True
         if self._burst is not None:
-            return self._burst.lost(sender, receiver)
-        return bool(self.channel.loss) and self.rng.random() < self.channel.loss
+            lost = self._burst.lost(sender, receiver)
+        else:
+            lost = bool(self.channel.loss) and self.rng.random() < self.channel.loss
+        link = (sender, receiver)
+        if lost:
+            self._losing[link] = (self._losing.get(link, (self.now, 0.0))[0], self.now)
+        elif (run := self._losing.pop(link, None)) is not None:
+            self._outage(link, run, self.now)
+        return lost
+
+    def _outage(self, link: tuple[int, int], run: tuple[float, float], heal: float) -> None:
+        """The channel alone lost every frame on `link` from `run[0]` to `run[1]`, the
+        next one came through at `heal`: a run spanning `t_max` or more, the checker judges
+        as a fade of that link (invariant 2)."""
+        if run[1] - run[0] >= self.params.t_max:
+            self.checker.outage(*link, run[0], heal)
 
     # ------------------------------------------------------------------ faults
     def _boot(self, rid: int) -> None:
