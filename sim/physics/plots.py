@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from sim.shared.faults import FaultKind
 from sim.shared.holders import HolderFold
 from swarmd.core.events import Alert, Claim, Event, Fault, Suspect, Takeover, event_of
 
@@ -38,7 +39,7 @@ FENCE_SHOW = 1.0
 """s a FENCED span lasts when no later event ends it: the node rejoins as standby after
 one heartbeat period and logs no event for that (roles.py FENCE_DONE)."""
 
-DOWN_FAULTS = frozenset({"crash", "motor", "collide"})
+DOWN_FAULTS: frozenset[str] = frozenset({FaultKind.CRASH, FaultKind.MOTOR, FaultKind.COLLIDE})
 """Injected faults after which the craft is down (black) until it starts again."""
 
 

@@ -92,7 +92,7 @@ from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, writ
 from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
-from sim.shared.faults import LINK_KINDS, Fault, fault_record
+from sim.shared.faults import LINK_KINDS, Fault, FaultKind, fault_record
 from swarmd.transport.addresses import DEFAULT_GROUP
 
 __all__ = ["Orchestrator", "RealtimeResult", "run_realtime", "run_realtime_async"]
@@ -351,7 +351,6 @@ class Orchestrator:
         self.view.feed(rec)
 
     def _apply(self, fault: Fault) -> None:
-        loop = asyncio.get_running_loop()
         if fault.kind in LINK_KINDS:
             for part in fault.split():
                 self._fault_event(part)  # the receive filters already hold the window
@@ -361,31 +360,33 @@ class Orchestrator:
             for part in parts:
                 self._apply(part)
             return
-        robot = fault.robot
         self._fault_event(fault)
-        proc = self.procs.get(robot)
+        self._act(fault, self.procs.get(fault.robot))
+
+    def _act(self, fault: Fault, proc: RobotProcess | None) -> None:
+        """What a fault on one robot does to its process (`proc`; None: it has none)."""
         kind = fault.kind
-        if kind == "collide":  # the crafts lose their motors; without physics, a crash
-            kind = "motor" if self.link == "quad" else "crash"
+        if kind is FaultKind.COLLIDE:  # the crafts lose their motors; without physics, a crash
+            kind = FaultKind.MOTOR if self.link == "quad" else FaultKind.CRASH
         match kind:
-            case "crash":
+            case FaultKind.CRASH:
                 if proc is not None:
                     self._kill_proc(proc)
-            case "pause":
+            case FaultKind.PAUSE:
                 if proc is not None and proc.alive and proc.process.pid is not None:
-                    pid = proc.process.pid
-                    kill_group(pid, signal.SIGSTOP)
-                    loop.call_later(fault.duration or 0.0, self._resume, proc)
-            case "restart":
+                    kill_group(proc.process.pid, signal.SIGSTOP)
+                    asyncio.get_running_loop().call_later(fault.duration or 0.0,
+                                                          self._resume, proc)
+            case FaultKind.RESTART:
                 if proc is not None:
                     self._kill_proc(proc)  # a restart of a live robot is a crash first
                     self.retired.append(proc)
-                self.procs[robot] = self._spawn(robot, self.t0)
-            case "leave" | "unhealthy" | "liar" | "motor":
+                self.procs[fault.robot] = self._spawn(fault.robot, self.t0)
+            case FaultKind.LEAVE | FaultKind.UNHEALTHY | FaultKind.LIAR | FaultKind.MOTOR:
                 if proc is not None and proc.alive:
-                    proc.left = proc.left or kind == "leave"
+                    proc.left = proc.left or kind is FaultKind.LEAVE
                     self._send(proc, Act(kind))
-            case "forge":  # the robot process holds R's key: it forges (robot_proc.Forger)
+            case FaultKind.FORGE:  # the robot process holds R's key: it forges (Forger)
                 if proc is not None and proc.alive:
                     self._send(proc, Forge(fault.attack))
             case _:
