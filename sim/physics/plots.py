@@ -1,8 +1,9 @@
 """Pictures of a run: a timeline of roles and functions, and a top-down
 trajectory plot. matplotlib with the Agg backend (no display needed).
 
-The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records
-`{"t", "robot", "event", ...}`), so it works for `--virtual` runs without physics too.
+The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records,
+read back through `swarmd.core.events`), so it works for `--virtual` runs without physics
+too.
 `role_spans` turns the log into per-robot spans of (role, function), from the one fold of
 the log (`sim.shared.holders`); `render` colours the crafts of the video with the same
 spans.

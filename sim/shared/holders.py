@@ -2,7 +2,7 @@
 
 Theory of operation
 -------------------
-The event log (DESIGN section 3: `{"t", "robot", "event", ...}`) tells, robot by robot,
+The event log (DESIGN section 3; its records are `swarmd.core.events`) tells, robot by robot,
 what the node did; `HolderFold` reads each record back as its typed event
 (`Event.from_record`) and replays them into one `Holding` per robot, the role the
 node is in (roles.py: active, standby, claiming, fenced) and the function that role is

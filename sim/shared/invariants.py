@@ -58,6 +58,8 @@ from typing import Any
 
 from sim.shared.faults import LINK_KINDS, Fault, FaultKind
 from sim.shared.holders import HolderFold
+from swarmd.core.events import Fault as EventFault
+from swarmd.core.events import name_of
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.signed import RELAY_EVERY
@@ -261,7 +263,7 @@ class Checker:
         carries the same facts; this hook exists for cross-checks in tests."""
 
     def event(self, rec: dict[str, Any]) -> None:
-        t, r, name = float(rec["t"]), int(rec["robot"]), rec["event"]
+        t, r, name = float(rec["t"]), int(rec["robot"]), name_of(rec)
         self.holding.feed(rec)
         if name == "fenced":
             f, epoch = rec["function"], int(rec["epoch"])
@@ -484,7 +486,7 @@ def check_events(
     checker = Checker(plan, params, loss=loss)
     timeline: list[tuple[float, int, Any]] = []
     for i, rec in enumerate(events):
-        if rec.get("event") != "fault":
+        if name_of(rec) != EventFault.name:
             timeline.append((float(rec["t"]), 1, (i, rec)))
     for i, fault in enumerate(faults):
         timeline.append((fault.at, 0, (i, fault, "begin")))

@@ -31,7 +31,7 @@ from sim.shared.liar import liar_warnings
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
-from swarmd.core.events import Event
+from swarmd.core.events import Event, name_of
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -392,7 +392,7 @@ class VirtualSwarm:
 
     def _record(self, rec: dict[str, Any]) -> None:
         self.events.append(rec)
-        if rec["event"] in ("started", "takeover", "fenced", "leave", "stopped", "fault"):
+        if name_of(rec) in ("started", "takeover", "fenced", "leave", "stopped", "fault"):
             self._changed[int(rec["robot"])] = float(rec["t"])
         self.checker.event(rec)
         if self.on_event is not None:
