@@ -37,7 +37,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sim.shared.faults import Fault  # noqa: E402
+from sim.shared.faults import Fault, FaultKind  # noqa: E402
 from sim.shared.invariants import Violation  # noqa: E402
 from sim.virtual.simulator import VirtualResult, run_virtual  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
@@ -132,17 +132,17 @@ def _draw_fault(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str, 
     if kind in ("partition", "oneway"):
         group = tuple(sorted(rng.sample(ids, rng.randint(1, len(ids) - 1))))
         rest = tuple(r for r in ids if r not in group)
-        return Fault("partition", at, (*group, *rest), round(rng.uniform(0.5, 3.0), 2),
+        return Fault(FaultKind.PARTITION, at, (*group, *rest), round(rng.uniform(0.5, 3.0), 2),
                      (group, rest), oneway=kind == "oneway")
     if kind == "fade":
-        return Fault(kind, at, (first,), round(rng.uniform(0.2, 3.0), 2))
+        return Fault(FaultKind(kind), at, (first,), round(rng.uniform(0.2, 3.0), 2))
     if kind == "deaf":
         heard = near or [r for r in ids if r != first]
         senders = tuple(sorted(rng.sample(heard, rng.randint(1, min(2, len(heard))))))
-        return Fault(kind, at, (first,), round(rng.uniform(0.2, 3.0), 2), (senders,))
+        return Fault(FaultKind(kind), at, (first,), round(rng.uniform(0.2, 3.0), 2), (senders,))
     if kind == "pause":
-        return Fault(kind, at, tuple(targets), round(rng.uniform(0.3, 4.0), 2))
-    return Fault(kind, at, tuple(targets))
+        return Fault(FaultKind(kind), at, tuple(targets), round(rng.uniform(0.3, 4.0), 2))
+    return Fault(FaultKind(kind), at, tuple(targets))
 
 
 def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
@@ -205,7 +205,7 @@ def ring8_latencies(pairs: Sequence[tuple[int, ...]], phases: int = 20,
         for k in range(phases):
             at = 3.0 + k * params.heartbeat_interval / phases
             res = run_virtual(plan, params, duration=at + 6.0, loss=loss, seed=k,
-                              faults=[Fault("crash", at, robots)], auth=auth or AUTH)
+                              faults=[Fault(FaultKind.CRASH, at, robots)], auth=auth or AUTH)
             bad += bool(res.violations)
             for r in robots:
                 f = plan.robots[r].function

@@ -29,7 +29,7 @@ from rich.table import Table
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sim.shared.faults import Fault  # noqa: E402
+from sim.shared.faults import Fault, FaultKind  # noqa: E402
 from sim.virtual.simulator import run_virtual  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
 from swarmd.core import wire  # noqa: E402
@@ -59,7 +59,7 @@ def takeover_latencies(plan: SwarmPlan, params: Params, *, seeds: int, loss: flo
         victim = rng.choice(actives)
         at = rng.uniform(3.0, 4.0)
         res = run_virtual(plan, params, duration=at + 5.0, loss=loss, seed=seed,
-                          faults=[Fault("crash", at, (victim,))], auth=AUTH)
+                          faults=[Fault(FaultKind.CRASH, at, (victim,))], auth=AUTH)
         violations += len(res.violations)
         t = next((e["t"] for e in res.events
                   if e["event"] == "takeover" and e.get("replaced") == victim), None)

@@ -28,7 +28,7 @@ from typing import Any
 
 from sim.shared.channel import LOSS_MODELS
 from sim.shared.eventlog import stops_at_end, write_events
-from sim.shared.faults import Fault, FaultSpecError, check_faults, parse_fault
+from sim.shared.faults import Fault, FaultKind, FaultSpecError, check_faults, parse_fault
 from sim.shared.summary import Summary, counted_drops, summarize
 from swarmd.core.events import Leave, Started, event_of
 
@@ -408,7 +408,7 @@ def _run_realtime(checked: _Checked, faults: Sequence[Fault], options: SimOption
                if isinstance(event_of(e), Started)}
     left = {e["robot"]: float(e["t"]) for e in reversed(result.events)
             if isinstance(ev := event_of(e), Leave) and ev.reason == "fault"}
-    refused = [RefusedArm("unhealthy",
+    refused = [RefusedArm(FaultKind.UNHEALTHY,
                           round(left.get(r, started.get(r, 0.0)), 6) - 1e-6
                           if r in left else round(started.get(r, 0.0), 6) + 1e-6, (r,))
                for r in options.refuse_arm]

@@ -33,7 +33,7 @@ from typing import Any
 from swarmd import state as state_mod
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
-from swarmd.core.events import Alert, event_of
+from swarmd.core.events import NAME_KEY, Alert, event_of
 from swarmd.core.node import Node
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
@@ -183,7 +183,7 @@ class Daemon:
         event = event_of(record)
         name = None if event is None else event.name
         fields = dict(record) if event is None else event.fields()
-        log.info("event %s", name, extra={"event": name, "fields": fields})
+        log.info("event %s", name, extra={NAME_KEY: name, "fields": fields})
         if isinstance(event, Alert) and self._alert_hook:
             self._run_hook(record)
 

@@ -18,6 +18,8 @@ import sys
 import time
 from typing import Any, Literal, TextIO
 
+from swarmd.core.events import NAME_KEY
+
 LogFormat = Literal["text", "json"]
 FORMATS: tuple[LogFormat, ...] = ("text", "json")
 
@@ -73,7 +75,7 @@ class TextFormatter(logging.Formatter):
         extra = {k: v for k, v in vars(record).items()
                  if k not in _STANDARD and not k.startswith("_")}
         fields = extra.pop("fields", None)
-        event = extra.pop("event", None)
+        event = extra.pop(NAME_KEY, None)
         text = f"{head}  {event if event is not None else record.getMessage()}"
         if isinstance(fields, dict):
             extra = {**fields, **extra}

@@ -51,7 +51,7 @@ from prometheus_client.core import CounterMetricFamily
 from prometheus_client.registry import Collector
 
 from swarmd.core.actions import Action
-from swarmd.core.events import CORE_EVENTS, Event
+from swarmd.core.events import CORE_EVENTS, NAME_KEY, Event
 from swarmd.core.roles import Role
 
 if TYPE_CHECKING:
@@ -121,7 +121,7 @@ class Metrics:
         )
         self._events = Counter(
             "swarmd_events", "Event-log records by event name (DESIGN section 3).",
-            ["event"], registry=reg,
+            [NAME_KEY], registry=reg,
         )
         for name in EVENT_NAMES:
             self._events.labels(name)

@@ -14,11 +14,8 @@ pytest.importorskip("mujoco")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sim.physics.autopilot import (
-    PREARM,
-    AutopilotCore,
-    geodetic,
-)
+from sim.physics.autopilot_core import AutopilotCore
+from sim.physics.mavlink_defs import PREARM, geodetic
 from sim.physics.point import PointRobot
 from sim.physics.robot import Mode
 from swarmd.link.mavlink_modes import custom_mode, mode_number

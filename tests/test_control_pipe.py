@@ -21,9 +21,10 @@ from sim.realtime.control import (
     decode_report,
     encode,
 )
+from sim.shared.faults import FaultKind
 
 
-@pytest.mark.parametrize("cmd", [Go(1700000000.25), Act("leave"), Act("motor"),
+@pytest.mark.parametrize("cmd", [Go(1700000000.25), Act(FaultKind.LEAVE), Act(FaultKind.MOTOR),
                                  Forge("replay")])
 def test_commands_round_trip(cmd: Go | Act | Forge) -> None:
     assert decode_command(encode(cmd)) == cmd

@@ -13,6 +13,7 @@ from sim.shared.faults import (
     ATTACKS,
     KINDS,
     Fault,
+    FaultKind,
     FaultSpecError,
     check_faults,
     fault_record,
@@ -27,24 +28,26 @@ PAPER_IDS = {1, 2, 3, 4, 5, 6}
 
 
 @pytest.mark.parametrize(("spec", "fault"), [
-    ("crash:2@3", Fault("crash", 3.0, (2,))),
-    ("restart:2@7.5", Fault("restart", 7.5, (2,))),
-    ("pause:3@2+1.5", Fault("pause", 2.0, (3,), 1.5)),
-    ("partition:1,2|3,4@2+3", Fault("partition", 2.0, (1, 2, 3, 4), 3.0, ((1, 2), (3, 4)))),
-    ("partition:1|2|3,4@0+1", Fault("partition", 0.0, (1, 2, 3, 4), 1.0, ((1,), (2,), (3, 4)))),
-    ("liar:4@0", Fault("liar", 0.0, (4,))),
-    ("leave:1@5", Fault("leave", 5.0, (1,))),
-    ("unhealthy:6@4", Fault("unhealthy", 4.0, (6,))),
-    ("motor:2@5", Fault("motor", 5.0, (2,))),
-    ("collide:1,2@5", Fault("collide", 5.0, (1, 2))),
-    ("collide:3,1,2@5", Fault("collide", 5.0, (3, 1, 2))),
-    ("crash:1,2@3", Fault("crash", 3.0, (1, 2))),
-    ("pause:1,4@2+1", Fault("pause", 2.0, (1, 4), 1.0)),
-    ("leave:2,3@1", Fault("leave", 1.0, (2, 3))),
-    ("unhealthy:5,6@1", Fault("unhealthy", 1.0, (5, 6))),
-    ("crash:35@.5", Fault("crash", 0.5, (35,))),
-    ("crash:2@3.", Fault("crash", 3.0, (2,))),
-    ("crash:65535@1", Fault("crash", 1.0, (65535,))),
+    ("crash:2@3", Fault(FaultKind.CRASH, 3.0, (2,))),
+    ("restart:2@7.5", Fault(FaultKind.RESTART, 7.5, (2,))),
+    ("pause:3@2+1.5", Fault(FaultKind.PAUSE, 2.0, (3,), 1.5)),
+    ("partition:1,2|3,4@2+3",
+     Fault(FaultKind.PARTITION, 2.0, (1, 2, 3, 4), 3.0, ((1, 2), (3, 4)))),
+    ("partition:1|2|3,4@0+1",
+     Fault(FaultKind.PARTITION, 0.0, (1, 2, 3, 4), 1.0, ((1,), (2,), (3, 4)))),
+    ("liar:4@0", Fault(FaultKind.LIAR, 0.0, (4,))),
+    ("leave:1@5", Fault(FaultKind.LEAVE, 5.0, (1,))),
+    ("unhealthy:6@4", Fault(FaultKind.UNHEALTHY, 4.0, (6,))),
+    ("motor:2@5", Fault(FaultKind.MOTOR, 5.0, (2,))),
+    ("collide:1,2@5", Fault(FaultKind.COLLIDE, 5.0, (1, 2))),
+    ("collide:3,1,2@5", Fault(FaultKind.COLLIDE, 5.0, (3, 1, 2))),
+    ("crash:1,2@3", Fault(FaultKind.CRASH, 3.0, (1, 2))),
+    ("pause:1,4@2+1", Fault(FaultKind.PAUSE, 2.0, (1, 4), 1.0)),
+    ("leave:2,3@1", Fault(FaultKind.LEAVE, 1.0, (2, 3))),
+    ("unhealthy:5,6@1", Fault(FaultKind.UNHEALTHY, 1.0, (5, 6))),
+    ("crash:35@.5", Fault(FaultKind.CRASH, 0.5, (35,))),
+    ("crash:2@3.", Fault(FaultKind.CRASH, 3.0, (2,))),
+    ("crash:65535@1", Fault(FaultKind.CRASH, 1.0, (65535,))),
 ])
 def test_parse_fault_every_kind(spec: str, fault: Fault) -> None:
     assert parse_fault(spec) == fault
@@ -173,16 +176,16 @@ def _faults(draw: st.DrawFn) -> Fault:
         groups = tuple(tuple(named[a:b]) for a, b in itertools.pairwise(bounds))
         length = draw(_times.filter(lambda d: d > 0))
         oneway = len(groups) == 2 and draw(st.booleans())
-        return Fault(kind, at, tuple(named), length, groups, oneway=oneway)
+        return Fault(FaultKind(kind), at, tuple(named), length, groups, oneway=oneway)
     if kind == "deaf":
         ids = draw(st.lists(_ids, min_size=2, max_size=4, unique=True))
-        return Fault(kind, at, (ids[0],), draw(_times.filter(lambda d: d > 0)),
+        return Fault(FaultKind(kind), at, (ids[0],), draw(_times.filter(lambda d: d > 0)),
                      (tuple(ids[1:]),))
     dur = draw(_times.filter(lambda d: d > 0)) if kind in ("pause", "fade") else None
     n = draw(st.integers(2 if kind == "collide" else 1, 4))
     attack = draw(st.sampled_from(ATTACKS)) if kind == "forge" else ""
-    return Fault(kind, at, tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True))), dur,
-                 attack=attack)
+    robots = tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True)))
+    return Fault(FaultKind(kind), at, robots, dur, attack=attack)
 
 
 @given(_faults())
@@ -193,9 +196,9 @@ def test_spec_round_trips(fault: Fault) -> None:
 
 
 def test_spec_keeps_small_and_precise_times() -> None:
-    assert Fault("crash", 1e-05, (2,)).spec() == "crash:2@0.00001"
-    assert Fault("crash", 1234567.5, (2,)).spec() == "crash:2@1234567.5"
-    assert Fault("crash", 0.123456789, (2,)).spec() == "crash:2@0.123456789"
+    assert Fault(FaultKind.CRASH, 1e-05, (2,)).spec() == "crash:2@0.00001"
+    assert Fault(FaultKind.CRASH, 1234567.5, (2,)).spec() == "crash:2@1234567.5"
+    assert Fault(FaultKind.CRASH, 0.123456789, (2,)).spec() == "crash:2@0.123456789"
 
 
 def test_fault_record_form() -> None:
@@ -223,7 +226,7 @@ def test_virtual_logs_one_fault_record_per_injected_fault(
 def test_split_gives_one_fault_a_robot_with_the_users_spec() -> None:
     collide = parse_fault("collide:1,2@5")
     parts = collide.split()
-    assert parts == (Fault("collide", 5.0, (1,)), Fault("collide", 5.0, (2,)))
+    assert parts == (Fault(FaultKind.COLLIDE, 5.0, (1,)), Fault(FaultKind.COLLIDE, 5.0, (2,)))
     assert [p.origin for p in parts] == ["collide:1,2@5"] * 2
     assert [p.robot for p in parts] == [1, 2]
     assert parse_fault("crash:2@3").split() == (parse_fault("crash:2@3"),)

@@ -22,7 +22,8 @@ pytest.importorskip("mujoco")
 
 from pymavlink import mavutil
 
-from sim.physics.autopilot import AutopilotCore, SimMavlinkLink, start_autopilot
+from sim.physics.autopilot import SimMavlinkLink, start_autopilot
+from sim.physics.autopilot_core import AutopilotCore
 from sim.physics.link import QuadLink
 from sim.physics.robot import QuadRobot
 from swarmd.core.roles import Health

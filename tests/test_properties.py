@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.shared.faults import Fault, parse_fault
+from sim.shared.faults import Fault, FaultKind, parse_fault
 from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.core.params import Params, udp
 from swarmd.core.plan import RobotPlan, SwarmPlan
@@ -96,13 +96,13 @@ def cases(draw: st.DrawFn, spaced: bool = False) -> Case:
                                   unique=True))
             rest = tuple(r for r in ids if r not in group)
             dur = round(draw(st.floats(0.5, 4.0)), 2)
-            faults.append(Fault(kind, at, (*sorted(group), *rest), dur,
+            faults.append(Fault(FaultKind(kind), at, (*sorted(group), *rest), dur,
                                 (tuple(sorted(group)), rest)))
         elif kind == "pause":
             dur = round(draw(st.floats(0.3, 4.0)), 2)
-            faults.append(Fault(kind, at, (draw(st.sampled_from(ids)),), dur))
+            faults.append(Fault(FaultKind(kind), at, (draw(st.sampled_from(ids)),), dur))
         else:
-            faults.append(Fault(kind, at, (draw(st.sampled_from(ids)),)))
+            faults.append(Fault(FaultKind(kind), at, (draw(st.sampled_from(ids)),)))
         if spaced:
             targets = set(faults[-1].robots)
             if targets & (hit if kind == "liar" else liars):

@@ -28,6 +28,7 @@ from typer.testing import CliRunner
 import sim.realtime.orchestrator as realtime
 import sim.realtime.robotfiles as robotfiles
 from sim.realtime.orchestrator import Orchestrator, RealtimeResult, run_realtime_async
+from sim.realtime.problems import errors_of
 from sim.realtime.summary import summarize_realtime
 from sim.shared.faults import parse_fault
 from sim.shared.summary import (
@@ -350,10 +351,10 @@ def test_errors_a_robot_survived_are_quoted_from_its_log(
     log.write_text('{"level":"warning","msg":"channel: send_error"}\n'
                    '{"level":"error","msg":"robot 3: cannot fly f3 (epoch 0): under the ground"}\n'
                    '{"level":"error","msg":"robot link assign failed","error":"boom"}\n')
-    assert orch._log_errors(3) == ("robot 3: 2 error(s) in its log, first: robot 3: cannot "
+    assert errors_of(orch.run_dir, 3) == ("robot 3: 2 error(s) in its log, first: robot 3: cannot "
                                    "fly f3 (epoch 0): under the ground")
-    assert orch._log_errors(4) == ""  # no log at all
+    assert errors_of(orch.run_dir, 4) == ""  # no log at all
     plan, params = paper
-    summary = summarize_realtime(_result(log_errors=[orch._log_errors(3)]), [], plan, params,
+    summary = summarize_realtime(_result(log_errors=[errors_of(orch.run_dir, 3)]), [], plan, params,
                                  loss=0.0)
     assert summary.ok and any("cannot fly f3" in w for w in summary.warnings)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.shared.faults import Fault
+from sim.shared.faults import Fault, FaultKind
 from sim.shared.invariants import Bounds
 from sim.virtual.simulator import run_virtual
 from swarmd.config import load_swarm
@@ -91,18 +91,18 @@ class Schedule:
         if self.kind in LINK:
             return self._link_faults(t0, params)
         dur = PAUSE if self.kind == "pause" else None
-        return [Fault(self.kind, round(t0 + i * self.gap, 6), (r,), dur)
+        return [Fault(FaultKind(self.kind), round(t0 + i * self.gap, 6), (r,), dur)
                 for i, r in enumerate(self.robots)]
 
     def _link_faults(self, t0: float, params: Params) -> list[Fault]:
         d = round(self.length * params.t_max, 6)
         a, b = self.robots
         if self.kind == "deaf":
-            return [Fault("deaf", t0, (a,), d, ((b,),))]
+            return [Fault(FaultKind.DEAF, t0, (a,), d, ((b,),))]
         if self.kind == "fade2":
-            return [Fault("fade", t0, (a,), d), Fault("fade", t0, (b,), d)]
-        return [Fault("fade", t0, (a,), d),
-                Fault("deaf", t0, (b,), round(d + self.extra * params.t_max, 6), ((a,),))]
+            return [Fault(FaultKind.FADE, t0, (a,), d), Fault(FaultKind.FADE, t0, (b,), d)]
+        return [Fault(FaultKind.FADE, t0, (a,), d),
+                Fault(FaultKind.DEAF, t0, (b,), round(d + self.extra * params.t_max, 6), ((a,),))]
 
     def duration(self) -> float:
         _, params = swarm(self.swarm)

@@ -1,8 +1,9 @@
 """Pictures of a run: a timeline of roles and functions, and a top-down
 trajectory plot. matplotlib with the Agg backend (no display needed).
 
-The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records
-`{"t", "robot", "event", ...}`), so it works for `--virtual` runs without physics too.
+The timeline is drawn from the event log alone (DESIGN section 3: JSON Lines records,
+read back through `swarmd.core.events`), so it works for `--virtual` runs without physics
+too.
 `role_spans` turns the log into per-robot spans of (role, function), from the one fold of
 the log (`sim.shared.holders`); `render` colours the crafts of the video with the same
 spans.
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from sim.shared.faults import FaultKind
 from sim.shared.holders import HolderFold
 from swarmd.core.events import Alert, Claim, Event, Fault, Suspect, Takeover, event_of
 
@@ -38,7 +40,7 @@ FENCE_SHOW = 1.0
 """s a FENCED span lasts when no later event ends it: the node rejoins as standby after
 one heartbeat period and logs no event for that (roles.py FENCE_DONE)."""
 
-DOWN_FAULTS = frozenset({"crash", "motor", "collide"})
+DOWN_FAULTS: frozenset[str] = frozenset({FaultKind.CRASH, FaultKind.MOTOR, FaultKind.COLLIDE})
 """Injected faults after which the craft is down (black) until it starts again."""
 
 

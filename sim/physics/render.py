@@ -32,6 +32,7 @@ import numpy as np
 
 from sim.physics.plots import ROLE_COLORS, Span, role_at, role_spans
 from sim.physics.robot import Trajectory
+from sim.shared.faults import FaultKind
 from swarmd.core.events import Fault, Takeover, event_of
 
 BACKENDS = ("egl", "osmesa")
@@ -246,7 +247,7 @@ def _with_fall(tr: Trajectory, events: Sequence[Mapping[str, Any]]) -> Trajector
     last = float(tr.t[-1])
     # Killed where the samples end (a restarted robot's samples go on after its kill).
     killed = any(isinstance(ev := event_of(e), Fault) and e.get("robot") == tr.robot
-                 and ev.kind in ("crash", "restart")
+                 and ev.kind in (FaultKind.CRASH, FaultKind.RESTART)
                  and abs(float(e.get("t", 0.0)) - last) <= 0.5 for e in events)
     if not killed or (tr.modes and tr.modes[-1] in ("parked", "crashed")):
         return tr

@@ -24,12 +24,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from sim.shared.faults import FaultKind
+
 _CMD = "cmd"
 """The key naming a command."""
 _CTL = "_ctl"
 """The key naming a report other than an event-log record (no event record has it)."""
 
-ACTS = frozenset({"leave", "unhealthy", "liar", "motor"})
+ACTS = frozenset({FaultKind.LEAVE, FaultKind.UNHEALTHY, FaultKind.LIAR, FaultKind.MOTOR})
 """Faults a robot process acts out when told (`Act.kind`)."""
 
 
@@ -50,7 +52,7 @@ class Go:
 class Act:
     """Act out the fault `kind` (one of `ACTS`)."""
 
-    kind: str
+    kind: FaultKind
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,7 +123,7 @@ def _to_json(msg: Command | Report) -> dict[str, Any]:
         case Go(t0):
             return {_CMD: "go", "t0": t0}
         case Act(kind):
-            return {_CMD: kind}
+            return {_CMD: str(kind)}
         case Forge(attack):
             return {_CMD: "forge", "attack": attack}
         case Ready(pid):
@@ -164,7 +166,7 @@ def decode_command(data: bytes) -> Command:
         if cmd == "forge":
             return Forge(str(doc["attack"]))
         if isinstance(cmd, str) and cmd in ACTS:
-            return Act(cmd)
+            return Act(FaultKind(cmd))
     except (KeyError, TypeError, ValueError) as exc:
         raise ControlError(f"command {cmd!r} without a valid {exc}") from None
     raise ControlError(f"unknown command {cmd!r}")

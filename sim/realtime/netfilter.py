@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from sim.shared.channel import GilbertElliott
-from sim.shared.faults import Fault
+from sim.shared.faults import Fault, FaultKind
 from swarmd.core.wire import HEADER, HEADER_LEN
 
 
@@ -135,6 +135,6 @@ def link_windows(faults: Sequence[Fault]) -> tuple[PartitionWindow, ...]:
         end = f.at + (f.duration or 0.0)
         if cut is not None:
             out.append(PartitionWindow(f.at, end, (), cut))
-        elif f.kind == "partition":
+        elif f.kind is FaultKind.PARTITION:
             out.append(PartitionWindow(f.at, end, tuple(frozenset(g) for g in f.groups)))
     return tuple(out)

@@ -26,13 +26,11 @@ robot before it goes up; robots die by themselves if the orchestrator does (robo
 PDEATHSIG and control-pipe EOF).
 
 What can go wrong with the processes themselves is reported, never silently passed over
-(`RealtimeResult.problems`): a robot that fails to start (or is not ready within
-`READY_TIMEOUT`: the run is refused with the reason and the robot's log), a robot
-process that ends on its own during the run (`deaths`: the time its pipe closed, so the
-checker treats it as a crash rather than calling its replacement a false takeover), a
-live robot whose daemon never logged `started`. Each robot also reports how late its
-event loop runs (`sim.realtime.robot_proc.LatenessProbe`), so a summary can say when the machine
-could not keep up.
+(`RealtimeResult.problems`, found by `sim/realtime/problems.py`); a robot that fails to
+start, or is not ready within `READY_TIMEOUT`, refuses the run with the reason and the
+robot's log. Each robot also reports how late its event loop runs
+(`sim.realtime.robot_proc.LatenessProbe`), so a summary can say when the machine could
+not keep up.
 
 Events from every robot arrive over pipes and are merged by t into one log.
 """
@@ -74,7 +72,15 @@ from sim.realtime.control import (
     decode_report,
     encode,
 )
-from sim.realtime.logscan import log_errors, log_tail
+from sim.realtime.problems import (
+    deaths,
+    never_started,
+    process_problems,
+    robot_log,
+    summed_drops,
+    survived_errors,
+    tail_of,
+)
 from sim.realtime.procs import (
     RobotProcess,
     forkserver_context,
@@ -86,8 +92,7 @@ from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, writ
 from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
-from sim.shared.faults import LINK_KINDS, Fault, fault_record
-from swarmd.core.events import Started, event_of
+from sim.shared.faults import LINK_KINDS, Fault, FaultKind, fault_record
 from swarmd.transport.addresses import DEFAULT_GROUP
 
 __all__ = ["Orchestrator", "RealtimeResult", "run_realtime", "run_realtime_async"]
@@ -99,8 +104,6 @@ READY_TIMEOUT = 20.0
 `READY_PER_ROBOT` for each robot: an overloaded machine starts a big swarm slowly (80
 robots on one busy core took 25 s) and must be waited for, not refused."""
 READY_PER_ROBOT = 0.5
-STARTED_GRACE = 3.0
-"""s a live robot process has, from its start, to log `started` before that is a problem."""
 
 P = ParamSpec("P")
 
@@ -113,26 +116,12 @@ class Orchestrator:
     while its `FaultSchedule` says when each fault acts; `cleanup` undoes what `prepare`
     made."""
 
-    def __init__(
-        self,
-        swarm_path: Path,
-        *,
-        duration: float,
-        faults: Sequence[Fault],
-        loss: float,
-        seed: int,
-        physics: bool,
-        live: bool,
-        report_dir: Path | None,
-        group: str = DEFAULT_GROUP,
-        port: int | None = None,
-        transport: str = "udp",
-        craft: str | None = None,
-        link: str | None = None,
-        refuse_arm: Sequence[int] = (),
-        loss_model: str = "bernoulli",
-        burst_len: float = 4.0,
-    ) -> None:
+    def __init__(self, swarm_path: Path, *, duration: float, faults: Sequence[Fault],
+                 loss: float, seed: int, physics: bool, live: bool, report_dir: Path | None,
+                 group: str = DEFAULT_GROUP, port: int | None = None, transport: str = "udp",
+                 craft: str | None = None, link: str | None = None,
+                 refuse_arm: Sequence[int] = (), loss_model: str = "bernoulli",
+                 burst_len: float = 4.0) -> None:
         self.swarm_path = swarm_path
         self.loss_model = loss_model
         self.burst_len = burst_len
@@ -156,6 +145,11 @@ class Orchestrator:
         if transport not in ("udp", "xbee", "serial"):
             raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
         self.physics = physics
+        self._init_supervision()
+        self._init_prepared()
+
+    def _init_supervision(self) -> None:
+        """What the run keeps of its processes and what they report (no process yet)."""
         self.procs: dict[int, RobotProcess] = {}
         self.retired: list[RobotProcess] = []
         self.events: list[dict[str, Any]] = []
@@ -167,7 +161,10 @@ class Orchestrator:
         self._ready = asyncio.Event()
         self._stop = asyncio.Event()
         self.interrupted: str | None = None
-        # Set by `prepare` (the start step: files, keys, radios), never here.
+
+    def _init_prepared(self) -> None:
+        """Set by `prepare` (the start step: files, keys, radios), never by the
+        constructor: until then, empty."""
         self.port = 0
         self.robots: tuple[int, ...] = ()
         self.ready_timeout = READY_TIMEOUT
@@ -250,7 +247,7 @@ class Orchestrator:
                                else None)
         spec = RobotSpec(
             robot_id=robot, config_path=str(cfg),
-            log_path=str(self.run_dir / "logs" / f"robot{robot}.log"),
+            log_path=str(robot_log(self.run_dir, robot)),
             loss=self.loss, seed=self.seed, partitions=self.schedule.partitions,
             loss_model=self.loss_model, burst_len=self.burst_len, link=self.link, t0=t0,
             craft=self.craft, refuse_arm=robot in self.refuse_arm,
@@ -354,7 +351,6 @@ class Orchestrator:
         self.view.feed(rec)
 
     def _apply(self, fault: Fault) -> None:
-        loop = asyncio.get_running_loop()
         if fault.kind in LINK_KINDS:
             for part in fault.split():
                 self._fault_event(part)  # the receive filters already hold the window
@@ -364,31 +360,33 @@ class Orchestrator:
             for part in parts:
                 self._apply(part)
             return
-        robot = fault.robot
         self._fault_event(fault)
-        proc = self.procs.get(robot)
+        self._act(fault, self.procs.get(fault.robot))
+
+    def _act(self, fault: Fault, proc: RobotProcess | None) -> None:
+        """What a fault on one robot does to its process (`proc`; None: it has none)."""
         kind = fault.kind
-        if kind == "collide":  # the crafts lose their motors; without physics, a crash
-            kind = "motor" if self.link == "quad" else "crash"
+        if kind is FaultKind.COLLIDE:  # the crafts lose their motors; without physics, a crash
+            kind = FaultKind.MOTOR if self.link == "quad" else FaultKind.CRASH
         match kind:
-            case "crash":
+            case FaultKind.CRASH:
                 if proc is not None:
                     self._kill_proc(proc)
-            case "pause":
+            case FaultKind.PAUSE:
                 if proc is not None and proc.alive and proc.process.pid is not None:
-                    pid = proc.process.pid
-                    kill_group(pid, signal.SIGSTOP)
-                    loop.call_later(fault.duration or 0.0, self._resume, proc)
-            case "restart":
+                    kill_group(proc.process.pid, signal.SIGSTOP)
+                    asyncio.get_running_loop().call_later(fault.duration or 0.0,
+                                                          self._resume, proc)
+            case FaultKind.RESTART:
                 if proc is not None:
                     self._kill_proc(proc)  # a restart of a live robot is a crash first
                     self.retired.append(proc)
-                self.procs[robot] = self._spawn(robot, self.t0)
-            case "leave" | "unhealthy" | "liar" | "motor":
+                self.procs[fault.robot] = self._spawn(fault.robot, self.t0)
+            case FaultKind.LEAVE | FaultKind.UNHEALTHY | FaultKind.LIAR | FaultKind.MOTOR:
                 if proc is not None and proc.alive:
-                    proc.left = proc.left or kind == "leave"
+                    proc.left = proc.left or kind is FaultKind.LEAVE
                     self._send(proc, Act(kind))
-            case "forge":  # the robot process holds R's key: it forges (robot_proc.Forger)
+            case FaultKind.FORGE:  # the robot process holds R's key: it forges (Forger)
                 if proc is not None and proc.alive:
                     self._send(proc, Forge(fault.attack))
             case _:
@@ -419,110 +417,91 @@ class Orchestrator:
 
     async def run(self, *, handle_signals: bool = False) -> RealtimeResult:
         self.prepare()
-        loop = asyncio.get_running_loop()
-        live_ctx: Any = contextlib.nullcontext()
-        startup = 0.0
-        ended_at = 0.0
-        installed: list[signal.Signals] = []
-        if handle_signals:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                loop.add_signal_handler(sig, self.interrupt, sig.name)
-                installed.append(sig)
+        startup = ended_at = 0.0
+        installed = self._install_signals() if handle_signals else []
         try:
-            started = time.monotonic()
-            for robot in self.robots:
-                self.procs[robot] = self._spawn(robot, None)
-            self._ready_check()
-            ready = await self._until(self._ready, self.ready_timeout)
-            if not ready and self.interrupted is None:
-                slow = [r for r, p in self.procs.items() if not p.ready]
-                raise RuntimeError(
-                    f"robots {slow} not ready after {self.ready_timeout:g} s: "
-                    + "; ".join(f"robot {r}: {self._log_tail(self.procs[r])}" for r in slow))
-            startup = time.monotonic() - started
-            failed = [p for p in self.procs.values() if not p.ready]
-            if failed and self.interrupted is None:
-                raise RuntimeError(
-                    "robot processes failed to start: "
-                    + "; ".join(f"robot {p.robot_id}: {p.error or self._log_tail(p)}"
-                                for p in failed)
-                )
+            startup = await self._start_robots()
             if self.interrupted is None:
-                self.t0 = time.time() + START_MARGIN
-                for proc in self.procs.values():
-                    self._send(proc, Go(self.t0))
-                self.schedule.arm(self.t0, self._apply)
-                if self.live and sys.stdout.isatty():
-                    from rich.live import Live
-
-                    live_ctx = Live(get_renderable=lambda: self.view.table(self.run_time()),
-                                    refresh_per_second=4, transient=False)
-                with live_ctx:
-                    await self._until(self._stop, self.t0 + self.duration - time.time())
-                ended_at = min(self.duration, max(0.0, self.run_time()))
-                self._check_started(ended_at)
+                ended_at = await self._fly()
         finally:
             for sig in installed:
-                loop.remove_signal_handler(sig)
+                asyncio.get_running_loop().remove_signal_handler(sig)
             self.schedule.cancel()
             self.kill_all()
             await self._drain()
-        self._process_problems()
-        deaths = {p.robot_id: p.died_at for p in self._all()
-                  if p.died_at is not None and not p.left}
-        # A robot that died is a problem already, its log quoted there.
-        log_errors = [self._log_errors(r) for r in self.robots if r not in deaths]
+        return self._result(startup, ended_at)
+
+    def _install_signals(self) -> list[signal.Signals]:
+        """SIGINT and SIGTERM end the run early (`interrupt`); the handlers installed."""
+        loop = asyncio.get_running_loop()
+        installed = []
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, self.interrupt, sig.name)
+            installed.append(sig)
+        return installed
+
+    async def _start_robots(self) -> float:
+        """Spawn every robot and wait until each is ready; the seconds that took. Raises
+        `RuntimeError` naming the robots that were not ready in time or failed to start
+        (unless the run was interrupted meanwhile)."""
+        started = time.monotonic()
+        for robot in self.robots:
+            self.procs[robot] = self._spawn(robot, None)
+        self._ready_check()
+        ready = await self._until(self._ready, self.ready_timeout)
+        if not ready and self.interrupted is None:
+            slow = [r for r, p in self.procs.items() if not p.ready]
+            raise RuntimeError(
+                f"robots {slow} not ready after {self.ready_timeout:g} s: "
+                + "; ".join(f"robot {r}: {self._log_tail(self.procs[r])}" for r in slow))
+        startup = time.monotonic() - started
+        failed = [p for p in self.procs.values() if not p.ready]
+        if failed and self.interrupted is None:
+            raise RuntimeError(
+                "robot processes failed to start: "
+                + "; ".join(f"robot {p.robot_id}: {p.error or self._log_tail(p)}"
+                            for p in failed)
+            )
+        return startup
+
+    async def _fly(self) -> float:
+        """From t0 to the end of the run (or an interruption), faults applied on
+        schedule; the run time it ended at."""
+        live_ctx: Any = contextlib.nullcontext()
+        self.t0 = time.time() + START_MARGIN
+        for proc in self.procs.values():
+            self._send(proc, Go(self.t0))
+        self.schedule.arm(self.t0, self._apply)
+        if self.live and sys.stdout.isatty():
+            from rich.live import Live
+
+            live_ctx = Live(get_renderable=lambda: self.view.table(self.run_time()),
+                            refresh_per_second=4, transient=False)
+        with live_ctx:
+            await self._until(self._stop, self.t0 + self.duration - time.time())
+        ended_at = min(self.duration, max(0.0, self.run_time()))
+        # Before the robots are killed: only then is a live process telling.
+        self.problems += never_started(self.procs.values(), self.events, ended_at,
+                                       self.run_dir)
+        return ended_at
+
+    def _result(self, startup: float, ended_at: float) -> RealtimeResult:
+        """The result, once every robot is killed and its last reports read."""
+        self.problems += process_problems(self._all(), self.run_dir)
+        died = deaths(self._all())
         self.events.sort(key=lambda r: float(r.get("t", 0.0)))
         return RealtimeResult(
             events=self.events, robots=self.robots, duration=self.duration, t0=self.t0,
             startup_s=startup, run_dir=self.run_dir if self.report_dir else None,
-            problems=self.problems, stats=self.stats, drops=self._drops(),
-            deaths=deaths,
+            problems=self.problems, stats=self.stats, drops=summed_drops(self._all()),
+            deaths=died,
             late=sorted(self.late, key=lambda x: x[1]), wakes=self.wakes,
             interrupted=self.interrupted, ended_at=ended_at,
-            log_errors=[e for e in log_errors if e],
+            log_errors=survived_errors(self.run_dir, self.robots, died),
         )
-
-    def _drops(self) -> dict[int, dict[str, int]]:
-        """robot -> counted drops summed over its processes (a restart is a new one)."""
-        out: dict[int, dict[str, int]] = {}
-        for proc in self._all():
-            mine = out.setdefault(proc.robot_id, {})
-            for reason, n in proc.drops.items():
-                mine[reason] = mine.get(reason, 0) + n
-        return {r: dict(sorted(d.items())) for r, d in out.items() if d}
 
     def _all(self) -> list[RobotProcess]:
         return [*self.retired, *self.procs.values()]
-
-    def _check_started(self, end: float) -> None:
-        """Live robots whose daemon never logged `started` (e.g. a transport that blocks
-        on open): alive, but not in the swarm. Called before the robots are killed."""
-        for p in self.procs.values():
-            if not p.alive or end - p.spawned_at < STARTED_GRACE:
-                continue
-            if not any(e.get("robot") == p.robot_id and isinstance(event_of(e), Started)
-                       and float(e.get("t", 0.0)) >= p.spawned_at - 0.5 for e in self.events):
-                self.problems.append(
-                    f"robot {p.robot_id}: process alive but its daemon never started (no "
-                    f"`started` event in {end - p.spawned_at:.1f} s): {self._log_tail(p)}")
-
-    def _process_problems(self) -> None:
-        """One line for each robot process that ended on its own, with its exit code and
-        the end of its log (its error, when it sent one)."""
-        for p in self._all():
-            code = p.process.exitcode
-            if p.died_at is not None:
-                if p.left and code == 0:
-                    continue  # a leave: the daemon handed over and exited
-                self.problems.append(
-                    f"robot {p.robot_id}: process ended on its own at t={p.died_at:.2f} s "
-                    f"(exit code {code}): {p.error or self._log_tail(p)}")
-            elif p.error is not None and p.ready:
-                self.problems.append(f"robot {p.robot_id} failed: {p.error}")
-            elif code not in (0, -signal.SIGKILL, None):
-                self.problems.append(f"robot {p.robot_id} exited with {code}: "
-                                     f"{self._log_tail(p)}")
 
     async def _drain(self) -> None:
         """Read what the killed robots wrote before they died (bounded)."""
@@ -538,14 +517,8 @@ class Orchestrator:
             with contextlib.suppress(OSError):
                 p.events.close()
 
-    def _log(self, robot: int) -> Path:
-        return self.run_dir / "logs" / f"robot{robot}.log"
-
     def _log_tail(self, proc: RobotProcess) -> str:
-        return log_tail(self._log(proc.robot_id))
-
-    def _log_errors(self, robot: int) -> str:
-        return log_errors(self._log(robot), robot)
+        return tail_of(self.run_dir, proc)
 
     def cleanup(self) -> None:
         if self.ros_domain is not None:

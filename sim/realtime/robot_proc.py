@@ -64,6 +64,7 @@ from sim.realtime.control import (
     encode,
 )
 from sim.realtime.netfilter import FilterStats, PartitionWindow, ReceiveFilter
+from sim.shared.faults import FaultKind
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.liar import liar_warnings
 from sim.shared.summary import counted_drops
@@ -424,20 +425,20 @@ class _Robot:
                 self.t0 = t0
                 if self.go is not None:
                     self.go.set()
-            case Act("leave"):
+            case Act(FaultKind.LEAVE):
                 # DESIGN section 3 `leave`: the node's stop(handover=True) path, then exit.
                 if self.stop_event is not None:
                     self.stop_event.set()
-            case Act("unhealthy"):
+            case Act(FaultKind.UNHEALTHY):
                 # DESIGN rule 7: the robot reports a fault; the daemon sends LEAVE.
                 set_health = getattr(self.link, "set_health", None)
                 if set_health is not None:
                     set_health(Health.FAULTY)
-            case Act("liar"):
+            case Act(FaultKind.LIAR):
                 self.liar.start()
             case Forge(attack):
                 self.forger.launch(attack)
-            case Act("motor"):
+            case Act(FaultKind.MOTOR):
                 fail = getattr(self.link, "fail_motor", None)
                 if fail is not None:
                     fail()

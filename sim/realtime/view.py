@@ -7,8 +7,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from sim.shared.faults import FaultKind
 from sim.shared.holders import HolderFold
 from swarmd.core.events import Fault, Started, Stopped, event_of
+
+_PROCESS_AFTER: dict[str, str] = {
+    FaultKind.CRASH: "killed", FaultKind.PAUSE: "paused", FaultKind.RESTART: "restarting",
+    FaultKind.LEAVE: "leaving", FaultKind.COLLIDE: "collided"}
+"""The process column after a fault of each kind (the others leave it as it was)."""
 
 
 @dataclass(slots=True)
@@ -50,9 +56,7 @@ class SwarmView:
             case Stopped():
                 view.process = "stopped"
             case Fault(kind=kind):
-                view.process = {"crash": "killed", "pause": "paused", "restart": "restarting",
-                                "leave": "leaving", "collide": "collided",
-                                }.get(str(kind), view.process)
+                view.process = _PROCESS_AFTER.get(kind, view.process)
         view.last_event = ("" if event is None else f"fault {event.kind}"
                            if isinstance(event, Fault) else event.name)
         view.last_t = float(rec.get("t", 0.0))

@@ -1,7 +1,8 @@
 """Fault specifications for `swarmd sim --fault SPEC` (DESIGN section 3).
 
-This module is the one source of the fault kinds: `KINDS`, their forms (`_FORMS`) and
-what each does (`WHAT`). `swarmd sim --help` prints `help_table()`; README.md,
+This module is the one source of the fault kinds: `FaultKind` (whose values are the
+SPEC's and the event log's words, `KINDS`), their forms (`_FORMS`) and what each does
+(`WHAT`). `swarmd sim --help` prints `help_table()`; README.md,
 docs/DESIGN.md and docs/sim.md hold `markdown_table()` between `<!-- fault-table -->`
 markers, which `python scripts/fault_table.py` rewrites (tests/test_fault_table.py
 fails when they differ). A new kind is one entry in each of the three, then that
@@ -21,16 +22,37 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
+from enum import StrEnum
 from typing import Any
 
 from swarmd.core import events
 
-KINDS = ("crash", "restart", "pause", "partition", "fade", "deaf", "liar", "leave",
-         "unhealthy", "motor", "collide", "forge")
+
+class FaultKind(StrEnum):
+    """A fault's kind. Its value is the word a SPEC starts with and the event log's
+    `fault{kind}` (a `str`: a kind compares equal to its word); the simulators and the
+    checker dispatch on the members, so a misspelt kind fails where it is written."""
+
+    CRASH = "crash"
+    RESTART = "restart"
+    PAUSE = "pause"
+    PARTITION = "partition"
+    FADE = "fade"
+    DEAF = "deaf"
+    LIAR = "liar"
+    LEAVE = "leave"
+    UNHEALTHY = "unhealthy"
+    MOTOR = "motor"
+    COLLIDE = "collide"
+    FORGE = "forge"
+
+
+KINDS: tuple[str, ...] = tuple(k.value for k in FaultKind)
+"""The kinds' words, in the order `--help` and the docs list them."""
 ATTACKS = ("epoch", "seq", "claim", "warn", "replay")
 """What a `forge` fault sends (module docstring)."""
-_DURATION_KINDS = {"pause", "partition", "fade", "deaf"}
-LINK_KINDS = ("partition", "fade", "deaf")
+_DURATION_KINDS = {FaultKind.PAUSE, FaultKind.PARTITION, FaultKind.FADE, FaultKind.DEAF}
+LINK_KINDS = (FaultKind.PARTITION, FaultKind.FADE, FaultKind.DEAF)
 """Faults that lose frames on links rather than stop robots: the checker judges the
 swarm's convergence after they heal (DESIGN, "Convergence")."""
 
@@ -41,7 +63,7 @@ class FaultSpecError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class Fault:
-    kind: str
+    kind: FaultKind
     at: float
     robots: tuple[int, ...] = ()
     """The target robots (one or several) — or, for a partition, every robot named."""
@@ -57,10 +79,15 @@ class Fault:
     origin: str | None = field(default=None, compare=False)
     """For one part of a fault on several robots (`split`): the SPEC the user gave."""
 
+    def __post_init__(self) -> None:
+        # A kind given by its word (`Fault("crash", ...)`) is the same fault; raises
+        # ValueError for a word that is no kind.
+        object.__setattr__(self, "kind", FaultKind(self.kind))
+
     @property
     def robot(self) -> int:
         """The single target of a one-robot fault (use `split()` for several)."""
-        if self.kind == "partition":
+        if self.kind is FaultKind.PARTITION:
             raise ValueError("a partition has groups, not one robot")
         if len(self.robots) != 1:
             raise ValueError(f"{self.spec()} targets several robots; use split()")
@@ -70,8 +97,8 @@ class Fault:
         """One fault a target robot, same kind and times, each remembering this SPEC
         (`origin`) so that the log and the summary show what the user typed. A
         partition acts on all its robots together and stays whole."""
-        if self.kind in ("partition", "deaf") \
-                or (len(self.robots) == 1 and self.kind != "collide"):
+        if self.kind in (FaultKind.PARTITION, FaultKind.DEAF) \
+                or (len(self.robots) == 1 and self.kind is not FaultKind.COLLIDE):
             return (self,)
         spec = self.spec()
         return tuple(replace(self, robots=(r,), origin=spec) for r in self.robots)
@@ -85,21 +112,21 @@ class Fault:
         """A one-way link fault as (senders, receivers): while it lasts, frames from a
         sender in `senders` do not reach a receiver in `receivers` (None: every robot).
         None for the kinds that are no such cut (a two-way partition has groups)."""
-        if self.kind == "fade":
+        if self.kind is FaultKind.FADE:
             return frozenset(self.robots), None
-        if self.kind == "deaf":
+        if self.kind is FaultKind.DEAF:
             return frozenset(self.groups[0]), frozenset(self.robots)
-        if self.kind == "partition" and self.oneway:
+        if self.kind is FaultKind.PARTITION and self.oneway:
             return frozenset(self.groups[0]), frozenset(self.groups[1])
         return None
 
     def spec(self) -> str:
         """The SPEC text: `parse_fault(f.spec()) == f`."""
-        if self.kind == "partition":
+        if self.kind is FaultKind.PARTITION:
             groups = (">" if self.oneway else "|").join(",".join(map(str, g))
                                                         for g in self.groups)
             return f"partition:{groups}@{_num(self.at)}+{_num(self.duration or 0.0)}"
-        if self.kind == "deaf":
+        if self.kind is FaultKind.DEAF:
             senders = ",".join(map(str, self.groups[0]))
             return f"deaf:{self.robots[0]}:{senders}@{_num(self.at)}+{_num(self.duration)}"
         tail = f"+{_num(self.duration)}" if self.duration is not None else ""
@@ -116,8 +143,9 @@ def fault_record(fault: Fault, t: float) -> dict[str, Any]:
     this, so a log reads the same whichever produced it. A fault on several robots is
     logged once a robot (`fault_records`), each record with the SPEC the user gave."""
     groups = [list(g) for g in fault.groups] or None
-    record = events.Fault(fault.kind, fault.origin or fault.spec(), fault.duration, groups)
-    return record.record(round(t, 6), 0 if fault.kind == "partition" else fault.robot)
+    record = events.Fault(fault.kind.value, fault.origin or fault.spec(), fault.duration,
+                          groups)
+    return record.record(round(t, 6), 0 if fault.kind is FaultKind.PARTITION else fault.robot)
 
 
 def fault_records(fault: Fault, t: float) -> list[dict[str, Any]]:
@@ -220,13 +248,14 @@ def parse_fault(spec: str) -> Fault:
     text = spec.strip()
     shown = _clip(spec)
     head, colon, rest = text.partition(":")
-    kind = head.strip()
-    if kind not in KINDS:
-        close = difflib.get_close_matches(kind.lower()[:40], KINDS, n=1)
+    word = head.strip()
+    if word not in KINDS:
+        close = difflib.get_close_matches(word.lower()[:40], KINDS, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise FaultSpecError(
-            f"fault {shown}: unknown kind {_clip(kind)}{hint}; kinds: {', '.join(KINDS)}"
+            f"fault {shown}: unknown kind {_clip(word)}{hint}; kinds: {', '.join(KINDS)}"
         )
+    kind = FaultKind(word)
     form = _FORMS[kind]
 
     def bad(what: str) -> FaultSpecError:
@@ -238,7 +267,7 @@ def parse_fault(spec: str) -> Fault:
     if not at_sign:
         raise bad("no '@T' (the time the fault starts)")
     attack = ""
-    if kind == "forge":
+    if kind is FaultKind.FORGE:
         when, colon2, attack = when.partition(":")
         attack = attack.strip()
         if not colon2 or attack not in ATTACKS:
@@ -246,7 +275,7 @@ def parse_fault(spec: str) -> Fault:
     elif ":" in when:
         raise bad(f"a {kind} takes no ':' after its time")
     senders: tuple[int, ...] = ()
-    if kind == "deaf":
+    if kind is FaultKind.DEAF:
         target, colon3, heard = who.partition(":")
         if not colon3:
             raise bad("no ':S' (the robot(s) it does not hear)")
@@ -261,16 +290,16 @@ def parse_fault(spec: str) -> Fault:
         raise bad(f"duration D must be positive, got {dur_text.strip()!r}")
     if kind not in _DURATION_KINDS and dur is not None:
         raise bad(f"a {kind} takes no duration '+{dur_text.strip()}'")
-    if kind != "partition":
+    if kind is not FaultKind.PARTITION:
         if "|" in who:
             raise bad(f"a {kind} has no groups, got {who.strip()!r}")
         robots = tuple(_robot(r, bad) for r in who.split(","))
         twice = sorted({r for r in robots if robots.count(r) > 1})
         if twice:
             raise bad(f"robot {twice[0]} is named twice")
-        if kind == "collide" and len(robots) < 2:
+        if kind is FaultKind.COLLIDE and len(robots) < 2:
             raise bad(f"a collision needs two or more robots, got {who.strip()!r}")
-        if kind == "deaf":
+        if kind is FaultKind.DEAF:
             if len(robots) != 1:
                 raise bad("a deaf fault names one robot that does not hear")
             if robots[0] in senders or len(set(senders)) != len(senders):
@@ -347,7 +376,7 @@ def check_faults(faults: list[Fault], robot_ids: set[int], *, physics: bool,
         if unknown:
             problems.append(f"{f.spec()}: robot {unknown[0]} is not in the swarm "
                             f"(robots: {_ranges(robot_ids)})")
-        if f.kind == "motor" and not physics:
+        if f.kind is FaultKind.MOTOR and not physics:
             problems.append(f"{f.spec()}: motor faults need physics (not with --virtual "
                             f"or --no-physics); unhealthy:{','.join(map(str, f.robots))}"
                             f"@{_num(f.at)} is what a failed motor does to the protocol")

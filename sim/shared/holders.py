@@ -2,7 +2,7 @@
 
 Theory of operation
 -------------------
-The event log (DESIGN section 3: `{"t", "robot", "event", ...}`) tells, robot by robot,
+The event log (DESIGN section 3; its records are `swarmd.core.events`) tells, robot by robot,
 what the node did; `HolderFold` reads each record back as its typed event
 (`Event.from_record`) and replays them into one `Holding` per robot, the role the
 node is in (roles.py: active, standby, claiming, fenced) and the function that role is
@@ -39,6 +39,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from sim.shared.faults import FaultKind
 from swarmd.core.events import (
     Backoff,
     Claim,
@@ -53,11 +54,11 @@ from swarmd.core.events import (
     event_of,
 )
 
-CRASH = frozenset({"crash", "collide"})
+CRASH: frozenset[str] = frozenset({FaultKind.CRASH, FaultKind.COLLIDE})
 """The default `down` faults: a crashed process logs nothing more until it restarts; a
 collided craft is down whether its process lives on (physics) or not."""
 
-_SILENT_FAULTS = frozenset({"unhealthy", "motor"})
+_SILENT_FAULTS = frozenset({FaultKind.UNHEALTHY, FaultKind.MOTOR})
 """Injected health faults: a claiming node drops its claim without an event (node.py
 robot_health); an active one logs `leave` itself."""
 

@@ -60,14 +60,17 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from sim.shared.faults import LINK_KINDS, Fault
+from sim.shared.faults import LINK_KINDS, Fault, FaultKind
 from sim.shared.holders import HolderFold
+from swarmd.core.events import Fault as EventFault
+from swarmd.core.events import name_of
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.signed import RELAY_EVERY
 
-_STOPPING_FAULTS = ("crash", "collide", "leave", "unhealthy", "motor")
-_SILENT = ("crash", "collide", "pause")
+_STOPPING_FAULTS = (FaultKind.CRASH, FaultKind.COLLIDE, FaultKind.LEAVE, FaultKind.UNHEALTHY,
+                    FaultKind.MOTOR)
+_SILENT = (FaultKind.CRASH, FaultKind.COLLIDE, FaultKind.PAUSE)
 """Failures the swarm learns of only from silence (the others hand over by LEAVE)."""
 
 
@@ -203,22 +206,30 @@ class Checker:
         if phase == "begin":
             self.faults.append((t, fault))
             self.last_fault_at.append(t)
-            if fault.kind in (*_STOPPING_FAULTS, "pause", "restart"):
-                end = fault.end if fault.kind == "pause" else t if fault.kind == "restart" \
-                    else float("inf")
+            if fault.kind in (*_STOPPING_FAULTS, FaultKind.PAUSE, FaultKind.RESTART):
+                end = fault.end if fault.kind is FaultKind.PAUSE \
+                    else t if fault.kind is FaultKind.RESTART else float("inf")
                 self.failures.append(_Failure(t, end if end is not None else t, fault.robot,
                                               fault.kind, self.executing.get(fault.robot)))
         if fault.kind in LINK_KINDS:
-            # Partitions and one-way link faults (fade, deaf) may overlap: each is a
-            # window after whose heal the swarm must converge (invariant 2).
-            key = fault.spec()
-            if phase == "begin":
-                self._open_links[key] = len(self.partitions)
-                self.partitions.append((t, float("inf")))
-            elif (i := self._open_links.pop(key, None)) is not None:
-                self.partitions[i] = (self.partitions[i][0], t)
-            self.in_partition = bool(self._open_links)
+            self._link_fault(t, fault, phase)
             return
+        self._robot_fault(t, fault, phase)
+        self._dual_update(t)
+
+    def _link_fault(self, t: float, fault: Fault, phase: str) -> None:
+        """Partitions and one-way link faults (fade, deaf) may overlap: each is a window
+        after whose heal the swarm must converge (invariant 2)."""
+        key = fault.spec()
+        if phase == "begin":
+            self._open_links[key] = len(self.partitions)
+            self.partitions.append((t, float("inf")))
+        elif (i := self._open_links.pop(key, None)) is not None:
+            self.partitions[i] = (self.partitions[i][0], t)
+        self.in_partition = bool(self._open_links)
+
+    def _robot_fault(self, t: float, fault: Fault, phase: str) -> None:
+        """What a fault on one robot changes of what the checker expects."""
         r = fault.robot
         if fault.kind in _SILENT and phase == "begin":
             self._close_watcher(r)  # a dead or frozen watcher's warnings end with it
@@ -226,7 +237,7 @@ class Checker:
             f = self.executing.get(r)
             # A collision is judged as a crash: with physics the daemon lives on and
             # hands over by LEAVE, which needs less than a crash does (no watchers).
-            if fault.kind in ("crash", "collide"):
+            if fault.kind in (FaultKind.CRASH, FaultKind.COLLIDE):
                 self.dead.add(r)
                 self.started.discard(r)
                 self.holding.forget(r)
@@ -235,7 +246,7 @@ class Checker:
                 self.unhealthy[r] = t
             if f is not None:
                 self._expect_takeover(t, r, f, fault.kind)
-        elif fault.kind == "restart" and phase == "begin":
+        elif fault.kind is FaultKind.RESTART and phase == "begin":
             # A restart kills the process first (both simulators): the robot executes
             # nothing until its new node logs `started` (at once in --virtual, after a
             # process start in real time, during which the slot may be taken over).
@@ -244,16 +255,15 @@ class Checker:
             self.started.discard(r)
             self.holding.forget(r)
             self.paused.discard(r)
-        elif fault.kind == "pause":
+        elif fault.kind is FaultKind.PAUSE:
             if phase == "begin":
                 self.paused.add(r)
                 self.paused_until[r] = fault.end or t
                 f = self.executing.get(r)
                 if f is not None and (fault.duration or 0.0) > 2 * self.bounds.takeover:
-                    self._expect_takeover(t, r, f, "pause")
+                    self._expect_takeover(t, r, f, FaultKind.PAUSE)
             else:
                 self.paused.discard(r)
-        self._dual_update(t)
 
     def raised(self, t: float, robot: int, exc: BaseException) -> None:
         self.violations.append(Violation(t, "raised", robot,
@@ -264,7 +274,7 @@ class Checker:
         carries the same facts; this hook exists for cross-checks in tests."""
 
     def event(self, rec: dict[str, Any]) -> None:
-        t, r, name = float(rec["t"]), int(rec["robot"]), rec["event"]
+        t, r, name = float(rec["t"]), int(rec["robot"]), name_of(rec)
         self.holding.feed(rec)
         if name == "fenced":
             f, epoch = rec["function"], int(rec["epoch"])
@@ -378,7 +388,7 @@ class Checker:
         if replaced == r or not self._healthy_and_reachable(replaced, t):
             return  # (a robot taking back its own slot, which it had left, replaces nobody)
         self.false_takeovers.append(rec)
-        liar = any(fl.kind == "liar" and ft <= t for ft, fl in self.faults)
+        liar = any(fl.kind is FaultKind.LIAR and ft <= t for ft, fl in self.faults)
         if not self.loss:
             what = "a liar got" if liar else "false takeover without loss:"
             self.violations.append(Violation(
@@ -394,7 +404,8 @@ class Checker:
             if robot not in fault.robots and fault.kind not in LINK_KINDS:
                 continue
             end = fault.end if fault.end is not None else float("inf")
-            if fault.kind in ("crash", "leave", "unhealthy", "motor", "restart"):
+            if fault.kind in (FaultKind.CRASH, FaultKind.LEAVE, FaultKind.UNHEALTHY,
+                              FaultKind.MOTOR, FaultKind.RESTART):
                 if ft <= t:
                     return False
             elif ft <= t <= end + window:
@@ -435,7 +446,7 @@ class Checker:
             return None  # the run ended too soon to tell
         if any(s <= deadline and h >= e.t for s, h in self.partitions):
             return None  # a partition is another kind of trouble (invariant 2)
-        if any(fl.kind == "restart" and e.robot in fl.robots and e.t < ft <= deadline
+        if any(fl.kind is FaultKind.RESTART and e.robot in fl.robots and e.t < ft <= deadline
                for ft, fl in self.faults):
             return None  # the robot is back and may take its slot back (rule 2)
         watchers = [w for w in e.watchers if not self._failed_in(w, e.t, deadline)]
@@ -498,7 +509,7 @@ def check_events(
     checker = Checker(plan, params, loss=loss)
     timeline: list[tuple[float, int, Any]] = []
     for i, rec in enumerate(events):
-        if rec.get("event") != "fault":
+        if name_of(rec) != EventFault.name:
             timeline.append((float(rec["t"]), 1, (i, rec)))
     for i, fault in enumerate(faults):
         timeline.append((fault.at, 0, (i, fault, "begin")))

@@ -24,7 +24,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from sim.shared.faults import Fault
+from sim.shared.faults import Fault, FaultKind
 from sim.shared.holders import HolderFold
 from sim.shared.invariants import Violation, check_events
 from swarmd.core.events import Alert, Event, Leave, Started, Suspect, Takeover, event_of
@@ -32,7 +32,8 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.runtime import QUIET_DROPS
 
-_REPLACEABLE = ("crash", "restart", "pause", "leave", "unhealthy", "motor", "collide")
+_REPLACEABLE = (FaultKind.CRASH, FaultKind.RESTART, FaultKind.PAUSE, FaultKind.LEAVE,
+                FaultKind.UNHEALTHY, FaultKind.MOTOR, FaultKind.COLLIDE)
 """Faults whose row says who took the robot's slot over. In real time `restart` kills the
 process first, so its slot can be taken over like a crash's (or kept, if the robot is
 back before T_max: then the row shows no takeover)."""
@@ -169,7 +170,7 @@ def summarize(
     replacement is no false takeover) and the fault table shows it as one."""
     events = sorted(events, key=lambda e: e["t"])
     typed = _typed(events)
-    died = [Fault("crash", t, (r,)) for r, t in sorted((deaths or {}).items())]
+    died = [Fault(FaultKind.CRASH, t, (r,)) for r, t in sorted((deaths or {}).items())]
     checker = check_events(events, [*faults, *died], plan, params, loss=loss,
                            duration=duration)
     violations = list(checker.violations) + list(extra_violations or [])
@@ -189,8 +190,8 @@ def summarize(
     labelled += [(f, f"died:{f.robot}@{f.at:.2f}") for f in died]
     for fault, spec in sorted(labelled, key=lambda fs: fs[0].at):
         if fault.kind not in _REPLACEABLE:
-            outcomes.append(FaultOutcome(spec, fault.kind, None if fault.kind ==
-                                         "partition" else fault.robot, fault.at, None,
+            outcomes.append(FaultOutcome(spec, fault.kind, None if fault.kind is
+                                         FaultKind.PARTITION else fault.robot, fault.at, None,
                                          None, None, None, None))
             continue
         r = fault.robot
@@ -249,7 +250,7 @@ def lateness_figures(
     under `sim.realtime.robot_proc.LATE_MS`). A paused robot's own lateness during and just after
     its pause is left out: it is the fault, not the machine."""
     frozen = [(r, f.at, (f.end or f.at) + PAUSE_AFTERMATH) for f in faults
-              if f.kind == "pause" for r in f.robots]
+              if f.kind is FaultKind.PAUSE for r in f.robots]
     kept = [x for x in late if not any(r == x[0] and a <= x[1] <= b for r, a, b in frozen)]
     n = max(wakes - (len(late) - len(kept)), len(kept))
     if n == 0:
@@ -294,7 +295,8 @@ def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
         if isinstance(event, Started):
             first.setdefault(robot, t)
     return {r: t for r, t in sorted(first.items()) if t > grace
-            and not any(f.kind != "partition" and r in f.robots and f.at <= t for f in faults)}
+            and not any(f.kind is not FaultKind.PARTITION and r in f.robots and f.at <= t
+                        for f in faults)}
 
 
 def render_summary(summary: Summary, console: Console) -> None:

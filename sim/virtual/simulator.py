@@ -24,14 +24,14 @@ from typing import Any
 
 from sim.shared.channel import LOSS_MODELS, GilbertElliott, LinkCut
 from sim.shared.fakeid import fake_identities
-from sim.shared.faults import Fault, fault_record
+from sim.shared.faults import Fault, FaultKind, fault_record
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
-from swarmd.core.events import Event
+from swarmd.core.events import Event, name_of
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -159,7 +159,7 @@ class VirtualSwarm:
         # `forge:R@T:replay`: R's radio records the channel until T (`sim.shared.forge`).
         self._recording: dict[int, collections.deque[bytes]] = {
             r: collections.deque(maxlen=CAPTURE) for f in self.faults
-            if f.kind == "forge" and f.attack == "replay" for r in f.robots}
+            if f.kind is FaultKind.FORGE and f.attack == "replay" for r in f.robots}
         self._tapes: dict[int, tuple[bytes, ...]] = {}
         for rid in self._all:
             start = self.rng.uniform(0.0, start_spread)
@@ -397,7 +397,7 @@ class VirtualSwarm:
 
     def _record(self, rec: dict[str, Any]) -> None:
         self.events.append(rec)
-        if rec["event"] in ("started", "takeover", "fenced", "leave", "stopped", "fault"):
+        if name_of(rec) in ("started", "takeover", "fenced", "leave", "stopped", "fault"):
             self._changed[int(rec["robot"])] = float(rec["t"])
         self.checker.event(rec)
         if self.on_event is not None:
@@ -473,22 +473,26 @@ class VirtualSwarm:
             elif link in self.cuts:
                 self.cuts.remove(link)
             return
-        if fault.kind == "partition":
+        if fault.kind is FaultKind.PARTITION:
             self.partition = {r: i for i, g in enumerate(fault.groups) for r in g} \
                 if phase == "begin" else None
             return
+        self._robot_fault(fault, phase, t)
+
+    def _robot_fault(self, fault: Fault, phase: str, t: float) -> None:
+        """A fault's `phase` on its one robot (not a link fault)."""
         rid = fault.robot
         r = self.robots[rid]
         node = r.node
-        if fault.kind == "restart" and r.alive:
+        if fault.kind is FaultKind.RESTART and r.alive:
             # A restart of a live robot is a crash first, as in real time (docs/sim.md):
             # the new node starts at once from what the old one persisted.
             self._kill(r)
         match fault.kind, phase:
-            case "crash" | "collide", _:
+            case FaultKind.CRASH | FaultKind.COLLIDE, _:
                 # Without physics a collision is two crashes at one instant (docs/sim.md).
                 self._kill(r)
-            case "restart", _:
+            case FaultKind.RESTART, _:
                 r.alive, r.paused, r.buffered = True, False, []
                 r.node = Node(rid, self.plan, self.params, t, keys=self.keys,
                               identity=self.identities.get(rid),
@@ -496,17 +500,11 @@ class VirtualSwarm:
                               restored=r.persisted or Restored())
                 r.timer_at = None
                 self._arm(rid)
-            case "pause", "begin":
+            case FaultKind.PAUSE, "begin":
                 r.paused = True
-            case "pause", "end":
-                r.paused = False
-                frames, r.buffered = r.buffered, []
-                for frame in frames:
-                    if r.alive and r.node is not None:
-                        self._call(rid, _OP_RECEIVE, frame)
-                if r.alive and r.node is not None:
-                    self._call(rid, _OP_TICK, None)
-            case "leave", _:
+            case FaultKind.PAUSE, "end":
+                self._unpause(rid, r)
+            case FaultKind.LEAVE, _:
                 if node is not None and r.alive:
                     self._call(rid, _OP_STOP, None)
                     # What the daemon writes on a graceful stop (swarmd.state): a robot
@@ -514,13 +512,23 @@ class VirtualSwarm:
                     # drops its frames as replays (it would be muted).
                     self._persist(r, node, left=True)
                 r.alive = False
-            case "unhealthy" | "motor", _:
+            case FaultKind.UNHEALTHY | FaultKind.MOTOR, _:
                 if node is not None and r.alive:
                     self._call(rid, _OP_HEALTH, Health.FAULTY)
-            case "liar", _:
+            case FaultKind.LIAR, _:
                 self._push(t, _LIAR, rid, None)
-            case "forge", _:
+            case FaultKind.FORGE, _:
                 self._push(t, _FORGE, rid, (fault.attack, 0))
+
+    def _unpause(self, rid: int, r: _Robot) -> None:
+        """The end of a pause: what the robot missed arrives at once, then its timers."""
+        r.paused = False
+        frames, r.buffered = r.buffered, []
+        for frame in frames:
+            if r.alive and r.node is not None:
+                self._call(rid, _OP_RECEIVE, frame)
+        if r.alive and r.node is not None:
+            self._call(rid, _OP_TICK, None)
 
     def _kill(self, r: _Robot) -> None:
         """A crash: the node's persisted state is kept (DESIGN rule 2), the rest is gone."""

@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from sim.shared.faults import FaultKind
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.auth import Identity
@@ -133,7 +134,7 @@ class RadioSwarm:
         robot.alive = False
         if robot.timer is not None:
             robot.timer.cancel()
-        self.record(Fault("crash").record(self.elapsed(), robot_id))
+        self.record(Fault(FaultKind.CRASH.value).record(self.elapsed(), robot_id))
         await robot.transport.close()
 
     async def wait_for(self, match: Callable[[Record], bool], timeout: float) -> Record | None:

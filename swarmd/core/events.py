@@ -18,8 +18,10 @@ from typing import Any, ClassVar
 
 from swarmd.core.errors import EventRecordError
 
-_NAME_KEY = "event"
-"""The key of a record's kind: the event log's one name-keyed field (DESIGN section 3)."""
+NAME_KEY = "event"
+"""The key of a record's kind: the event log's one name-keyed field (DESIGN section 3).
+The daemon's own log and its metrics name an event under the same key; readers that
+need only a record's name ask `name_of`."""
 
 
 class Event:
@@ -35,7 +37,7 @@ class Event:
 
     def record(self, t: float, robot: int) -> dict[str, Any]:
         """The JSON Lines object: {"t", "robot", "event", ...fields}."""
-        return {"t": t, "robot": robot, _NAME_KEY: self.name, **self.fields()}
+        return {"t": t, "robot": robot, NAME_KEY: self.name, **self.fields()}
 
     @classmethod
     def from_record(cls, record: Mapping[str, Any]) -> Event:
@@ -43,7 +45,7 @@ class Event:
         read back) holds. Keys beyond the kind's fields (`t`, `robot`) are ignored.
         Raises `EventRecordError` for a name no kind has, a record without a field its
         kind's class requires, or (called on a subclass) a record of another kind."""
-        name = record.get(_NAME_KEY)
+        name = record.get(NAME_KEY)
         kind = EVENTS.get(name) if isinstance(name, str) else None
         if kind is None:
             raise EventRecordError(f"unknown event {name!r}; known: {', '.join(EVENTS)}")
@@ -218,6 +220,13 @@ class Fault(Event):
                 if value is not None or key == "kind"}
 
 
+def name_of(record: Mapping[str, Any]) -> str | None:
+    """A record's event name, without reading the rest of it (a hot path: every record
+    of a run goes through the checker); None when it has none."""
+    name = record.get(NAME_KEY)
+    return name if isinstance(name, str) else None
+
+
 def event_of(record: Mapping[str, Any]) -> Event | None:
     """`Event.from_record`, or None for a record that is no event: for readers that pass
     over what they cannot read (a live view, a plot)."""
@@ -239,7 +248,7 @@ EVENTS[Fault.name] = Fault
 
 
 __all__ = [
-    "CORE_EVENTS", "EVENTS", "Alert", "Backoff", "Claim", "Event", "Fault", "Fenced",
-    "Leave", "Refute", "Started", "Stopped", "Suspect", "Takeover", "Vote", "Warn",
-    "event_of",
+    "CORE_EVENTS", "EVENTS", "NAME_KEY", "Alert", "Backoff", "Claim", "Event", "Fault",
+    "Fenced", "Leave", "Refute", "Started", "Stopped", "Suspect", "Takeover", "Vote", "Warn",
+    "event_of", "name_of",
 ]

@@ -11,6 +11,8 @@ What happens where:
   fence hold, rejoin hold (`moves.py`).
 - `robot_health`: the robot's single input (Fig. 4); FAULTY sends LEAVE (rule 7).
 - `stop`: graceful stop, LEAVE when asked to hand over.
+- the constructor: the plan's holders, or what a restarted robot persisted
+  (`restart.py`: its own hold resumed only after listening).
 
 Roles and transitions are the table in `roles.py`; every change of role goes through
 `NodeBase._to()`, which enforces it. The state is declared in `nodebase.py`.
@@ -38,8 +40,8 @@ from swarmd.core.moves import Moves
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder, Restored, Snapshot
-from swarmd.core.rejoin import Rejoin
 from swarmd.core.replay import ReplayFilter
+from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.signed import Signed
 from swarmd.core.votes import VoteCounter
@@ -47,7 +49,7 @@ from swarmd.core.watchdog import WatchState
 from swarmd.core.witness import Ears
 
 
-class Node(Hearing, Moves, Signed):
+class Node(Hearing, Moves, Signed, Restart):
     """One robot's protocol state. Its state is private: drivers read `snapshot()` and
     the few read-only properties below."""
 
@@ -90,41 +92,6 @@ class Node(Hearing, Moves, Signed):
             self._role, self._function = Role.ACTIVE, own
             self._epoch = self._known[own].epoch
             self._watch_neighbours(now)
-
-    def _views(self, restored: Restored | None) -> dict[str, Holder]:
-        """Who holds each slot at start: the plan's holders at epoch 0, or newer ones a
-        restarted robot persisted (its own memory: what it had verified before it went
-        down; its own hold is verified again, `_restore`)."""
-        known = {}
-        for f in self._plan.functions:
-            holder = self._plan.initial_holder(f)
-            known[f] = Holder(holder if holder is not None else 0, 0)
-        for f, (holder, epoch) in (restored.known.items() if restored is not None else ()):
-            if f in known and epoch >= known[f].epoch:
-                known[f] = Holder(holder, epoch)
-        return known
-
-    def _restore(self, restored: Restored, now: float) -> None:
-        """A restarted robot: peers' seqs (a refused absurd value counts as `seq_jump`),
-        and a held slot resumed only after listening (rule 2 across a reboot: a takeover
-        may have happened while it was down)."""
-        for peer, top in restored.peer_seq.items():
-            if peer != self._robot_id and peer in self._plan.robots \
-                    and not self._replay.restore(peer, top):
-                self._drops[DropReason.SEQ_JUMP] += 1
-        held = restored.held
-        if held is None or held[0] not in self._known:
-            return
-        if self._verifier is not None:
-            f = held[0]
-            held = self._verified_hold(f, held[1], restored)
-            if held is None and self._known[f].robot == self._robot_id:
-                # Our own hold, unproven: the file's view of the slot is no better.
-                holder = self._plan.initial_holder(f)
-                self._known[f] = Holder(holder if holder is not None else 0, 0)
-        if held is not None:
-            self._rejoin = Rejoin(self._robot_id, *held, now + self._params.rejoin_hold)
-            self._role = Role.REJOINING
 
     # ------------------------------------------------------------------ read-only
     @property

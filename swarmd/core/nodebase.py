@@ -1,10 +1,11 @@
 """The state of one robot's node and the plumbing every rule uses (DESIGN section 2).
 
-`Node` (`node.py`) is assembled from this base and three rule modules: `hearing.py`
-(what a robot does with each message), `moves.py` (how its role changes) and `signed.py`
-(per-robot evidence). They share the state declared here, set up once by
-`Node.__init__`; drivers see it only through `Node.snapshot()`. The methods a rule
-module calls in another are declared here and defined there.
+`Node` (`node.py`) is assembled from this base and four rule modules: `hearing.py`
+(what a robot does with each message), `moves.py` (how its role changes), `signed.py`
+(per-robot evidence) and `restart.py` (what a restarted robot starts from). They share
+the state declared here, set up once by `Node.__init__`; drivers see it only through
+`Node.snapshot()`. The methods a rule module calls in another are declared here and
+defined there.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
 from swarmd.core.params import Params
 from swarmd.core.plan import Relevant, SwarmPlan
-from swarmd.core.records import Holder
+from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
@@ -162,6 +163,10 @@ class NodeBase:
         raise NotImplementedError
 
     def _sign_only(self, msg: wire.Message) -> bytes:
+        raise NotImplementedError
+
+    def _verified_hold(self, f: str, epoch: int,
+                       restored: Restored) -> tuple[str, int] | None:
         raise NotImplementedError
 
     def _send_cert(self, f: str, raw: bytes) -> None:

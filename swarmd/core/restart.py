@@ -1,0 +1,54 @@
+"""A restarted robot's node (DESIGN rule 2 across a reboot): who holds each slot at start,
+from the plan or from what the robot persisted before it went down, and the hold it
+resumes only after listening (`rejoin.py`). `Restart` is that part of `Node`, called once
+from its constructor; the per-robot check of a restored hold is `signed.py`'s
+(`_verified_hold`).
+"""
+
+from __future__ import annotations
+
+from swarmd.core.drops import DropReason
+from swarmd.core.nodebase import NodeBase
+from swarmd.core.records import Holder, Restored
+from swarmd.core.rejoin import Rejoin
+from swarmd.core.roles import Role
+
+
+class Restart(NodeBase):
+    def _views(self, restored: Restored | None) -> dict[str, Holder]:
+        """Who holds each slot at start: the plan's holders at epoch 0, or newer ones a
+        restarted robot persisted (its own memory: what it had verified before it went
+        down; its own hold is verified again, `_restore`)."""
+        known = {}
+        for f in self._plan.functions:
+            holder = self._plan.initial_holder(f)
+            known[f] = Holder(holder if holder is not None else 0, 0)
+        for f, (holder, epoch) in (restored.known.items() if restored is not None else ()):
+            if f in known and epoch >= known[f].epoch:
+                known[f] = Holder(holder, epoch)
+        return known
+
+    def _restore(self, restored: Restored, now: float) -> None:
+        """A restarted robot: peers' seqs (a refused absurd value counts as `seq_jump`),
+        and a held slot resumed only after listening (rule 2 across a reboot: a takeover
+        may have happened while it was down)."""
+        for peer, top in restored.peer_seq.items():
+            if peer != self._robot_id and peer in self._plan.robots \
+                    and not self._replay.restore(peer, top):
+                self._drops[DropReason.SEQ_JUMP] += 1
+        held = restored.held
+        if held is None or held[0] not in self._known:
+            return
+        if self._verifier is not None:
+            f = held[0]
+            held = self._verified_hold(f, held[1], restored)
+            if held is None and self._known[f].robot == self._robot_id:
+                # Our own hold, unproven: the file's view of the slot is no better.
+                holder = self._plan.initial_holder(f)
+                self._known[f] = Holder(holder if holder is not None else 0, 0)
+        if held is not None:
+            self._rejoin = Rejoin(self._robot_id, *held, now + self._params.rejoin_hold)
+            self._role = Role.REJOINING
+
+
+__all__ = ["Restart"]
