@@ -28,6 +28,7 @@ from sim.shared.faults import Fault, FaultKind, fault_record
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
+from sim.virtual.judge import muted, views
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
@@ -240,8 +241,8 @@ class VirtualSwarm:
         self.now = self.duration
         for link, run in self._losing.items():
             self._outage(link, run, self.duration)
-        violations = self.checker.finish(self.events, self.duration) + self._muted() \
-            + self._views()
+        violations = self.checker.finish(self.events, self.duration) + muted(self) \
+            + views(self)
         violations.sort(key=lambda v: v.t)
         final = {}
         drops = {}
@@ -263,85 +264,10 @@ class VirtualSwarm:
             final=final,
         )
 
-    def _muted(self) -> list[Violation]:
-        """Invariant 7 (`sim.shared.invariants`): a live, healthy, heartbeating robot
-        whose current heartbeats some robot that should hear them (same partition side,
-        the frame relevant to it) has not accepted for ten heartbeat periods, although
-        it did accept that robot's frames before: its frames are dropped (a forged
-        sequence number, say)."""
-        out: list[Violation] = []
-        snaps = {rid: r.node.snapshot() for rid, r in self.robots.items()
-                 if r.alive and not r.paused and r.node is not None}
-        part = self.partition
-        for x, sx in snaps.items():
-            if sx.health != Health.OK:
-                continue
-            active = sx.role == Role.ACTIVE and sx.function is not None
-            period = self.params.heartbeat_interval if active else \
-                self.params.standby_heartbeat_interval
-            # A bursty channel loses whole runs of frames (mean `burst_len`): silence of
-            # a few bursts is the channel, not a muted robot.
-            bursty = self.channel.loss_model == "burst" and self.channel.loss > 0
-            window = max(10.0, 16 * self.channel.burst_len if bursty else 0.0) * period
-            slot = self.plan.slot(sx.function) if active and sx.function is not None else 0
-            audience = self._relevant_to.get(slot, ()) if slot else \
-                self._standby_targets.get(x, ())
-            for r in audience:
-                sr = snaps.get(r)
-                if sr is None or r == x or (part is not None and part.get(r, 0) != part.get(x, 0)):
-                    continue
-                if any(c.cuts(x, r, c.start) and c.end > self.duration - window
-                       for c in self.cuts_seen):
-                    continue  # cut off from x lately: not muted, unheard
-                last = sr.heard.get(x)
-                if last is not None and self.duration - last > window \
-                        and self.duration - self.checker_last_change(x) > window:
-                    out.append(Violation(self.duration, "muted", x,
-                                         f"robot {r} has accepted no frame of live robot {x} "
-                                         f"since {last:.2f} s"))
-                    break
-        return out
-
-    def _views(self) -> list[Violation]:
-        """Invariant 8 (`sim.shared.invariants`): at the end of a run that has been quiet
-        for `Bounds.settle`, every live robot that hears a slot holds one view of it
-        (`views_disagree`), and a live, healthy holder they all name executes it
-        (`orphaned`)."""
-        last = max((f.end if f.end is not None else f.at for f in self.faults), default=0.0)
-        if self.duration - last < self.checker.bounds.settle:
-            return []
-        snaps = {rid: r.node.snapshot() for rid, r in self.robots.items()
-                 if r.alive and not r.paused and r.node is not None}
-        # A robot that reported itself faulty has left the protocol (rule 7): it hears
-        # and heartbeats nothing that matters, so its view is nobody's business.
-        snaps = {rid: sx for rid, sx in snaps.items() if sx.health != Health.FAULTY}
-        out: list[Violation] = []
-        for f in self.plan.functions:
-            slot = self.plan.slot(f)
-            views = {rid: sx.known[f] for rid, sx in snaps.items()
-                     if slot in self.plan.relevant(rid).slots or sx.function == f}
-            named = {h[0] for h in views.values()}
-            executing = {rid for rid, sx in snaps.items()
-                         if sx.role == Role.ACTIVE and sx.function == f}
-            if len(set(views.values())) > 1 and (named & set(snaps) or executing):
-                # (Views that all name dead robots are an unheld slot: invariant 1 and
-                # rule 8's alert judge it; no live robot can relay a dead holder's
-                # certificate.)
-                shown = ", ".join(f"{r}: {h[0]}@{h[1]}" for r, h in sorted(views.items()))
-                out.append(Violation(self.duration, "views_disagree", None,
-                                     f"{f} is held by different robots in different views "
-                                     f"({shown})"))
-                continue
-            if not views:
-                continue
-            holder = next(iter(views.values()))[0]
-            sh = snaps.get(holder)
-            if sh is not None and sh.health == Health.OK and not (
-                    sh.role == Role.ACTIVE and sh.function == f):
-                out.append(Violation(self.duration, "orphaned", holder,
-                                     f"every view names robot {holder} the holder of {f}, "
-                                     f"which it does not execute"))
-        return out
+    def audience(self, sender: int, slot: int) -> tuple[int, ...]:
+        """Who should hear `sender`'s heartbeat for `slot` (0: its standby heartbeat)."""
+        return self._relevant_to.get(slot, ()) if slot else \
+            self._standby_targets.get(sender, ())
 
     def checker_last_change(self, rid: int) -> float:
         """When robot `rid` last started, took over or was fenced (its heartbeat's
