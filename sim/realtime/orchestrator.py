@@ -75,6 +75,7 @@ from sim.realtime.control import (
     encode,
 )
 from sim.realtime.logscan import log_errors, log_tail
+from sim.realtime.ports import PortLease
 from sim.realtime.procs import (
     RobotProcess,
     forkserver_context,
@@ -82,7 +83,7 @@ from sim.realtime.procs import (
     main_not_reimported,
 )
 from sim.realtime.result import RealtimeResult
-from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, write_robot_file
+from sim.realtime.robotfiles import robot_ids, sign_for_run, write_robot_file
 from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
@@ -169,6 +170,7 @@ class Orchestrator:
         self.interrupted: str | None = None
         # Set by `prepare` (the start step: files, keys, radios), never here.
         self.port = 0
+        self.port_lease: PortLease | None = None
         self.robots: tuple[int, ...] = ()
         self.ready_timeout = READY_TIMEOUT
         self.view = SwarmView(())
@@ -193,7 +195,13 @@ class Orchestrator:
         made is undone by `cleanup`, also after a failure half-way."""
         if self._run_dir is not None:
             return
-        self.port = self._port or free_udp_port()
+        if self._port:
+            self.port = self._port
+        else:
+            # The run's own multicast port, held until `cleanup` so that no other run on
+            # this machine is handed it while these robots use it (sim/realtime/ports.py).
+            self.port_lease = PortLease(self.group)
+            self.port = self.port_lease.port
         self.robots = robot_ids(self.swarm_path)
         self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
         self.view = SwarmView(self.robots)
@@ -548,6 +556,9 @@ class Orchestrator:
         return log_errors(self._log(robot), robot)
 
     def cleanup(self) -> None:
+        if self.port_lease is not None:
+            self.port_lease.release()
+            self.port_lease = None
         if self.ros_domain is not None:
             self.ros_domain.release()
             self.ros_domain = None

@@ -1,6 +1,6 @@
 """The robot files of a real-time run: each simulated robot runs from a file that is
-literally what `swarmd start --config` takes, on a UDP port picked for the run (so runs
-and tests never hear each other) or an emulated radio.
+literally what `swarmd start --config` takes, on a UDP port leased for the run (so runs
+and tests never hear each other: sim/realtime/ports.py) or an emulated radio.
 
 Signed by default: every run signs with throwaway keys made for it (`sign_for_run`), so
 a swarm file's real keys are never needed, nor touched, to simulate it."""
@@ -17,7 +17,11 @@ from swarmd.transport.addresses import DEFAULT_INTERFACE, DEFAULT_TTL
 
 
 def free_udp_port() -> int:
-    """A UDP port nothing on 127.0.0.1 uses now: each run gets its own channel."""
+    """A UDP port nothing on 127.0.0.1 uses now, for a unicast socket its user binds
+    right away without reuse options (a simulated autopilot): should another program
+    take it first, that bind fails loudly. Never a swarm's multicast port: robots share
+    that one with SO_REUSEPORT, so a second run handed it would hear the first; see
+    `sim.realtime.ports.PortLease`."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port: int = s.getsockname()[1]
