@@ -30,7 +30,9 @@ from swarms import PAPER, ROOT, paper_text, unsigned_paper
 from sim.shared.invariants import Bounds
 from swarmd.config import load_swarm
 
-pytestmark = pytest.mark.slow
+# One worker runs the whole module under pytest -n: its `runs` fixture starts 11 swarms
+# at once, and a module fixture is made again on every worker that runs one of its tests.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_attacks_realtime")]
 
 DURATION = 6.0
 ATTACKS: dict[str, tuple[str, ...]] = {

@@ -27,7 +27,9 @@ ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
 DURATION = 8.0
 
-pytestmark = pytest.mark.slow
+# One worker runs the whole module under pytest -n, so the flown run (`flown`, a module
+# fixture, made again on every worker that runs one of its tests) is flown once.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_sim_report")]
 
 
 def _sim(*args: str, timeout: float, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:

@@ -27,7 +27,9 @@ PAPER = ROOT / "configs" / "paper.yaml"
 SIM_HINT = "pip install 'swarmd[sim]'"
 ROS2_HINT = "pip install 'swarmd[ros2]'"
 
-pytestmark = pytest.mark.slow
+# One worker runs the whole module under pytest -n, so the wheel and its venv (`venv`, a
+# module fixture, made again on every worker that runs one of its tests) are built once.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_wheel")]
 
 
 def run(cmd: list[str | Path], timeout: float, env: dict[str, str] | None = None,
