@@ -30,9 +30,7 @@ from swarms import PAPER, ROOT, paper_text, unsigned_paper
 from sim.shared.invariants import Bounds
 from swarmd.config import load_swarm
 
-# One worker runs the whole module under pytest -n: its `runs` fixture starts 11 swarms
-# at once, and a module fixture is made again on every worker that runs one of its tests.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_attacks_realtime")]
+pytestmark = pytest.mark.slow
 
 DURATION = 6.0
 ATTACKS: dict[str, tuple[str, ...]] = {

@@ -27,9 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
 DURATION = 8.0
 
-# One worker runs the whole module under pytest -n, so the flown run (`flown`, a module
-# fixture, made again on every worker that runs one of its tests) is flown once.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_sim_report")]
+pytestmark = pytest.mark.slow
 
 
 def _sim(*args: str, timeout: float, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:

@@ -27,9 +27,7 @@ PAPER = ROOT / "configs" / "paper.yaml"
 SIM_HINT = "pip install 'swarmd[sim]'"
 ROS2_HINT = "pip install 'swarmd[ros2]'"
 
-# One worker runs the whole module under pytest -n, so the wheel and its venv (`venv`, a
-# module fixture, made again on every worker that runs one of its tests) are built once.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("test_wheel")]
+pytestmark = pytest.mark.slow
 
 
 def run(cmd: list[str | Path], timeout: float, env: dict[str, str] | None = None,
