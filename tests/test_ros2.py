@@ -251,8 +251,9 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     assert goal["position"] == [0.0, 2.0, 1.5] and goal["frame"] == "map"
     delay = goal["w"] - result.t0 - takeover["t"]
     print(f"robot 6's stack got f2's goal {delay * 1000:.1f} ms after its takeover event")
-    # Causal, and bounded loosely (the figure is the report's, not a timing assertion).
-    assert -0.01 <= delay <= 1.0, delay
+    # Causal, and within the run. How soon is the printed figure, not an assertion: a
+    # bound of 1 s failed at 1.4 s with the suite running twice over on two cores.
+    assert -0.01 <= delay < duration - takeover["t"], delay
     # A late subscriber gets the current assignment (transient-local).
     assert listener.late["/robot6/swarmd/function"][:1] == ["f2"]
     assert listener.late["/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
