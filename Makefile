@@ -28,8 +28,11 @@ lint: $(STAMP)/python
 	$(PY) -m ruff check .
 	$(PY) -m mypy
 
+# On every core: `-n auto` starts one worker per CPU; `--dist loadfile` runs each module
+# on one worker, so a module fixture (a wheel's venv, a flown run) is made once
+# (docs/testing.md, "Parallel").
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 # The paper's swarm flown in MuJoCo, one process per robot; robot 2 crashes at 5 s and
 # standby 6 flies over to f2's slot. out/demo/: summary, event log, timeline.png,

@@ -8,11 +8,13 @@ property, no deadline because example cost depends on the drawn swarm) and "benc
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
 
+from sim.realtime.ports import PortLease
 from swarmd.config import load_swarm
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -43,3 +45,11 @@ def paper_plan(paper: tuple[SwarmPlan, Params]) -> SwarmPlan:
 @pytest.fixture(scope="session")
 def udp_params(paper: tuple[SwarmPlan, Params]) -> Params:
     return paper[1]
+
+
+@pytest.fixture
+def udp_port() -> Iterator[int]:
+    """A multicast port of this test's own, held until the test ends: daemons of tests
+    running at the same time (pytest -n) never hear each other (sim/realtime/ports.py)."""
+    with PortLease() as lease:
+        yield lease.port

@@ -180,7 +180,7 @@ def test_shared_key_what_is_still_stopped(runs: dict[tuple[str, str], Run],
 
 # ---------------------------------------------------------------- revocation, real daemons
 async def test_per_robot_a_revoked_robot_is_taken_over_on_real_daemons(
-        tmp_path: Path) -> None:
+        tmp_path: Path, udp_port: int) -> None:
     """The paper swarm as six `run_daemon` tasks over UDP on loopback, signed per robot.
     Robot 2 is stolen: it keeps running, healthy, while `revoked: [2]` goes into the
     swarm file and every other daemon reloads it (SIGHUP). Its heartbeats count for
@@ -191,12 +191,11 @@ async def test_per_robot_a_revoked_robot_is_taken_over_on_real_daemons(
 
     from swarms import signed_paper
 
-    from sim.realtime.robotfiles import free_udp_port
     from swarmd.config import load_robot
     from swarmd.daemon import Daemon, run_daemon
 
     swarm, _keys = signed_paper(tmp_path)
-    port = free_udp_port()
+    port = udp_port
     events: list[dict[str, Any]] = []
     daemons: dict[int, Daemon] = {}
     stop = asyncio.Event()

@@ -21,7 +21,6 @@ from swarms import paper_text, unsigned_paper
 from test_runtime import GROUP, launch, robot_cfg, runtime_of, wait_until
 from test_start import listener
 
-from sim.realtime.robotfiles import free_udp_port
 from swarmd.config import load_robot
 from swarmd.core import wire
 from swarmd.daemon import EXIT_FAILURE, Daemon, run_daemon
@@ -66,8 +65,8 @@ def test_state_write_error_names_the_file(tmp_path: Path) -> None:
         sf.write_initial(None, 0)
 
 
-async def test_daemon_starts_fresh_from_a_binary_state_file(tmp_path: Path) -> None:
-    cfg = robot_cfg(tmp_path, 1, free_udp_port())
+async def test_daemon_starts_fresh_from_a_binary_state_file(tmp_path: Path, udp_port: int) -> None:
+    cfg = robot_cfg(tmp_path, 1, udp_port)
     path = state_path(cfg.state_dir, 1543, 1)
     path.parent.mkdir(parents=True)
     path.write_bytes(b"\xff\xfe\x00\x01")
@@ -86,9 +85,10 @@ async def test_daemon_starts_fresh_from_a_binary_state_file(tmp_path: Path) -> N
     ("link: {{kind: socket, path: {tmp}/file/robot.sock}}\n", "robot socket"),
 ])
 async def test_start_failure_names_the_field_and_sends_nothing(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture, extra: str, field: str) -> None:
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, extra: str, field: str,
+        udp_port: int) -> None:
     (tmp_path / "file").write_text("x")
-    cfg = load_robot(write_robot(tmp_path, 1, free_udp_port(), extra.format(tmp=tmp_path)))
+    cfg = load_robot(write_robot(tmp_path, 1, udp_port, extra.format(tmp=tmp_path)))
     assert await asyncio.wait_for(run_daemon(cfg), 10.0) == EXIT_FAILURE
     [failed] = _messages(caplog, "daemon failed to start")
     assert field in failed.__dict__["error"] and str(tmp_path) in failed.__dict__["error"]
@@ -98,9 +98,9 @@ async def test_start_failure_names_the_field_and_sends_nothing(
 
 
 async def test_state_dir_that_is_a_file_is_named_as_such(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
     (tmp_path / "state").write_text("x")
-    cfg = load_robot(write_robot(tmp_path, 1, free_udp_port()))
+    cfg = load_robot(write_robot(tmp_path, 1, udp_port))
     assert await asyncio.wait_for(run_daemon(cfg), 10.0) == EXIT_FAILURE
     [failed] = _messages(caplog, "daemon failed to start")
     state = tmp_path / "state"
@@ -109,9 +109,9 @@ async def test_state_dir_that_is_a_file_is_named_as_such(
     assert not _messages(caplog, "state file unusable; starting fresh")
 
 
-async def test_udp_interface_not_on_this_host_names_the_field() -> None:
+async def test_udp_interface_not_on_this_host_names_the_field(udp_port: int) -> None:
     # TEST-NET-1 (RFC 5737) is on no interface here; the join fails before any send.
-    transport = UdpTransport(interface="192.0.2.1", port=free_udp_port())
+    transport = UdpTransport(interface="192.0.2.1", port=udp_port)
     with pytest.raises(TransportError, match=r"transport\.interface"):
         await transport.start(lambda data: None, lambda name, fields: None)
 
@@ -134,8 +134,8 @@ def test_event_log_reopen_failure_keeps_the_old_file(tmp_path: Path) -> None:
 
 
 async def test_sighup_with_an_unopenable_event_log_keeps_running_and_the_old_log(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    port = free_udp_port()
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
+    port = udp_port
     events = tmp_path / "events.jsonl"
     path = write_robot(tmp_path, 1, port, f"event_log: {events}\n")
     daemon = Daemon(load_robot(path), config_path=path)
@@ -156,11 +156,11 @@ async def test_sighup_with_an_unopenable_event_log_keeps_running_and_the_old_log
 
 
 async def test_sighup_restart_needed_compares_with_the_running_config(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
     caplog.set_level(logging.INFO)
     swarm = tmp_path / "swarm.yaml"
     swarm.write_text(paper_text())
-    path = write_robot(tmp_path, 1, free_udp_port(), swarm=swarm)
+    path = write_robot(tmp_path, 1, udp_port, swarm=swarm)
     daemon = Daemon(load_robot(path), config_path=path)
     await daemon.start()
     try:
@@ -183,11 +183,11 @@ def _open_fds() -> int:
 
 
 async def test_embedded_swarm_takes_over_from_a_cancelled_daemon_which_cleans_up(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
     # As an outside user would (docs/daemon.md "Embedding"): load_robot + run_daemon
     # tasks in one loop, the paper swarm without robots 4 and 5.
     caplog.set_level(logging.INFO)
-    port = free_udp_port()
+    port = udp_port
     events: list[dict[str, Any]] = []
     fds_before = _open_fds()
     tasks: dict[int, asyncio.Task[int]] = {}
@@ -270,8 +270,8 @@ async def test_exec_link_worker_survives_a_command_that_cannot_be_built() -> Non
 
 # ------------------------------------------------------------------ hostile frames
 async def test_a_stopping_daemon_reports_the_drops_since_its_last_report(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    port = free_udp_port()
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
+    port = udp_port
     a = await launch(robot_cfg(tmp_path, 1, port))
     rt = runtime_of(a)
     out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -290,8 +290,8 @@ async def test_a_stopping_daemon_reports_the_drops_since_its_last_report(
 
 
 async def test_dropped_frames_are_reported_by_reason(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    port = free_udp_port()
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
+    port = udp_port
     a = await launch(robot_cfg(tmp_path, 1, port))
     rt = runtime_of(a)
     rt.drop_report_interval = 0.0  # every tick (10 s in production)

@@ -21,7 +21,6 @@ from pathlib import Path
 import pytest
 from swarms import unsigned_paper
 
-from sim.realtime.robotfiles import free_udp_port
 from swarmd.config.swarm_rules import load_swarm
 from swarmd.core import wire
 
@@ -207,8 +206,8 @@ def state_cases() -> dict[str, str]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(state_cases()))
-def test_start_sets_aside_an_unusable_state_file_and_starts_fresh(tmp_path: Path,
-                                                                   case: str) -> None:
+def test_start_sets_aside_an_unusable_state_file_and_starts_fresh(
+        tmp_path: Path, case: str, udp_port: int) -> None:
     state_dir = tmp_path / "state"
     state_dir.mkdir()
     state = state_dir / "swarm1543-robot2.json"
@@ -222,7 +221,7 @@ def test_start_sets_aside_an_unusable_state_file_and_starts_fresh(tmp_path: Path
     other.write_text("{")
     config = tmp_path / "robot.yaml"
     config.write_text(f"robot: 2\nswarm: {unsigned_paper(tmp_path)}\n"
-                      f"transport: {{kind: udp, port: {free_udp_port()}}}\n"
+                      f"transport: {{kind: udp, port: {udp_port}}}\n"
                       f"state_dir: {state_dir}\n")
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     env.pop("NOTIFY_SOCKET", None)

@@ -16,7 +16,7 @@ from swarms import PAPER, identity_file, paper_text, signed_paper
 from typer.testing import CliRunner
 
 import swarmd.daemon as daemon_mod
-from sim.realtime.robotfiles import free_udp_port, sign_for_run
+from sim.realtime.robotfiles import sign_for_run
 from swarmd.cli import app
 from swarmd.config import ConfigError, load_robot, load_swarm
 from swarmd.core.auth import SIGNATURE_LEN, Identity
@@ -189,9 +189,10 @@ def test_keygen_shared_key_still_works_and_options_conflict(tmp_path: Path) -> N
 
 
 def _robot(tmp_path: Path, robot: int, swarm: Path, extra: str = "") -> Path:
+    # Only loaded, or refused by `swarmd start` before any socket: no port is opened.
     path = tmp_path / f"robot{robot}.yaml"
     path.write_text(f"robot: {robot}\nswarm: {swarm}\nstate_dir: {tmp_path / 'state'}\n"
-                    f"transport: {{kind: udp, port: {free_udp_port()}}}\n{extra}")
+                    f"transport: {{kind: udp}}\n{extra}")
     return path
 
 

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from sim.realtime.robotfiles import free_udp_port
 from swarmd.cli import app
 from swarmd.config import load_swarm
 from swarmd.core import params, wire
@@ -164,9 +163,9 @@ def test_monitor_table_renders() -> None:
     assert "f2" in text and "STANDBY" in text
 
 
-def test_monitor_cli_once_json_hears_the_loopback_channel() -> None:
+def test_monitor_cli_once_json_hears_the_loopback_channel(udp_port: int) -> None:
     swarm = load_swarm(PAPER)
-    port = free_udp_port()
+    port = udp_port
     group = DEFAULT_GROUP
     stop = threading.Event()
     tx = Sender()

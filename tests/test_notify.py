@@ -110,14 +110,14 @@ def _free_port(kind: socket.SocketKind) -> int:
         return int(s.getsockname()[1])
 
 
-def _robot_dir(tmp_path: Path, metrics_port: int) -> Path:
+def _robot_dir(tmp_path: Path, metrics_port: int, udp_port: int) -> Path:
     """Robot 2 of the paper's swarm, alone on a private loopback multicast port."""
     unsigned_paper(tmp_path, "swarm.yaml")
     robot = tmp_path / "robot.yaml"
     robot.write_text(
         "robot: 2\n"
         "swarm: swarm.yaml\n"
-        f"transport: {{kind: udp, port: {_free_port(socket.SOCK_DGRAM)}, "
+        f"transport: {{kind: udp, port: {udp_port}, "
         "interface: 127.0.0.1, ttl: 1}\n"
         "state_dir: state\n"
         f"metrics: {{host: 127.0.0.1, port: {metrics_port}}}\n"
@@ -126,7 +126,7 @@ def _robot_dir(tmp_path: Path, metrics_port: int) -> Path:
 
 
 def test_swarmd_start_speaks_sd_notify(
-    listener: tuple[socket.socket, str], tmp_path: Path
+    listener: tuple[socket.socket, str], tmp_path: Path, udp_port: int
 ) -> None:
     pytest.importorskip("swarmd.daemon", reason="daemon runtime not in this tree")
     httpx = pytest.importorskip("httpx")
@@ -135,7 +135,7 @@ def test_swarmd_start_speaks_sd_notify(
     sock, path = listener
     sock.settimeout(0.5)
     metrics_port = _free_port(socket.SOCK_STREAM)
-    robot = _robot_dir(tmp_path, metrics_port)
+    robot = _robot_dir(tmp_path, metrics_port, udp_port)
     env = {**os.environ, "NOTIFY_SOCKET": path, "WATCHDOG_USEC": str(WATCHDOG_USEC)}
     env.pop("WATCHDOG_PID", None)
     proc = subprocess.Popen(

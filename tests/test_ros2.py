@@ -193,8 +193,13 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
         tmp_path: Path) -> None:
     pytest.importorskip("rclpy", reason="needs the ros2 extra: pip install 'swarmd[ros2]'")
     crash, unhealthy = 4.0, 4.0
+    # The run and the monitor last well past the takeover (about crash + 1.5 s): robot 1's
+    # next status, and the monitor's view of it, must reach them before the run ends, and
+    # on a loaded machine (tests in parallel) ROS delivery can take seconds; with 7 s
+    # both had about 1.4 s to spare.
+    duration = 12.0
     run = asyncio.create_task(run_realtime_async(
-        PAPER, duration=7.0, physics=False, link="ros2-bare", report_dir=tmp_path,
+        PAPER, duration=duration, physics=False, link="ros2-bare", report_dir=tmp_path,
         faults=[parse_fault(f"crash:2@{crash:g}"), parse_fault(f"unhealthy:4@{unhealthy:g}")]))
     robot_file = tmp_path / "realtime" / "robots" / "robot1.yaml"
     await _wait_for(robot_file, 60)
@@ -204,7 +209,7 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     # The base station: `swarmd monitor --ros2` on the run's channel and domain.
     monitor = subprocess.Popen(
         [sys.executable, "-m", "swarmd.cli", "monitor", "--config", str(robot_file), "--once",
-         "--json", "--duration", "7", "--ros2"], stdout=subprocess.PIPE,
+         "--json", "--duration", f"{duration:g}", "--ros2"], stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, cwd=ROOT,
         env={**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONPATH": str(ROOT)})
     try:
@@ -246,8 +251,9 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     assert goal["position"] == [0.0, 2.0, 1.5] and goal["frame"] == "map"
     delay = goal["w"] - result.t0 - takeover["t"]
     print(f"robot 6's stack got f2's goal {delay * 1000:.1f} ms after its takeover event")
-    # Causal, and bounded loosely (the figure is the report's, not a timing assertion).
-    assert -0.01 <= delay <= 1.0, delay
+    # Causal, and within the run. How soon is the printed figure, not an assertion: a
+    # bound of 1 s failed at 1.4 s with the suite running twice over on two cores.
+    assert -0.01 <= delay < duration - takeover["t"], delay
     # A late subscriber gets the current assignment (transient-local).
     assert listener.late["/robot6/swarmd/function"][:1] == ["f2"]
     assert listener.late["/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]

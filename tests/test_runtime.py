@@ -22,7 +22,6 @@ import pytest
 from swarms import paper_text, unsigned_paper
 
 import swarmd.daemon as daemon_mod
-from sim.realtime.robotfiles import free_udp_port
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node
@@ -123,8 +122,8 @@ def runtime_of(r: Running) -> Runtime:
     return r.daemon.runtime
 
 
-async def test_runtime_two_daemons_hear_each_other(tmp_path: Path) -> None:
-    port = free_udp_port()
+async def test_runtime_two_daemons_hear_each_other(tmp_path: Path, udp_port: int) -> None:
+    port = udp_port
     a = await launch(robot_cfg(tmp_path, 1, port))
     b = await launch(robot_cfg(tmp_path, 2, port))
     try:
@@ -159,8 +158,8 @@ class MemoryTransport:
         pass
 
 
-async def test_runtime_queue_drops_oldest_and_counts(tmp_path: Path) -> None:
-    cfg = robot_cfg(tmp_path, 1, free_udp_port())
+async def test_runtime_queue_drops_oldest_and_counts(tmp_path: Path, udp_port: int) -> None:
+    cfg = robot_cfg(tmp_path, 1, udp_port)
     loop = asyncio.get_running_loop()
     node = Node(1, cfg.swarm.to_plan(), cfg.swarm.params(), loop.time())
     transport = MemoryTransport()
@@ -184,8 +183,8 @@ class ExplodingLink(NoneLink):
         raise RuntimeError("robot on fire")
 
 
-async def test_runtime_survives_a_link_that_raises(tmp_path: Path) -> None:
-    cfg = robot_cfg(tmp_path, 1, free_udp_port())
+async def test_runtime_survives_a_link_that_raises(tmp_path: Path, udp_port: int) -> None:
+    cfg = robot_cfg(tmp_path, 1, udp_port)
     loop = asyncio.get_running_loop()
     node = Node(1, cfg.swarm.to_plan(), cfg.swarm.params(), loop.time())
     transport = MemoryTransport()
@@ -251,8 +250,9 @@ print(json.dumps({"heartbeats": len(times), "max_gap": max(gaps), "max_gap_flood
 """
 
 
-async def test_runtime_flood_keeps_heartbeats_on_time_and_counts_drops(tmp_path: Path) -> None:
-    port = free_udp_port()
+async def test_runtime_flood_keeps_heartbeats_on_time_and_counts_drops(
+        tmp_path: Path, udp_port: int) -> None:
+    port = udp_port
     cfg = robot_cfg(tmp_path, 1, port)
     a = await launch(cfg)
     root = str(Path(__file__).resolve().parent.parent)
@@ -285,9 +285,10 @@ async def test_runtime_flood_keeps_heartbeats_on_time_and_counts_drops(tmp_path:
     assert stats["node_errors"] == 0
 
 
-async def test_socket_link_silence_stops_heartbeats_and_leaves(tmp_path: Path) -> None:
+async def test_socket_link_silence_stops_heartbeats_and_leaves(
+        tmp_path: Path, udp_port: int) -> None:
     link = SocketLink(tmp_path / "robot.sock", health_timeout=0.3)
-    a = await launch(robot_cfg(tmp_path, 1, free_udp_port()), link=link)
+    a = await launch(robot_cfg(tmp_path, 1, udp_port), link=link)
     try:
         # The robot never connects: after 0.3 s it counts as faulty (DESIGN rule 7).
         await wait_until(lambda: "leave" in a.names(), 3.0, "leave on fault")
@@ -304,8 +305,8 @@ async def test_socket_link_silence_stops_heartbeats_and_leaves(tmp_path: Path) -
         await a.finish()
 
 
-async def test_daemon_corrupt_state_file_starts_fresh(tmp_path: Path) -> None:
-    cfg = robot_cfg(tmp_path, 1, free_udp_port())
+async def test_daemon_corrupt_state_file_starts_fresh(tmp_path: Path, udp_port: int) -> None:
+    cfg = robot_cfg(tmp_path, 1, udp_port)
     path = state_path(cfg.state_dir, 1543, 1)
     path.parent.mkdir(parents=True)
     path.write_text("{half a json")
@@ -320,8 +321,9 @@ async def test_daemon_corrupt_state_file_starts_fresh(tmp_path: Path) -> None:
     assert json.loads(path.read_text())["robot"] == 1  # a valid file again
 
 
-async def test_restarted_daemon_does_not_resume_a_function_taken_over(tmp_path: Path) -> None:
-    port = free_udp_port()
+async def test_restarted_daemon_does_not_resume_a_function_taken_over(
+        tmp_path: Path, udp_port: int) -> None:
+    port = udp_port
     others = [await launch(robot_cfg(tmp_path, r, port)) for r in (1, 3, 4, 6)]
     two = await launch(robot_cfg(tmp_path, 2, port, handover=False))
     six = others[-1]
@@ -354,12 +356,12 @@ async def test_restarted_daemon_does_not_resume_a_function_taken_over(tmp_path: 
             await r.finish()
 
 
-async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> None:
+async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path, udp_port: int) -> None:
     # docs/operations.md "Rotating the swarm key", steps 1-3, by Daemon.reload (what
     # SIGHUP calls) on a running daemon; the keys reach the node through set_keys.
     old, new = tmp_path / "old.key", tmp_path / "new.key"
     k_old, k_new = generate_key(old), generate_key(new)
-    port = free_udp_port()
+    port = udp_port
     swarm, robot = tmp_path / "swarm.yaml", tmp_path / "robot.yaml"
 
     def write(signing: Path | None, accepted: list[Path]) -> None:
@@ -414,10 +416,10 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path) -> No
 
 async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-        caplog: pytest.LogCaptureFixture) -> None:
+        caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
     # DESIGN rule 8; the hook runs through the exec link's run_command.
     out = tmp_path / "alert.txt"
-    daemon = Daemon(robot_cfg(tmp_path, 1, free_udp_port()))
+    daemon = Daemon(robot_cfg(tmp_path, 1, udp_port))
     daemon._alert_hook = ["sh", "-c", f'echo "$SWARMD_ROBOT $SWARMD_FUNCTION '
                                       f'$SWARMD_REASON" > {out}; exit 3']
     daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
@@ -437,11 +439,11 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
 
 
 async def test_runtime_second_daemon_with_our_id_is_reported_not_our_echo(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, udp_port: int) -> None:
     # A copied robot file: two daemons as robot 1. Each drops the other's frames as
     # `own` (as it drops its multicast echoes), so it used to go unnoticed while both
     # could hold f1 (DESIGN rule 2).
-    port = free_udp_port()
+    port = udp_port
     a = await launch(robot_cfg(tmp_path / "a", 1, port))
     try:
         rt_a = runtime_of(a)

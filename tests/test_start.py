@@ -17,7 +17,6 @@ from typing import IO, Any
 import pytest
 from swarms import unsigned_paper
 
-from sim.realtime.robotfiles import free_udp_port
 from swarmd.core import wire
 from swarmd.core.events import EVENTS
 from swarmd.transport.addresses import DEFAULT_GROUP
@@ -71,8 +70,8 @@ def start(config: Path) -> subprocess.Popen[str]:
 
 
 @pytest.mark.slow
-def test_start_logs_json_reloads_and_leaves_on_sigterm(tmp_path: Path) -> None:
-    port = free_udp_port()
+def test_start_logs_json_reloads_and_leaves_on_sigterm(tmp_path: Path, udp_port: int) -> None:
+    port = udp_port
     config = tmp_path / "robot.yaml"
     events = tmp_path / "events.jsonl"
     config.write_text(

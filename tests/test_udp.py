@@ -10,7 +10,6 @@ from typing import Any
 import pytest
 from pydantic import ValidationError
 
-from sim.realtime.robotfiles import free_udp_port
 from swarmd.config.robot import UdpTransportConfig
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport
@@ -30,8 +29,8 @@ class Sink:
         self.events.append((name, fields))
 
 
-async def test_udp_two_transports_exchange_frames_on_loopback() -> None:
-    port = free_udp_port()
+async def test_udp_two_transports_exchange_frames_on_loopback(udp_port: int) -> None:
+    port = udp_port
     a, b = UdpTransport(port=port), UdpTransport(port=port)
     sa, sb = Sink(), Sink()
     await a.start(sa.frame, sa.event)
@@ -51,8 +50,8 @@ async def test_udp_two_transports_exchange_frames_on_loopback() -> None:
         await b.close()
 
 
-async def test_udp_other_group_on_same_port_is_not_heard() -> None:
-    port = free_udp_port()
+async def test_udp_other_group_on_same_port_is_not_heard(udp_port: int) -> None:
+    port = udp_port
     a = UdpTransport(port=port, group="239.255.77.8")
     b = UdpTransport(port=port)
     sa, sb = Sink(), Sink()
@@ -69,8 +68,8 @@ async def test_udp_other_group_on_same_port_is_not_heard() -> None:
         await b.close()
 
 
-async def test_udp_socket_options_default_to_loopback_ttl_1() -> None:
-    t = UdpTransport(port=free_udp_port())
+async def test_udp_socket_options_default_to_loopback_ttl_1(udp_port: int) -> None:
+    t = UdpTransport(port=udp_port)
     sink = Sink()
     await t.start(sink.frame, sink.event)
     try:
@@ -85,8 +84,8 @@ async def test_udp_socket_options_default_to_loopback_ttl_1() -> None:
         await t.close()
 
 
-async def test_udp_send_errors_are_counted_not_raised() -> None:
-    t = UdpTransport(port=free_udp_port())
+async def test_udp_send_errors_are_counted_not_raised(udp_port: int) -> None:
+    t = UdpTransport(port=udp_port)
     sink = Sink()
     t.send(b"before start")  # not open yet
     await t.start(sink.frame, sink.event)

@@ -22,8 +22,6 @@ from pathlib import Path
 import pytest
 from swarms import paper_text
 
-from sim.realtime.robotfiles import free_udp_port
-
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
 SIM_HINT = "pip install 'swarmd[sim]'"
@@ -87,14 +85,15 @@ def test_version(venv: Path) -> None:
     assert done.stdout.startswith("swarmd ")
 
 
-def test_start_runs_one_robot_and_stops_on_sigterm(venv: Path, tmp_path: Path) -> None:
+def test_start_runs_one_robot_and_stops_on_sigterm(venv: Path, tmp_path: Path,
+                                                   udp_port: int) -> None:
     swarm = tmp_path / "swarm.yaml"
     swarm.write_text(paper_text("none", PAPER))
     events = tmp_path / "events.jsonl"
     config = tmp_path / "robot.yaml"
     config.write_text(
         f"robot: 1\nswarm: {swarm}\n"
-        f"transport: {{kind: udp, group: 239.255.77.7, port: {free_udp_port()}, "
+        f"transport: {{kind: udp, group: 239.255.77.7, port: {udp_port}, "
         "interface: 127.0.0.1, ttl: 1, loopback: true}\n"
         f"link: {{kind: none}}\nstate_dir: {tmp_path / 'state'}\nevent_log: {events}\n")
     proc = subprocess.Popen([venv / "swarmd", "start", "--config", config],

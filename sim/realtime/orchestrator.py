@@ -72,6 +72,7 @@ from sim.realtime.control import (
     decode_report,
     encode,
 )
+from sim.realtime.ports import PortLease
 from sim.realtime.problems import (
     deaths,
     never_started,
@@ -88,7 +89,7 @@ from sim.realtime.procs import (
     main_not_reimported,
 )
 from sim.realtime.result import RealtimeResult
-from sim.realtime.robotfiles import free_udp_port, robot_ids, sign_for_run, write_robot_file
+from sim.realtime.robotfiles import emulated_radio, robot_ids, sign_for_run, write_robot_file
 from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
@@ -166,6 +167,7 @@ class Orchestrator:
         """Set by `prepare` (the start step: files, keys, radios), never by the
         constructor: until then, empty."""
         self.port = 0
+        self.port_lease: PortLease | None = None
         self.robots: tuple[int, ...] = ()
         self.ready_timeout = READY_TIMEOUT
         self.view = SwarmView(())
@@ -190,7 +192,13 @@ class Orchestrator:
         made is undone by `cleanup`, also after a failure half-way."""
         if self._run_dir is not None:
             return
-        self.port = self._port or free_udp_port()
+        if self._port:
+            self.port = self._port
+        else:
+            # The run's own multicast port, held until `cleanup` so that no other run on
+            # this machine is handed it while these robots use it (sim/realtime/ports.py).
+            self.port_lease = PortLease(self.group)
+            self.port = self.port_lease.port
         self.robots = robot_ids(self.swarm_path)
         self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
         self.view = SwarmView(self.robots)
@@ -223,25 +231,13 @@ class Orchestrator:
                                  directory=self._run_dir / "radios", seed=self.seed,
                                  transparent=self.transport == "serial").start()
 
-    def _transport_doc(self, robot: int) -> dict[str, Any] | None:
-        if self.medium is None:
-            return None
-        port = self.medium.path(self.radio_of[robot])
-        if self.transport == "serial":
-            # The emulated medium is 802.15.4: its 100 B packets carry 93 B of framed
-            # swarmd frame, so even a per-robot CERT (92 B) goes whole; the 64 B default
-            # of a serial radio would send signed frames in fragments (transport/fragment).
-            return {"kind": "serial", "port": port, "max_payload": 93}
-        role = "coordinator" if self.radio_of[robot] == 1 else "router"
-        return {"kind": "xbee", "port": port, "protocol": "802.15.4", "api_mode": 1,
-                "role": role}
-
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, robot: int, t0: float | None) -> RobotProcess:
         from sim.realtime.robot_proc import RobotSpec, child_main
 
         cfg = write_robot_file(self.run_dir, self.swarm_path, robot, group=self.group,
-                               port=self.port, transport=self._transport_doc(robot),
+                               port=self.port, transport=emulated_radio(
+                                   self.transport, self.medium, self.radio_of[robot]),
                                identity_file=self.identity_files.get(robot),
                                link=self.ros_domain.link_doc(robot) if self.ros_domain
                                else None)
@@ -521,6 +517,9 @@ class Orchestrator:
         return tail_of(self.run_dir, proc)
 
     def cleanup(self) -> None:
+        if self.port_lease is not None:
+            self.port_lease.release()
+            self.port_lease = None
         if self.ros_domain is not None:
             self.ros_domain.release()
             self.ros_domain = None

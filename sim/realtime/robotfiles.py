@@ -1,6 +1,6 @@
 """The robot files of a real-time run: each simulated robot runs from a file that is
-literally what `swarmd start --config` takes, on a UDP port picked for the run (so runs
-and tests never hear each other) or an emulated radio.
+literally what `swarmd start --config` takes, on a UDP port leased for the run (so runs
+and tests never hear each other: sim/realtime/ports.py) or an emulated radio.
 
 Signed by default: every run signs with throwaway keys made for it (`sign_for_run`), so
 a swarm file's real keys are never needed, nor touched, to simulate it."""
@@ -9,19 +9,42 @@ from __future__ import annotations
 
 import socket
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from swarmd.transport.addresses import DEFAULT_INTERFACE, DEFAULT_TTL
 
+if TYPE_CHECKING:
+    from sim.xbee_emu.medium import Medium
+
 
 def free_udp_port() -> int:
-    """A UDP port nothing on 127.0.0.1 uses now: each run gets its own channel."""
+    """A UDP port nothing on 127.0.0.1 uses now, for a unicast socket its user binds
+    right away without reuse options (a simulated autopilot): should another program
+    take it first, that bind fails loudly. Never a swarm's multicast port: robots share
+    that one with SO_REUSEPORT, so a second run handed it would hear the first; see
+    `sim.realtime.ports.PortLease`."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port: int = s.getsockname()[1]
         return port
+
+
+def emulated_radio(transport: str, medium: Medium | None, radio: int) -> dict[str, Any] | None:
+    """The `transport` section of a robot file whose robot speaks through radio number
+    `radio` of an emulated `medium` (sim.xbee_emu; None: UDP multicast, no section)."""
+    if medium is None:
+        return None
+    port = medium.path(radio)
+    if transport == "serial":
+        # The emulated medium is 802.15.4: its 100 B packets carry 93 B of framed
+        # swarmd frame, so even a per-robot CERT (92 B) goes whole; the 64 B default
+        # of a serial radio would send signed frames in fragments (transport/fragment).
+        return {"kind": "serial", "port": port, "max_payload": 93}
+    role = "coordinator" if radio == 1 else "router"
+    return {"kind": "xbee", "port": port, "protocol": "802.15.4", "api_mode": 1,
+            "role": role}
 
 
 def robot_ids(swarm_path: Path) -> tuple[int, ...]:

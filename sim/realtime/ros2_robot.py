@@ -32,6 +32,8 @@ from swarmd.link.ros2_node import RosThread
 HEALTH_PERIOD = 0.5
 """s between two health statuses of the stack (diagnostic_updater's default is 1 s)."""
 LEVEL = {Health.OK: 0, Health.DEGRADED: 1, Health.FAULTY: 2}
+SIM_HEALTH_TIMEOUT = 6.0
+"""s: the simulated robots' ros2 link health_timeout (`DomainLease.link_doc`)."""
 
 
 class RobotStack:
@@ -216,7 +218,15 @@ class DomainLease:
 
     def link_doc(self, robot: int) -> dict[str, Any]:
         """The robot file's link section for `robot` in this run."""
-        return {"kind": "ros2", "domain_id": self.domain_id, "namespace": f"robot{robot}"}
+        # health_timeout also bounds the link's start-up grace: no health heard that long
+        # after its start, and the robot is reported faulty. The simulated stack starts
+        # with the daemon, in its process, and its DDS participant and the link's found
+        # each other only after more than the default 2 s when tests ran in parallel on
+        # two cores: robots left as faulty before any fault. Here the stack never falls
+        # silent on its own (its faults are explicit: ERROR, or the whole process), so a
+        # longer timeout costs nothing.
+        return {"kind": "ros2", "domain_id": self.domain_id, "namespace": f"robot{robot}",
+                "health_timeout": SIM_HEALTH_TIMEOUT}
 
     def release(self) -> None:
         if self._file is not None:
