@@ -35,23 +35,7 @@ class Hearing(NodeBase):
             self._uncertified_beat(f, hb, now)
             return
         if not newer:
-            # A stale holder (e.g. back from a pause): if it is our slot, answer at once
-            # so it hears the newer epoch and fences itself (rule 2) within a frame.
-            if f == self._function and self._role == Role.ACTIVE:
-                # A rival holding it at our epoch (the race won on each side of a
-                # partition) lacks only our CLAIM, most likely (its own evidence backs
-                # ours): every other heartbeat period rather than every T_max, so a
-                # lossy channel does not keep two robots executing one slot (rule 2).
-                rival = hb.epoch == self._epoch
-                self._relay_cert(f, now, 2 * self._params.heartbeat_interval if rival
-                                 else None)
-                self._heartbeat_now(now)
-            elif self._identity is not None and hb.epoch < epoch:
-                # Per-robot mode, a takeover it missed whose new holder may be gone:
-                # whoever certified it shows the stale holder the evidence against it
-                # (it fences itself, or refutes and keeps its slot everywhere).
-                for raw in self._ev.stale_frames(f, holder, epoch, hb.epoch, now):
-                    self._send_cert(f, raw)
+            self._older_beat(f, hb, Holder(holder, epoch), now)
             return
         self._known[f] = Holder(sender, hb.epoch)
         self._ears.slot_beat(f, sender, hb.epoch, now)
@@ -61,6 +45,27 @@ class Hearing(NodeBase):
             self._fence(hb.epoch, now)
             return
         self._holder_heard(f, sender, hb.epoch, Holder(holder, epoch), now)
+
+    def _older_beat(self, f: str, hb: wire.Heartbeat, known: Holder, now: float) -> None:
+        """A heartbeat for f older than our view of it (`known`): its sender missed a
+        takeover, or lost a race at the same epoch; show it what it missed."""
+        # A stale holder (e.g. back from a pause): if it is our slot, answer at once
+        # so it hears the newer epoch and fences itself (rule 2) within a frame.
+        if f == self._function and self._role == Role.ACTIVE:
+            # A rival holding it at our epoch (the race won on each side of a
+            # partition) lacks only our CLAIM, most likely (its own evidence backs
+            # ours): every other heartbeat period rather than every T_max, so a
+            # lossy channel does not keep two robots executing one slot (rule 2).
+            rival = hb.epoch == self._epoch
+            self._relay_cert(f, now, 2 * self._params.heartbeat_interval if rival
+                             else None)
+            self._heartbeat_now(now)
+        elif self._identity is not None and hb.epoch < known.epoch:
+            # Per-robot mode, a takeover it missed whose new holder may be gone:
+            # whoever certified it shows the stale holder the evidence against it
+            # (it fences itself, or refutes and keeps its slot everywhere).
+            for raw in self._ev.stale_frames(f, known.robot, known.epoch, hb.epoch, now):
+                self._send_cert(f, raw)
 
     def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
