@@ -7,9 +7,12 @@ neighbours' 10 Hz heartbeats and the standbys' 2 Hz ones) from /proc for `--dura
 seconds after READY. `--alone` runs robot 1 without its swarm: it then also warns about
 its silent neighbours at 10 Hz (a busier case than idle). `--auth` picks how the swarm
 signs: `per-robot` (the default, as configs/paper.yaml: keys made for the run), `shared`
-or `none`.
+or `none`. `--failover` kills robot 2 (SIGKILL) as the measurement starts and measures
+robot 1 (a watcher of f2: it suspects, warns, sees the takeover) and robot 6 (the standby
+that claims and takes f2 over) through the failover and after it.
 
-    python bench/bench_daemon.py [--duration 10] [--alone] [--auth per-robot|shared|none]
+    python bench/bench_daemon.py [--duration 10] [--alone | --failover]
+                                 [--auth per-robot|shared|none]
 """
 
 from __future__ import annotations
@@ -67,6 +70,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=10.0, help="seconds measured")
     ap.add_argument("--alone", action="store_true", help="robot 1 without its swarm")
+    ap.add_argument("--failover", action="store_true",
+                    help="kill robot 2 as the measurement starts; measure robots 1 and 6")
     ap.add_argument("--auth", choices=sorted(AUTH), default="per-robot",
                     help="how the swarm signs (default per-robot)")
     args = ap.parse_args()
@@ -89,6 +94,7 @@ def main() -> int:
                                     cwd=ROOT)
 
         others = [] if args.alone else [launch(r) for r in (2, 3, 4, 5, 6)]
+        standby = None if args.alone else others[-1]
         proc = launch(1)
         assert proc.stdout is not None
         try:
@@ -104,8 +110,12 @@ def main() -> int:
                 assert out is not None
                 threading.Thread(target=out.read, daemon=True).start()
             t0, c0 = time.monotonic(), cpu_seconds(proc.pid)
+            s0 = cpu_seconds(standby.pid) if standby is not None else 0.0
+            if args.failover:
+                others[0].kill()  # robot 2: a crash, nothing said
             time.sleep(args.duration)
             t1, c1 = time.monotonic(), cpu_seconds(proc.pid)
+            s1 = cpu_seconds(standby.pid) if standby is not None else 0.0
             rss = status_kb(proc.pid, "VmRSS") / 1024
             hwm = status_kb(proc.pid, "VmHWM") / 1024
         finally:
@@ -118,11 +128,16 @@ def main() -> int:
                     p.kill()
     cpu = 100.0 * (c1 - c0) / (t1 - t0)
     what = ("alone (warning at 10 Hz)" if args.alone else "in the paper swarm") + \
+        (", robot 2 crashing as the measurement starts" if args.failover else "") + \
         f", auth {args.auth}"
     print(f"daemon of robot 1 {what}, 10 Hz heartbeats, {t1 - t0:.1f} s: "
           f"CPU {cpu:.2f}% of one core (goal < 1%), RSS {rss:.1f} MB, "
           f"peak RSS {hwm:.1f} MB (goal < 60 MB)")
-    print(json.dumps({"cpu_percent": round(cpu, 3), "rss_mb": round(rss, 1),
+    standby_cpu = 100.0 * (s1 - s0) / (t1 - t0)
+    if args.failover:
+        print(f"daemon of robot 6, the standby taking f2 over: CPU {standby_cpu:.2f}% of one core")
+    print(json.dumps({"cpu_percent": round(cpu, 3), "standby_cpu_percent": round(standby_cpu, 3),
+                      "rss_mb": round(rss, 1),
                       "peak_rss_mb": round(hwm, 1), "seconds": round(t1 - t0, 2),
                       "auth": args.auth}))
     return 0 if cpu < 1.0 and hwm < 60 else 2
