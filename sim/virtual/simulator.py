@@ -121,19 +121,7 @@ class VirtualSwarm:
         self.faults = sorted((part for f in faults for part in f.split()), key=lambda f: f.at)
         self.channel = channel or Channel()
         self.rng = random.Random(seed)
-        if auth not in AUTH_MODES:
-            raise ValueError(f"auth must be one of {', '.join(AUTH_MODES)}, not {auth!r}")
-        if auth != "none" and not keys:
-            keys = (bytes(range(32)),)  # a throwaway swarm key for this run
-        self.keys = tuple(keys) if auth != "none" or keys else ()
-        self.auth = "shared" if auth == "none" and self.keys else auth
-        # Per-robot mode: throwaway identities (`sim.shared.fakeid`) unless given.
-        self.identities: dict[int, Identity] = {}
-        if self.auth == "per-robot":
-            self.identities = identities if identities is not None else \
-                fake_identities(plan.robots, seed)
-        self.verifier = self.identities[min(self.identities)].verifier \
-            if self.identities else None
+        self._init_auth(auth, keys, identities, seed)
         self.on_event = on_event
         self.now = 0.0
         self._heap: list[tuple[float, int, int, Any, Any]] = []
@@ -162,6 +150,28 @@ class VirtualSwarm:
             r: collections.deque(maxlen=CAPTURE) for f in self.faults
             if f.kind is FaultKind.FORGE and f.attack == "replay" for r in f.robots}
         self._tapes: dict[int, tuple[bytes, ...]] = {}
+        self._schedule(start_spread)
+
+    # ------------------------------------------------------------------ set-up
+    def _init_auth(self, auth: str, keys: Sequence[bytes],
+                   identities: dict[int, Identity] | None, seed: int) -> None:
+        """The run's keys, authentication mode, identities and verifier."""
+        if auth not in AUTH_MODES:
+            raise ValueError(f"auth must be one of {', '.join(AUTH_MODES)}, not {auth!r}")
+        if auth != "none" and not keys:
+            keys = (bytes(range(32)),)  # a throwaway swarm key for this run
+        self.keys = tuple(keys) if auth != "none" or keys else ()
+        self.auth = "shared" if auth == "none" and self.keys else auth
+        # Per-robot mode: throwaway identities (`sim.shared.fakeid`) unless given.
+        self.identities: dict[int, Identity] = {}
+        if self.auth == "per-robot":
+            self.identities = identities if identities is not None else \
+                fake_identities(self.plan.robots, seed)
+        self.verifier = self.identities[min(self.identities)].verifier \
+            if self.identities else None
+
+    def _schedule(self, start_spread: float) -> None:
+        """Each robot's boot at a spread time, then each fault's begin and end."""
         for rid in self._all:
             start = self.rng.uniform(0.0, start_spread)
             self.robots[rid] = _Robot(node=None)
@@ -171,7 +181,6 @@ class VirtualSwarm:
             if fault.end is not None:
                 self._push(fault.end, _FAULT, i, "end")
 
-    # ------------------------------------------------------------------ set-up
     def _interest(self) -> dict[int, tuple[int, ...]]:
         """slot -> robots to which a frame about it matters, from `SwarmPlan.relevant`
         (the same sets `Node` drops irrelevant frames by); standby heartbeats go by
@@ -208,51 +217,14 @@ class VirtualSwarm:
         while heap and heap[0][0] <= self.duration:
             t, _, kind, a, b = heapq.heappop(heap)
             self.now = t
-            if kind == _TICK:
-                r = self.robots[a]
-                if b != r.timer_gen or not r.alive or r.paused or r.node is None:
-                    continue
-                r.timer_at = None
-                self._call(a, _OP_TICK, None)
-            elif kind == _DELIVER:
-                r = self.robots[a]
-                if not r.alive or r.node is None:
-                    continue
-                if r.paused:
-                    if len(r.buffered) < 512:  # a socket buffer holds a few hundred frames
-                        r.buffered.append(b)
-                    continue
-                self.deliveries += 1
-                self._call(a, _OP_RECEIVE, b)
-            elif kind == _FAULT:
-                if a == -1:
-                    self._boot(b)
-                else:
-                    self._fault(self.faults[a], b)
-            elif kind == _LIAR:
-                self._lie(a)
-            elif kind == _FORGE:
-                self._forge(a, b)
-            elif kind == _DELIVER_RAW:
-                r = self.robots[a]
-                if r.alive and r.node is not None and not r.paused:
-                    self.deliveries += 1
-                    self._call(a, _OP_RAW, b)
+            self._step(kind, a, b)
         self.now = self.duration
         for link, run in self._losing.items():
             self._outage(link, run, self.duration)
         violations = self.checker.finish(self.events, self.duration) + muted(self) \
             + views(self)
         violations.sort(key=lambda v: v.t)
-        final = {}
-        drops = {}
-        for rid, r in self.robots.items():
-            total = collections.Counter(r.dropped)
-            if r.alive and r.node is not None:
-                snap = r.node.snapshot()
-                final[rid] = (snap.role.name.lower(), snap.function, snap.epoch)
-                total.update(snap.drops)
-            drops[rid] = dict(total)
+        final, drops = self._final_states()
         return VirtualResult(
             events=self.events,
             violations=violations,
@@ -263,6 +235,54 @@ class VirtualSwarm:
             drops=drops,
             final=final,
         )
+
+    def _step(self, kind: int, a: Any, b: Any) -> None:
+        """Handle one event popped off the heap at `self.now`."""
+        if kind == _TICK:
+            r = self.robots[a]
+            if b != r.timer_gen or not r.alive or r.paused or r.node is None:
+                return
+            r.timer_at = None
+            self._call(a, _OP_TICK, None)
+        elif kind == _DELIVER:
+            r = self.robots[a]
+            if not r.alive or r.node is None:
+                return
+            if r.paused:
+                if len(r.buffered) < 512:  # a socket buffer holds a few hundred frames
+                    r.buffered.append(b)
+                return
+            self.deliveries += 1
+            self._call(a, _OP_RECEIVE, b)
+        elif kind == _FAULT:
+            if a == -1:
+                self._boot(b)
+            else:
+                self._fault(self.faults[a], b)
+        elif kind == _LIAR:
+            self._lie(a)
+        elif kind == _FORGE:
+            self._forge(a, b)
+        elif kind == _DELIVER_RAW:
+            r = self.robots[a]
+            if r.alive and r.node is not None and not r.paused:
+                self.deliveries += 1
+                self._call(a, _OP_RAW, b)
+
+    def _final_states(self) -> tuple[dict[int, tuple[str, str | None, int]],
+                                     dict[int, dict[str, int]]]:
+        """Each live robot's (role, function, epoch) at the end, and every robot's
+        drops by reason over all its nodes."""
+        final = {}
+        drops = {}
+        for rid, r in self.robots.items():
+            total = collections.Counter(r.dropped)
+            if r.alive and r.node is not None:
+                snap = r.node.snapshot()
+                final[rid] = (snap.role.name.lower(), snap.function, snap.epoch)
+                total.update(snap.drops)
+            drops[rid] = dict(total)
+        return final, drops
 
     def audience(self, sender: int, slot: int) -> tuple[int, ...]:
         """Who should hear `sender`'s heartbeat for `slot` (0: its standby heartbeat)."""
