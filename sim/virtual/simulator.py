@@ -129,27 +129,14 @@ class VirtualSwarm:
         self.events: list[dict[str, Any]] = []
         self.frames_sent = 0
         self.deliveries = 0
-        self.partition: dict[int, int] | None = None  # robot -> group while partitioned
-        self.cuts: list[LinkCut] = []  # one-way link faults in force (fade, deaf, A>B)
-        self.cuts_seen: list[LinkCut] = []
-        self._losing: dict[tuple[int, int], tuple[float, float]] = {}
-        """(sender, receiver) -> the first and last frame the channel lost in the link's
-        current run of losses: a run spanning `t_max` or more is an outage to the checker."""
-        if self.channel.loss_model not in LOSS_MODELS:
-            raise ValueError(f"loss model must be one of {', '.join(LOSS_MODELS)}")
-        self._burst = GilbertElliott(self.channel.loss, self.channel.burst_len, self.rng) \
-            if self.channel.loss_model == "burst" else None
+        self._init_links()
         self._changed: dict[int, float] = {}
         self.checker = Checker(plan, params, loss=self.channel.loss)
         self.robots: dict[int, _Robot] = {}
         self._relevant_to = self._interest()
         self._receivers = self._relevant_to if interest else None
         self._all = tuple(sorted(plan.robots))
-        # `forge:R@T:replay`: R's radio records the channel until T (`sim.shared.forge`).
-        self._recording: dict[int, collections.deque[bytes]] = {
-            r: collections.deque(maxlen=CAPTURE) for f in self.faults
-            if f.kind is FaultKind.FORGE and f.attack == "replay" for r in f.robots}
-        self._tapes: dict[int, tuple[bytes, ...]] = {}
+        self._init_recorders()
         self._schedule(start_spread)
 
     # ------------------------------------------------------------------ set-up
@@ -169,6 +156,26 @@ class VirtualSwarm:
                 fake_identities(self.plan.robots, seed)
         self.verifier = self.identities[min(self.identities)].verifier \
             if self.identities else None
+
+    def _init_links(self) -> None:
+        """The link faults in force and the channel's losses, per link."""
+        self.partition: dict[int, int] | None = None  # robot -> group while partitioned
+        self.cuts: list[LinkCut] = []  # one-way link faults in force (fade, deaf, A>B)
+        self.cuts_seen: list[LinkCut] = []
+        self._losing: dict[tuple[int, int], tuple[float, float]] = {}
+        """(sender, receiver) -> the first and last frame the channel lost in the link's
+        current run of losses: a run spanning `t_max` or more is an outage to the checker."""
+        if self.channel.loss_model not in LOSS_MODELS:
+            raise ValueError(f"loss model must be one of {', '.join(LOSS_MODELS)}")
+        self._burst = GilbertElliott(self.channel.loss, self.channel.burst_len, self.rng) \
+            if self.channel.loss_model == "burst" else None
+
+    def _init_recorders(self) -> None:
+        # `forge:R@T:replay`: R's radio records the channel until T (`sim.shared.forge`).
+        self._recording: dict[int, collections.deque[bytes]] = {
+            r: collections.deque(maxlen=CAPTURE) for f in self.faults
+            if f.kind is FaultKind.FORGE and f.attack == "replay" for r in f.robots}
+        self._tapes: dict[int, tuple[bytes, ...]] = {}
 
     def _schedule(self, start_spread: float) -> None:
         """Each robot's boot at a spread time, then each fault's begin and end."""
