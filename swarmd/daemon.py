@@ -146,9 +146,7 @@ class Daemon:
         self.time_origin = time_origin
         self.notifier = notifier if notifier is not None else Notifier.from_env()
         self.metrics = Metrics(robot_id=cfg.robot, swarm_id=self.swarm_id)
-        self.metrics_server: MetricsServer | None = None
-        self.event_log: EventLog | None = None
-        self.runtime: Runtime | None = None
+        self._init_started()
         self.state_file = state_mod.StateFile(
             state_mod.state_path(cfg.state_dir, self.swarm_id, cfg.robot),
             robot=cfg.robot, swarm=self.swarm_id, plan=cfg.swarm.to_plan())
@@ -158,6 +156,12 @@ class Daemon:
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
+
+    def _init_started(self) -> None:
+        """What `start` makes: None until it runs."""
+        self.metrics_server: MetricsServer | None = None
+        self.event_log: EventLog | None = None
+        self.runtime: Runtime | None = None
         self._waiting: asyncio.Task[None] | None = None
         self._link_events: Callable[[dict[str, Any]], None] | None = None
         """A link that shows the swarm (ros2) gets every event record too."""
