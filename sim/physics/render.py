@@ -205,17 +205,11 @@ def report_pictures(
     loads `swarm.mp4` (or `.gif`) and `key-*.png`. Returns what was written, and why
     not (`"video_error"`); never raises for a robot's broken trajectory file."""
     from sim.physics.plots import trajectory_png
-    from sim.physics.robot import load_trajectory
 
     paths = trajectory_files(report_dir)
     origin = t0 if t0 is not None else run_origin(paths)
-    trajs = []
     out: dict[str, Any] = {"trajectories": len(paths)}
-    for path in paths:
-        try:
-            trajs.append(load_trajectory(path, t0=origin))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            out.setdefault("skipped", []).append(f"{path.name}: {exc}")
+    trajs = _load_trajectories(paths, origin, out)
     if not trajs:
         out["video_error"] = ("no trajectory files under realtime/state/ (a run without "
                               "physics, or one stopped before the robots flew)")
@@ -230,6 +224,20 @@ def report_pictures(
         if res.error:
             out["video_error"] = res.error
     return out
+
+
+def _load_trajectories(paths: Sequence[Path], origin: float | None,
+                       out: dict[str, Any]) -> list[Trajectory]:
+    """The trajectories that load; each that does not is listed in `out["skipped"]`."""
+    from sim.physics.robot import load_trajectory
+
+    trajs = []
+    for path in paths:
+        try:
+            trajs.append(load_trajectory(path, t0=origin))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            out.setdefault("skipped", []).append(f"{path.name}: {exc}")
+    return trajs
 
 
 FALL_STEP = 0.05
