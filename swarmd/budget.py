@@ -261,8 +261,30 @@ def budget_for(
         ) * copies
     max_payload = MAX_PAYLOAD[medium]
     fits = hb <= max_payload
+    warn_parts = fragments(medium, warn)
+    cert_parts = fragments(medium, cert) if per_robot else 0
+    warnings = _size_warnings(medium, hb, warn, cert, anchor, per_robot=per_robot)
+    warnings += _rate_warnings(medium, robots, hb_rate, airtime_share, peak_share)
+    return Budget(
+        medium=medium, signed=signed, robots=robots, active=active, standby=standby,
+        frames_per_s=hb_rate, bytes_per_s=bytes_per_s, airtime_share=airtime_share,
+        peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
+        max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
+        per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
+        warn_fragments=warn_parts, cert_fragments=cert_parts,
+        anchor_bytes=anchor if per_robot else 0,
+        anchor_fragments=fragments(medium, anchor) if per_robot else 0,
+        anchors_per_s=anchor_rate,
+    )
+
+
+def _size_warnings(medium: str, hb: int, warn: int, cert: int, anchor: int, *,
+                   per_robot: bool) -> list[str]:
+    """A heartbeat over the medium's payload limit; a frame in more fragments than a
+    message may have."""
+    max_payload = MAX_PAYLOAD[medium]
     warnings: list[str] = []
-    if not fits:
+    if hb > max_payload:
         warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
     warn_parts = fragments(medium, warn)
     cert_parts = fragments(medium, cert) if per_robot else 0
@@ -271,6 +293,13 @@ def budget_for(
             f"a {max(warn, cert, anchor if per_robot else 0)} B frame needs more than "
             f"{fragment.MAX_FRAGMENTS} "
             f"fragments of the {max_payload} B payload limit: it cannot be sent")
+    return warnings
+
+
+def _rate_warnings(medium: str, robots: int, hb_rate: float, airtime_share: float | None,
+                   peak_share: float | None) -> list[str]:
+    """More broadcasts than Zigbee carries; more airtime than CSMA leaves usable."""
+    warnings: list[str] = []
     if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
         needed = robots / ZIGBEE_BROADCASTS_PER_S
         warnings.append(
@@ -288,17 +317,7 @@ def budget_for(
         warnings.append(
             f"a failover raises airtime to {peak_share:.0%}, above {AIRTIME_CEILING:.0%}"
         )
-    return Budget(
-        medium=medium, signed=signed, robots=robots, active=active, standby=standby,
-        frames_per_s=hb_rate, bytes_per_s=bytes_per_s, airtime_share=airtime_share,
-        peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
-        max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
-        per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
-        warn_fragments=warn_parts, cert_fragments=cert_parts,
-        anchor_bytes=anchor if per_robot else 0,
-        anchor_fragments=fragments(medium, anchor) if per_robot else 0,
-        anchors_per_s=anchor_rate,
-    )
+    return warnings
 
 
 def channel_budget(plan: SwarmPlan, params: Params, *, medium: str, signed: bool,
