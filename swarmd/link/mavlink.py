@@ -118,6 +118,10 @@ class MavlinkLink:
         self.last: Assessment | None = None
         self.counters: dict[str, int] = {"opens": 0, "open_errors": 0, "io_errors": 0,
                                          "bad_data": 0, "bursts": 0}
+        self._init_reporting()
+
+    def _init_reporting(self) -> None:
+        """The health not yet handed to the daemon, and the logs of changes and bad data."""
         self._latest: Health | None = None
         self._handed_at = float("-inf")  # thread time of the last hand-over (`_report`)
         self._dirty = False  # a health not yet handed over
