@@ -127,24 +127,31 @@ def render_swarm(
     out_dir.mkdir(parents=True, exist_ok=True)
     t_lo = start if start is not None else min(float(tr.t[0]) for tr in trajectories)
     t_hi = end if end is not None else max(float(tr.t[-1]) for tr in trajectories)
+    job = {
+        "robots": [tr.robot for tr in trajectories],
+        "events": [dict(e) for e in events],
+        "out_dir": str(out_dir),
+        "fps": fps,
+        "speed": speed,
+        "start": t_lo,
+        "end": t_hi,
+        "keyframes": keyframes,
+        "fmt": fmt,
+        "preset": preset_name,
+    }
+    return _render_in_child(job, trajectories, backend, timeout)
+
+
+def _render_in_child(job: dict[str, Any], trajectories: Sequence[Trajectory], backend: str,
+                     timeout: float) -> RenderResult:
+    """Run the render child on `job` and the trajectories (written to a temporary
+    directory for it): what it rendered, or why not."""
     with tempfile.TemporaryDirectory(prefix="swarmd-render-") as tmp:
         arrays: dict[str, Any] = {}
         for i, tr in enumerate(trajectories):
             arrays[f"t{i}"], arrays[f"p{i}"], arrays[f"q{i}"] = tr.t, tr.pos, tr.quat
         np.savez(Path(tmp) / "traj.npz", **arrays)
-        job = {
-            "robots": [tr.robot for tr in trajectories],
-            "events": [dict(e) for e in events],
-            "out_dir": str(out_dir),
-            "fps": fps,
-            "speed": speed,
-            "start": t_lo,
-            "end": t_hi,
-            "keyframes": keyframes,
-            "fmt": fmt,
-            "preset": preset_name,
-            "traj": str(Path(tmp) / "traj.npz"),
-        }
+        job = {**job, "traj": str(Path(tmp) / "traj.npz")}
         job_path = Path(tmp) / "job.json"
         job_path.write_text(json.dumps(job))
         try:
@@ -154,6 +161,11 @@ def render_swarm(
             )
         except subprocess.TimeoutExpired:
             return RenderResult(backend=backend, error=f"render took over {timeout:.0f} s")
+    return _result_of(proc, backend)
+
+
+def _result_of(proc: subprocess.CompletedProcess[str], backend: str) -> RenderResult:
+    """What the render child reported: its video and key frames, or why it failed."""
     if proc.returncode != 0:
         tail = " | ".join(proc.stderr.strip().splitlines()[-3:])
         return RenderResult(backend=backend, error=f"render child failed: {tail}")
