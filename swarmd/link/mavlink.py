@@ -190,24 +190,33 @@ class MavlinkLink:
                     next_open = now + self.reopen_interval
                     log.warning("cannot open MAVLink %s: %s (retrying)", self.url, exc)
                     continue
-            try:
-                msg = conn.recv_match(blocking=True, timeout=self.poll)
-                read += msg is not None
-                now = self._clock()
-                out = self._tick(msg, now)
-                for m in out:
-                    conn.mav.send(m)
-            except Exception as exc:  # unplugged serial, reset TCP, a pymavlink bug
-                self.counters["io_errors"] += 1
-                log.warning("MAVLink %s failed: %s (reopening)", self.url, exc)
-                with contextlib.suppress(Exception):
-                    conn.close()
-                conn = None
+            conn, got = self._exchange(conn)
+            read += got
+            if conn is None:
                 next_open = self._clock() + self.reopen_interval
             last_report = self._report(self._clock(), last_report)
         if conn is not None:
             with contextlib.suppress(Exception):
                 conn.close()
+
+    def _exchange(self, conn: Any) -> tuple[Any, bool]:
+        """Read a message (or time out), tick the pilot and send what it answers: the
+        connection (None once it failed and was closed) and whether a message came."""
+        got = False
+        try:
+            msg = conn.recv_match(blocking=True, timeout=self.poll)
+            got = msg is not None
+            now = self._clock()
+            out = self._tick(msg, now)
+            for m in out:
+                conn.mav.send(m)
+        except Exception as exc:  # unplugged serial, reset TCP, a pymavlink bug
+            self.counters["io_errors"] += 1
+            log.warning("MAVLink %s failed: %s (reopening)", self.url, exc)
+            with contextlib.suppress(Exception):
+                conn.close()
+            return None, got
+        return conn, got
 
     def _tick(self, msg: Any, now: float) -> list[Any]:
         pilot = self.pilot
