@@ -103,6 +103,19 @@ class SimOptions:
     parsed_faults: tuple[Fault, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        problems = self._channel_problems() + self._link_problems()
+        parsed = []
+        for spec in self.faults:
+            try:
+                parsed.append(parse_fault(spec))
+            except FaultSpecError as exc:
+                problems.append(f"--fault: {exc}")
+        if problems:
+            raise SimError(*problems)
+        object.__setattr__(self, "parsed_faults", tuple(parsed))
+
+    def _channel_problems(self) -> list[str]:
+        """What is wrong with the run's length, loss and transport options."""
         problems = []
         if not self.duration > 0:
             problems.append(f"--duration: {self.duration:g} is not above 0")
@@ -119,6 +132,11 @@ class SimOptions:
         elif self.virtual and self.transport != "udp":
             problems.append("--transport: --virtual has no channel (it runs every core in "
                             "this process); drop --virtual to use emulated radios")
+        return problems
+
+    def _link_problems(self) -> list[str]:
+        """What is wrong with the physics, craft, link and autopilot options."""
+        problems = []
         if self.craft is not None and not self.flies:
             problems.append("--craft: only with physics (not with --virtual or --no-physics)")
         if self.virtual and not self.physics:
@@ -137,15 +155,7 @@ class SimOptions:
             problems.append("--autopilot: only with --link mavlink")
         if self.refuse_arm and self.link != "mavlink":
             problems.append("--refuse-arm: only with --link mavlink")
-        parsed = []
-        for spec in self.faults:
-            try:
-                parsed.append(parse_fault(spec))
-            except FaultSpecError as exc:
-                problems.append(f"--fault: {exc}")
-        if problems:
-            raise SimError(*problems)
-        object.__setattr__(self, "parsed_faults", tuple(parsed))
+        return problems
 
     @property
     def flies(self) -> bool:

@@ -39,7 +39,7 @@ timing parameters, not from measurement:
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from swarmd.core import chain
 from swarmd.core.auth import SIGNATURE_LEN
@@ -236,33 +236,98 @@ def budget_for(
     robots = active + standby
     overhead = frame_overhead(medium)
     copies = broadcast_copies(medium, robots)
-    hb = heartbeat_size(signed, slot_bytes, per_robot=per_robot)
-    anchor = heartbeat_size(signed, slot_bytes, per_robot=True, anchor=True)
-    warn = warn_size(signed, slot_bytes, per_robot=per_robot)
-    cert = cert_size(slot_bytes) if per_robot else 0
+    sizes = _frame_sizes(signed, slot_bytes, per_robot=per_robot)
+    hb, anchor, warn, cert = sizes
+    rates = _frame_rates(active, standby, max_watchers, params, per_robot=per_robot)
+    link_rate = rates.heartbeats - rates.anchors
+    peak_rate = rates.heartbeats + rates.warns + rates.claims * (1 + rates.backers)
+    bytes_per_s = (link_rate * (hb + overhead) + rates.anchors * sum(
+        n + overhead for n in _transmissions(medium, anchor))) * copies
+    airtime_share, peak_share = _airtime_shares(medium, sizes, rates, copies,
+                                                per_robot=per_robot)
+    max_payload = MAX_PAYLOAD[medium]
+    warnings = _size_warnings(medium, hb, warn, cert, anchor, per_robot=per_robot)
+    warnings += _rate_warnings(medium, robots, rates.heartbeats, airtime_share, peak_share)
+    return Budget(
+        medium=medium, signed=signed, robots=robots, active=active, standby=standby,
+        frames_per_s=rates.heartbeats, bytes_per_s=bytes_per_s, airtime_share=airtime_share,
+        peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
+        max_payload=max_payload, heartbeat_fits=hb <= max_payload, warnings=tuple(warnings),
+        per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
+        warn_fragments=fragments(medium, warn),
+        cert_fragments=fragments(medium, cert) if per_robot else 0,
+        anchor_bytes=anchor if per_robot else 0,
+        anchor_fragments=fragments(medium, anchor) if per_robot else 0,
+        anchors_per_s=rates.anchors,
+    )
+
+
+class _Sizes(NamedTuple):
+    """Bytes of each frame a swarm sends (`budget_for`)."""
+
+    heartbeat: int
+    anchor: int
+    warn: int
+    cert: int
+    """0 unless signed per robot."""
+
+
+def _frame_sizes(signed: bool, slot_bytes: int, *, per_robot: bool) -> _Sizes:
+    return _Sizes(
+        heartbeat_size(signed, slot_bytes, per_robot=per_robot),
+        heartbeat_size(signed, slot_bytes, per_robot=True, anchor=True),
+        warn_size(signed, slot_bytes, per_robot=per_robot),
+        cert_size(slot_bytes) if per_robot else 0,
+    )
+
+
+class _Rates(NamedTuple):
+    """Frames per second swarm-wide, by kind (`budget_for`)."""
+
+    heartbeats: float
+    anchors: float
+    """Of the heartbeats, those that are anchors (per-robot mode)."""
+    warns: float
+    claims: float
+    backers: int
+    """Frames that back a CLAIM in per-robot mode."""
+
+
+def _frame_rates(active: int, standby: int, max_watchers: int, params: Params, *,
+                 per_robot: bool) -> _Rates:
     backers = max_watchers + 1 if per_robot else 0  # the witnesses and rule 9's own ears
     hb_rate = active / params.heartbeat_interval + standby / params.standby_heartbeat_interval
     anchor_rate = min(hb_rate, anchor_rates(active, standby, params)) if per_robot else 0.0
-    link_rate = hb_rate - anchor_rate
     warn_rate = max_watchers / params.warn_interval
     claim_rate = 1 / params.claim_hold  # at most one CLAIM per hold, counted as a rate
-    peak_rate = hb_rate + warn_rate + claim_rate * (1 + backers)
-    bytes_per_s = (link_rate * (hb + overhead) + anchor_rate * sum(
-        n + overhead for n in _transmissions(medium, anchor))) * copies
-    airtime_share: float | None = None
-    peak_share: float | None = None
-    if medium != "udp":
-        beats = link_rate * airtime(medium, hb) + anchor_rate * frame_airtime(medium, anchor)
-        airtime_share = beats * copies
-        peak_share = (
-            beats
-            + (warn_rate + claim_rate) * frame_airtime(medium, warn)
-            + (claim_rate * backers * frame_airtime(medium, cert) if per_robot else 0.0)
-        ) * copies
+    return _Rates(hb_rate, anchor_rate, warn_rate, claim_rate, backers)
+
+
+def _airtime_shares(medium: str, sizes: _Sizes, rates: _Rates, copies: int, *,
+                    per_robot: bool) -> tuple[float | None, float | None]:
+    """The share of the channel's time heartbeats take, and a failover at its peak
+    (None for UDP, which has no airtime to share)."""
+    if medium == "udp":
+        return None, None
+    link_rate = rates.heartbeats - rates.anchors
+    beats = link_rate * airtime(medium, sizes.heartbeat) \
+        + rates.anchors * frame_airtime(medium, sizes.anchor)
+    peak_share = (
+        beats
+        + (rates.warns + rates.claims) * frame_airtime(medium, sizes.warn)
+        + (rates.claims * rates.backers * frame_airtime(medium, sizes.cert)
+           if per_robot else 0.0)
+    ) * copies
+    return beats * copies, peak_share
+
+
+def _size_warnings(medium: str, hb: int, warn: int, cert: int, anchor: int, *,
+                   per_robot: bool) -> list[str]:
+    """A heartbeat over the medium's payload limit; a frame in more fragments than a
+    message may have."""
     max_payload = MAX_PAYLOAD[medium]
-    fits = hb <= max_payload
     warnings: list[str] = []
-    if not fits:
+    if hb > max_payload:
         warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
     warn_parts = fragments(medium, warn)
     cert_parts = fragments(medium, cert) if per_robot else 0
@@ -271,6 +336,13 @@ def budget_for(
             f"a {max(warn, cert, anchor if per_robot else 0)} B frame needs more than "
             f"{fragment.MAX_FRAGMENTS} "
             f"fragments of the {max_payload} B payload limit: it cannot be sent")
+    return warnings
+
+
+def _rate_warnings(medium: str, robots: int, hb_rate: float, airtime_share: float | None,
+                   peak_share: float | None) -> list[str]:
+    """More broadcasts than Zigbee carries; more airtime than CSMA leaves usable."""
+    warnings: list[str] = []
     if medium == "zigbee" and hb_rate > ZIGBEE_BROADCASTS_PER_S:
         needed = robots / ZIGBEE_BROADCASTS_PER_S
         warnings.append(
@@ -288,17 +360,7 @@ def budget_for(
         warnings.append(
             f"a failover raises airtime to {peak_share:.0%}, above {AIRTIME_CEILING:.0%}"
         )
-    return Budget(
-        medium=medium, signed=signed, robots=robots, active=active, standby=standby,
-        frames_per_s=hb_rate, bytes_per_s=bytes_per_s, airtime_share=airtime_share,
-        peak_frames_per_s=peak_rate, peak_airtime_share=peak_share, heartbeat_bytes=hb,
-        max_payload=max_payload, heartbeat_fits=fits, warnings=tuple(warnings),
-        per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
-        warn_fragments=warn_parts, cert_fragments=cert_parts,
-        anchor_bytes=anchor if per_robot else 0,
-        anchor_fragments=fragments(medium, anchor) if per_robot else 0,
-        anchors_per_s=anchor_rate,
-    )
+    return warnings
 
 
 def channel_budget(plan: SwarmPlan, params: Params, *, medium: str, signed: bool,

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.table import Table
@@ -22,9 +22,12 @@ from rich.text import Text
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, has_errors
 from swarmd.config.robot import from_source as robot_from_source
 from swarmd.config.source import read_source
-from swarmd.config.swarm import SwarmConfig
+from swarmd.config.swarm import Coverage, SwarmConfig
 from swarmd.config.swarm_rules import inspect_swarm
 from swarmd.core.params import Params, ParamsError
+
+if TYPE_CHECKING:
+    from swarmd.budget import Budget  # budget_section imports it only when it runs
 
 EXIT_OK, EXIT_ERRORS, EXIT_UNREADABLE = 0, 1, 2
 
@@ -98,16 +101,7 @@ def coverage_section(cfg: SwarmConfig) -> Section:
     rows: list[tuple[str, ...]] = []
     data: list[dict[str, Any]] = []
     for c in cfg.coverage():
-        status = []
-        if not c.holders:
-            status.append("NO HOLDER")
-        elif len(c.holders) > 1:
-            status.append("TWO HOLDERS")
-        if quorum is not None and c.holders and len(c.watchers) < quorum:
-            status.append("UNDER QUORUM")
-        if not c.standbys:
-            status.append("NO STANDBY")
-        text = ", ".join(status) or "OK"
+        text = _coverage_status(c, quorum)
         rows.append((
             c.function,
             c.kind,
@@ -132,6 +126,20 @@ def coverage_section(cfg: SwarmConfig) -> Section:
         rows=tuple(rows),
         data=data,
     )
+
+
+def _coverage_status(c: Coverage, quorum: int | None) -> str:
+    """A function's coverage status: OK, or what is wrong with it."""
+    status = []
+    if not c.holders:
+        status.append("NO HOLDER")
+    elif len(c.holders) > 1:
+        status.append("TWO HOLDERS")
+    if quorum is not None and c.holders and len(c.watchers) < quorum:
+        status.append("UNDER QUORUM")
+    if not c.standbys:
+        status.append("NO STANDBY")
+    return ", ".join(status) or "OK"
 
 
 def timing_section(cfg: SwarmConfig) -> Section | None:
@@ -185,24 +193,11 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
     for medium in MEDIA:
         b = channel_budget(plan, params, medium=medium, signed=signed,
                            per_robot=cfg.auth_mode == "per-robot")
-        rows.append((
-            medium,
-            f"{b.frames_per_s:.1f}",
-            f"{b.bytes_per_s:.0f}",
-            "-" if b.airtime_share is None else f"{b.airtime_share:.1%}",
-            "-" if b.peak_airtime_share is None else f"{b.peak_airtime_share:.1%}",
-            f"{b.heartbeat_bytes}/{b.max_payload} B " + ("fits" if b.heartbeat_fits else
-                                                        "DOES NOT FIT"),
-        ))
+        rows.append(_budget_row(medium, b))
         data.append(b.as_dict())
         warnings += [f"{medium}: {w}" for w in b.warnings]
         if b.warn_fragments > 1 or b.cert_fragments > 1 or b.anchor_fragments > 1:
-            split = [f"{what} ({size} B) in {n}" for what, size, n in (
-                ("warning/claim", b.warn_bytes, b.warn_fragments),
-                ("certificate", b.cert_bytes, b.cert_fragments),
-                ("heartbeat anchor", b.anchor_bytes, b.anchor_fragments)) if n > 1]
-            notes.append(f"{medium}: {', '.join(split)} fragments of <= {b.max_payload} B "
-                         "(transport/fragment.py; counted in the airtime)")
+            notes.append(_fragments_note(medium, b))
     return Section(
         key="channel_budget",
         title=f"Channel budget ({'signed' if signed else 'unsigned'} frames)",
@@ -213,6 +208,29 @@ def budget_section(cfg: SwarmConfig) -> Section | None:
         notes=tuple(notes),
         warnings=tuple(warnings),
     )
+
+
+def _budget_row(medium: str, b: Budget) -> tuple[str, ...]:
+    """One medium's line of the channel budget table."""
+    return (
+        medium,
+        f"{b.frames_per_s:.1f}",
+        f"{b.bytes_per_s:.0f}",
+        "-" if b.airtime_share is None else f"{b.airtime_share:.1%}",
+        "-" if b.peak_airtime_share is None else f"{b.peak_airtime_share:.1%}",
+        f"{b.heartbeat_bytes}/{b.max_payload} B " + ("fits" if b.heartbeat_fits else
+                                                    "DOES NOT FIT"),
+    )
+
+
+def _fragments_note(medium: str, b: Budget) -> str:
+    """Which messages a medium carries in several fragments."""
+    split = [f"{what} ({size} B) in {n}" for what, size, n in (
+        ("warning/claim", b.warn_bytes, b.warn_fragments),
+        ("certificate", b.cert_bytes, b.cert_fragments),
+        ("heartbeat anchor", b.anchor_bytes, b.anchor_fragments)) if n > 1]
+    return (f"{medium}: {', '.join(split)} fragments of <= {b.max_payload} B "
+            "(transport/fragment.py; counted in the airtime)")
 
 
 def auth_section(cfg: SwarmConfig) -> Section:

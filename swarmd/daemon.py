@@ -100,6 +100,20 @@ def _ensure_dir(field: str, path: Path) -> None:
                            f"{exc.strerror or exc}") from exc
 
 
+def _restart_needed(old: RobotConfig, new: RobotConfig) -> list[str]:
+    """The settings a SIGHUP changed that only a restart applies."""
+    return [name for name, a, b in (
+        ("robot", old.robot, new.robot),
+        ("transport", old.transport, new.transport),
+        ("link", old.link, new.link),
+        ("timing", old.swarm.params(), new.swarm.params()),
+        ("plan", old.swarm.to_plan(), new.swarm.to_plan()),
+        ("state_dir", old.state_dir, new.state_dir),
+        ("metrics", old.metrics, new.metrics),
+        ("auth", old.swarm.auth_mode, new.swarm.auth_mode),
+    ) if a != b]
+
+
 class Daemon:
     """The pieces of one running daemon; `run_daemon` drives it."""
 
@@ -132,9 +146,7 @@ class Daemon:
         self.time_origin = time_origin
         self.notifier = notifier if notifier is not None else Notifier.from_env()
         self.metrics = Metrics(robot_id=cfg.robot, swarm_id=self.swarm_id)
-        self.metrics_server: MetricsServer | None = None
-        self.event_log: EventLog | None = None
-        self.runtime: Runtime | None = None
+        self._init_started()
         self.state_file = state_mod.StateFile(
             state_mod.state_path(cfg.state_dir, self.swarm_id, cfg.robot),
             robot=cfg.robot, swarm=self.swarm_id, plan=cfg.swarm.to_plan())
@@ -144,6 +156,12 @@ class Daemon:
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
+
+    def _init_started(self) -> None:
+        """What `start` makes: None until it runs."""
+        self.metrics_server: MetricsServer | None = None
+        self.event_log: EventLog | None = None
+        self.runtime: Runtime | None = None
         self._waiting: asyncio.Task[None] | None = None
         self._link_events: Callable[[dict[str, Any]], None] | None = None
         """A link that shows the swarm (ros2) gets every event record too."""
@@ -244,33 +262,15 @@ class Daemon:
             write_at = self.state_file.write_initial(persisted, seq_start)
         except OSError as exc:  # StateWriteError names the file
             raise StartupError(f"state_dir {cfg.state_dir}: {exc}") from exc
-        if cfg.event_log is not None:
-            self.event_log = EventLog(cfg.event_log)
-        if cfg.metrics is not None:
-            self.metrics_server = self.metrics.start_server(
-                cfg.metrics.host, cfg.metrics.port, allow_remote=cfg.metrics.allow_remote)
+        self._open_outputs(cfg)
         transport = self._injected_transport or make_transport(cfg.transport)
         link = self._injected_link or make_link(cfg.link)
         # A restored holder keeps `held` on disk until its rejoin hold is over.
         holding = restored is not None and restored.held is not None
-        self.runtime = Runtime(
-            node, transport, link,
-            function_params=self.function_params,
-            event_sink=self.on_event,
-            receive_filter=self.receive_filter,
-            state_writer=self.state_file.write_snapshot,
-            persist_after=now + params.rejoin_hold if holding else now,
-            # Without an endpoint nobody reads the counters: spare the per-frame cost.
-            metrics=self.metrics if cfg.metrics is not None else None,
-            notifier=self.notifier,
-            time_origin=self.time_origin,
-        )
+        self.runtime = self._make_runtime(
+            node, transport, link, persist_after=now + params.rejoin_hold if holding else now)
         self.runtime.seq_write_at = write_at
-        # A link that publishes the swarm's view (ros2) reads the node only through its
-        # snapshot and the event records (DESIGN section 3), on this loop.
-        watch = getattr(link, "watch", None)
-        if watch is not None:
-            self._link_events = watch(self.runtime.snapshot, cfg)
+        self._watch(link, self.runtime)
         log.info("starting", extra={
             "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
@@ -282,6 +282,37 @@ class Daemon:
             Waiting.of(cfg.swarm.to_plan(), cfg.robot), lambda: rt.heard(),
             grace=params.startup_grace, channel=describe_channel(cfg.transport)))
         return self.runtime
+
+    def _open_outputs(self, cfg: RobotConfig) -> None:
+        """Open the event log and start the metrics endpoint, if configured."""
+        if cfg.event_log is not None:
+            self.event_log = EventLog(cfg.event_log)
+        if cfg.metrics is not None:
+            self.metrics_server = self.metrics.start_server(
+                cfg.metrics.host, cfg.metrics.port, allow_remote=cfg.metrics.allow_remote)
+
+    def _make_runtime(self, node: Node, transport: Transport, link: RobotLink, *,
+                      persist_after: float) -> Runtime:
+        """The runtime that drives `node` over `transport` and `link`."""
+        return Runtime(
+            node, transport, link,
+            function_params=self.function_params,
+            event_sink=self.on_event,
+            receive_filter=self.receive_filter,
+            state_writer=self.state_file.write_snapshot,
+            persist_after=persist_after,
+            # Without an endpoint nobody reads the counters: spare the per-frame cost.
+            metrics=self.metrics if self.cfg.metrics is not None else None,
+            notifier=self.notifier,
+            time_origin=self.time_origin,
+        )
+
+    def _watch(self, link: RobotLink, runtime: Runtime) -> None:
+        # A link that publishes the swarm's view (ros2) reads the node only through its
+        # snapshot and the event records (DESIGN section 3), on this loop.
+        watch = getattr(link, "watch", None)
+        if watch is not None:
+            self._link_events = watch(runtime.snapshot, self.cfg)
 
     async def stop(self) -> None:
         """Stop the node (LEAVE if configured), then close everything, in that order."""
@@ -319,17 +350,7 @@ class Daemon:
                 "problems": [str(p) for p in exc.problems]})
             return
         old = self.running_cfg
-        keys: tuple[bytes, ...] | None = None
-        try:
-            keys = new.keys()
-            if self.runtime is not None:
-                # The node signs with keys[0] and accepts any: the rotation window.
-                self.runtime.set_keys(keys)
-        except Exception as exc:  # KeyFileError, NodeError, or an OSError reading
-            self.reload_errors += 1
-            log.error("SIGHUP: keys not reloaded; the old ones stay in use",
-                      extra={"error": str(exc)})
-            keys = None
+        keys = self._reload_keys(new)
         self._reload_identity(new)
         try:
             self._reload_event_log(new.event_log)
@@ -341,20 +362,26 @@ class Daemon:
         self.handover_on_stop = new.handover_on_stop
         self._alert_hook = new.swarm.alert_hook
         self._function_specs = self._specs(new)
-        restart_needed = [name for name, a, b in (
-            ("robot", old.robot, new.robot),
-            ("transport", old.transport, new.transport),
-            ("link", old.link, new.link),
-            ("timing", old.swarm.params(), new.swarm.params()),
-            ("plan", old.swarm.to_plan(), new.swarm.to_plan()),
-            ("state_dir", old.state_dir, new.state_dir),
-            ("metrics", old.metrics, new.metrics),
-            ("auth", old.swarm.auth_mode, new.swarm.auth_mode),
-        ) if a != b]
+        restart_needed = _restart_needed(old, new)
         self.cfg = new
         log.info("SIGHUP: config reloaded", extra={
             "keys": len(keys) if keys is not None else None,
             "restart_needed_for": restart_needed})
+
+    def _reload_keys(self, new: RobotConfig) -> tuple[bytes, ...] | None:
+        """SIGHUP: the new config's keys, given to the node; None when refused (the
+        old ones stay in use)."""
+        try:
+            keys = new.keys()
+            if self.runtime is not None:
+                # The node signs with keys[0] and accepts any: the rotation window.
+                self.runtime.set_keys(keys)
+        except Exception as exc:  # KeyFileError, NodeError, or an OSError reading
+            self.reload_errors += 1
+            log.error("SIGHUP: keys not reloaded; the old ones stay in use",
+                      extra={"error": str(exc)})
+            return None
+        return keys
 
     def _reload_identity(self, new: RobotConfig) -> None:
         """SIGHUP in per-robot mode: the public keys of the keys dir and the `revoked`
@@ -422,42 +449,68 @@ async def run_daemon(
     daemon = Daemon(robot_cfg, transport=transport, link=link, receive_filter=receive_filter,
                     event_sink=event_sink, time_origin=time_origin, config_path=config_path)
     loop = asyncio.get_running_loop()
-    installed: list[signal.Signals] = []
-    if handle_signals:
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, stop.set)
-            installed.append(sig)
-        loop.add_signal_handler(signal.SIGHUP, daemon.reload)
-        installed.append(signal.SIGHUP)
+    installed = _install_signals(loop, stop, daemon) if handle_signals else []
     try:
-        try:
-            runtime = await daemon.start()
-        except asyncio.CancelledError:
-            await _stop_cancelled(daemon)
-            raise
-        except Exception as exc:
-            log.error("daemon failed to start", extra={
-                "error": str(exc), "error_type": type(exc).__name__,
-                "config": str(config_path) if config_path is not None else None})
-            await daemon.stop()
-            return EXIT_FAILURE
-        try:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(runtime.first_broadcast.wait(), READY_TIMEOUT)
-            daemon.notifier.ready()
-            log.info("ready", extra={"robot": daemon.robot_id})
-            if on_ready is not None:
-                on_ready(daemon)
-            await stop.wait()
-        except asyncio.CancelledError:
-            await _stop_cancelled(daemon)
-            raise
-        log.info("stopping", extra={"handover": daemon.handover_on_stop})
-        await daemon.stop()
-        return EXIT_OK
+        return await _lifecycle(daemon, stop, on_ready, config_path)
     finally:
         for sig in installed:
             loop.remove_signal_handler(sig)
+
+
+async def _lifecycle(daemon: Daemon, stop: asyncio.Event,
+                     on_ready: Callable[[Daemon], None] | None,
+                     config_path: Path | None) -> int:
+    """Start the daemon, serve until `stop`, stop it: the exit code."""
+    runtime = await _start_or_log(daemon, config_path)
+    if runtime is None:
+        return EXIT_FAILURE
+    await _serve(daemon, runtime, stop, on_ready)
+    log.info("stopping", extra={"handover": daemon.handover_on_stop})
+    await daemon.stop()
+    return EXIT_OK
+
+
+def _install_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event,
+                     daemon: Daemon) -> list[signal.Signals]:
+    """SIGTERM and SIGINT set `stop`, SIGHUP reloads: the signals handled, to remove."""
+    installed: list[signal.Signals] = []
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+        installed.append(sig)
+    loop.add_signal_handler(signal.SIGHUP, daemon.reload)
+    installed.append(signal.SIGHUP)
+    return installed
+
+
+async def _start_or_log(daemon: Daemon, config_path: Path | None) -> Runtime | None:
+    """`daemon.start()`, or None after logging why it failed and cleaning up."""
+    try:
+        return await daemon.start()
+    except asyncio.CancelledError:
+        await _stop_cancelled(daemon)
+        raise
+    except Exception as exc:
+        log.error("daemon failed to start", extra={
+            "error": str(exc), "error_type": type(exc).__name__,
+            "config": str(config_path) if config_path is not None else None})
+        await daemon.stop()
+        return None
+
+
+async def _serve(daemon: Daemon, runtime: Runtime, stop: asyncio.Event,
+                 on_ready: Callable[[Daemon], None] | None) -> None:
+    """Announce readiness once the first heartbeat is out, then wait for `stop`."""
+    try:
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(runtime.first_broadcast.wait(), READY_TIMEOUT)
+        daemon.notifier.ready()
+        log.info("ready", extra={"robot": daemon.robot_id})
+        if on_ready is not None:
+            on_ready(daemon)
+        await stop.wait()
+    except asyncio.CancelledError:
+        await _stop_cancelled(daemon)
+        raise
 
 
 async def _stop_cancelled(daemon: Daemon) -> None:

@@ -136,34 +136,9 @@ class MonitorState:
 
     def feed(self, data: bytes, now: float) -> None:
         """Fold one frame in. Never raises on peer input (counted drop instead)."""
-        try:
-            frame = wire.decode(data, self.keys, self.verifier)
-        except wire.CodecError as exc:
-            self._drop(exc.reason)
+        frame = self._accept(data, now)
+        if frame is None:
             return
-        if frame.swarm_id != self.plan.swarm_id:
-            self._drop(MonitorDrop.OTHER_SWARM)
-            return
-        if frame.sender not in self.plan.robots:
-            self._drop(DropReason.UNKNOWN_SENDER)
-            return
-        if isinstance(frame.msg, wire.Cert):
-            return  # relays a signed frame; no replay filter, as in the daemons
-        msg = frame.msg
-        if isinstance(msg, wire.Heartbeat) and self.verifier is not None \
-                and not self.chains.check(frame.sender, msg.n, msg.link, now,
-                                          anchor=msg.anchor):
-            # As the daemons: a heartbeat counts only if its link is its sender's own
-            # (a monitor started late waits for each robot's next anchor).
-            self._drop(DropReason.UNANCHORED)
-            return
-        reason = self.replay.check(frame.sender, frame.seq, now)
-        if reason is not None:
-            self._drop(reason)
-            return
-        if isinstance(msg, wire.Heartbeat) and self.verifier is not None:
-            self.chains.commit(frame.sender, msg.n, msg.link, frame.seq, now,
-                               anchor=msg.anchor)
         seen = self.robots.get(frame.sender)
         if seen is None:
             seen = self.robots[frame.sender] = Heard(frame.sender, now)
@@ -173,18 +148,7 @@ class MonitorState:
         seen.frames += 1
         match frame.msg:
             case wire.Heartbeat(function, epoch, role, health):
-                seen.role = _name(Role, role)
-                seen.function = self.plan.function_at(function)
-                seen.epoch = epoch
-                seen.health = _name(Health, health)
-                seen.unverified = seen.function is not None \
-                    and seen.role == Role.ACTIVE.name \
-                    and not self._believed(seen.function, epoch, frame.sender)
-                if seen.function is not None and seen.role == Role.ACTIVE.name \
-                        and not seen.unverified:
-                    newest = self.newest.get(seen.function)
-                    if newest is None or epoch >= newest[0]:
-                        self.newest[seen.function] = (epoch, frame.sender)
+                self._on_heartbeat(seen, frame.sender, function, epoch, role, health)
             case wire.Warn(suspect, function, _epoch):
                 target = self.robots.get(suspect)
                 if target is None and suspect in self.plan.robots:
@@ -194,20 +158,72 @@ class MonitorState:
                         target.warned_since = now
                     target.warned_by[frame.sender] = now
             case wire.Claim(failed, function, epoch):
-                name = self.plan.function_at(function)
-                if name is not None:
-                    self.claims[name] = (frame.sender, epoch, now)
-                    if self.verifier is not None:  # decoded: signed by its sender
-                        self.signed_claims.add((name, epoch, frame.sender))
-                failed_seen = self.robots.get(failed)
-                if failed_seen is not None:
-                    # A claim tells the watchers to stop warning (paper section IV-A).
-                    failed_seen.warned_by.clear()
-                    failed_seen.warned_since = None
+                self._on_claim(frame.sender, failed, function, epoch, now)
             case wire.Leave(function, _epoch, _reason):
                 seen.leave_at = now
                 seen.leave_function = self.plan.function_at(function)
                 seen.function = None
+
+    def _accept(self, data: bytes, now: float) -> wire.Frame | None:
+        """The frame, if it is this swarm's, authentic and new (as the daemons judge);
+        None when dropped (counted) or a certificate."""
+        try:
+            frame = wire.decode(data, self.keys, self.verifier)
+        except wire.CodecError as exc:
+            self._drop(exc.reason)
+            return None
+        if frame.swarm_id != self.plan.swarm_id:
+            self._drop(MonitorDrop.OTHER_SWARM)
+            return None
+        if frame.sender not in self.plan.robots:
+            self._drop(DropReason.UNKNOWN_SENDER)
+            return None
+        if isinstance(frame.msg, wire.Cert):
+            return None  # relays a signed frame; no replay filter, as in the daemons
+        msg = frame.msg
+        if isinstance(msg, wire.Heartbeat) and self.verifier is not None \
+                and not self.chains.check(frame.sender, msg.n, msg.link, now,
+                                          anchor=msg.anchor):
+            # As the daemons: a heartbeat counts only if its link is its sender's own
+            # (a monitor started late waits for each robot's next anchor).
+            self._drop(DropReason.UNANCHORED)
+            return None
+        reason = self.replay.check(frame.sender, frame.seq, now)
+        if reason is not None:
+            self._drop(reason)
+            return None
+        if isinstance(msg, wire.Heartbeat) and self.verifier is not None:
+            self.chains.commit(frame.sender, msg.n, msg.link, frame.seq, now,
+                               anchor=msg.anchor)
+        return frame
+
+    def _on_heartbeat(self, seen: Heard, sender: int, function: int, epoch: int, role: int,
+                      health: int) -> None:
+        seen.role = _name(Role, role)
+        seen.function = self.plan.function_at(function)
+        seen.epoch = epoch
+        seen.health = _name(Health, health)
+        seen.unverified = seen.function is not None \
+            and seen.role == Role.ACTIVE.name \
+            and not self._believed(seen.function, epoch, sender)
+        if seen.function is not None and seen.role == Role.ACTIVE.name \
+                and not seen.unverified:
+            newest = self.newest.get(seen.function)
+            if newest is None or epoch >= newest[0]:
+                self.newest[seen.function] = (epoch, sender)
+
+    def _on_claim(self, sender: int, failed: int, function: int, epoch: int,
+                  now: float) -> None:
+        name = self.plan.function_at(function)
+        if name is not None:
+            self.claims[name] = (sender, epoch, now)
+            if self.verifier is not None:  # decoded: signed by its sender
+                self.signed_claims.add((name, epoch, sender))
+        failed_seen = self.robots.get(failed)
+        if failed_seen is not None:
+            # A claim tells the watchers to stop warning (paper section IV-A).
+            failed_seen.warned_by.clear()
+            failed_seen.warned_since = None
 
     def _fresh_warnings(self, seen: Heard, now: float) -> dict[int, float]:
         window = self.params.vote_window

@@ -94,6 +94,14 @@ DUPLICATE_REPORT_S = 10.0
 _RATE_LIMIT_S = 1.0  # per name, for channel condition reports (send errors can be per frame)
 
 
+_COUNTERS: tuple[str, ...] = (
+    "received", "filtered", RuntimeDrop.QUEUE_OVERFLOW, "sent", "ticks",
+    "node_errors", "transport_errors", "link_errors", "sink_errors",
+    "filter_errors", "persist_errors", "state_writes", "duplicate_id",
+)
+"""The runtime's counters (`Runtime.stats`), in the order they are reported."""
+
+
 class Runtime:
     """Drives one `Node` with one transport and one robot link. See the module docstring."""
 
@@ -122,36 +130,47 @@ class Runtime:
         self.function_params = function_params
         self.event_sink = event_sink
         self.receive_filter = receive_filter
-        self.state_writer = state_writer
-        self.persist_after = persist_after
-        """loop time before which node-driven state is not written: a restarted holder
-        keeps its persisted `held` until its rejoin hold is over, so a crash during the
-        hold does not forget it."""
+        self._init_persistence(state_writer, persist_after)
         self.metrics = metrics
         self.notifier = notifier
         self.time_origin = time_origin
         self.wall_clock = wall_clock
         self.batch = batch
-        self._counters: dict[str, int] = {
-            "received": 0, "filtered": 0, RuntimeDrop.QUEUE_OVERFLOW: 0, "sent": 0, "ticks": 0,
-            "node_errors": 0, "transport_errors": 0, "link_errors": 0, "sink_errors": 0,
-            "filter_errors": 0, "persist_errors": 0, "state_writes": 0, "duplicate_id": 0,
-        }
+        self._counters: dict[str, int] = dict.fromkeys(_COUNTERS, 0)
         self._raw_send_failed = False
         self.max_lateness = 0.0
         """s. Largest delay seen between a deadline and the tick that served it."""
         self.first_broadcast = asyncio.Event()
         """Set once the first frame (the first heartbeat) went out: READY (notify.py)."""
+        self._init_scheduling(queue_size)
+        self._init_reports()
+
+    def _init_scheduling(self, queue_size: int) -> None:
+        """The loop the runtime runs on, its receive queue and its timers."""
         self._queue: deque[bytes] = deque()
         self._queue_size = queue_size
         self._drain_scheduled = False
         self._timer: asyncio.TimerHandle | None = None
         self._armed_at: float | None = None
         self._watchdog: asyncio.TimerHandle | None = None
+        self._running = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    def _init_persistence(self, state_writer: StateWriter | None,
+                          persist_after: float) -> None:
+        """When and what state the runtime writes (swarmd/state.py)."""
+        self.state_writer = state_writer
+        self.persist_after = persist_after
+        """loop time before which node-driven state is not written: a restarted holder
+        keeps its persisted `held` until its rejoin hold is over, so a crash during the
+        hold does not forget it."""
         self._last_persisted: tuple[Any, ...] | None = None
         self.seq_write_at = 0
         """Reaching this sequence number forces a state write (the reservation in the
         state file must stay ahead of every seq sent; swarmd/state.py)."""
+
+    def _init_reports(self) -> None:
+        """What was last logged or notified, so a report is made once per change."""
         self._last_role: tuple[Role, str | None, int] | None = None
         self._last_health: Health | None = None
         self._reported: dict[str, float] = {}
@@ -161,8 +180,6 @@ class Runtime:
         # hash(frame) of the last SENT_MEMORY frames sent, oldest first (an ordered set).
         self._sent_digests: dict[int, None] = {}
         self._duplicate_logged_at = -DUPLICATE_REPORT_S
-        self._running = False
-        self._loop: asyncio.AbstractEventLoop | None = None
 
     # ---------------------------------------------------------------- lifecycle
     @property

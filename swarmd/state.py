@@ -129,44 +129,14 @@ def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -
             f"file is for robot {data.get('robot')!r} of swarm {data.get('swarm')!r}, "
             f"this daemon is robot {robot} of swarm {swarm}"
         )
-    known_raw = data.get("known", {})
-    if not isinstance(known_raw, dict):
-        raise ValueError("'known' is not an object")
-    known: dict[str, tuple[int, int]] = {}
-    for f, pair in known_raw.items():
-        if not isinstance(pair, list) or len(pair) != 2:
-            raise ValueError(f"known[{f!r}] is not [holder, epoch]")
-        known[f] = (_int(pair[0], f"known[{f!r}] holder"), _int(pair[1], f"known[{f!r}] epoch"))
-    held_raw = data.get("held")
-    held: tuple[str, int] | None = None
-    if held_raw is not None:
-        if (not isinstance(held_raw, list) or len(held_raw) != 2
-                or not isinstance(held_raw[0], str)):
-            raise ValueError("'held' is not [function, epoch] or null")
-        held = (held_raw[0], _int(held_raw[1], "held epoch"))
+    known = _known(data.get("known", {}))
+    held = _held(data.get("held"))
     seq = _int(data.get("seq_reserved", 0), "seq_reserved")
     if seq > SEQ_MAX - SEQ_RESERVE:
         # Every frame would be sent with a seq receivers already saw (a mute robot).
         raise ValueError(f"seq_reserved {seq} leaves no room below the 48-bit maximum")
-    peer_raw = data.get("peer_seq", {})
-    if not isinstance(peer_raw, dict):
-        raise ValueError("'peer_seq' is not an object")
-    peer_seq: dict[int, int] = {}
-    for r, q in peer_raw.items():
-        if not isinstance(r, str) or not r.isdigit() or len(r) > 5:
-            raise ValueError(f"peer_seq key {r!r} is not a robot id")
-        value = _int(q, f"peer_seq[{r}]")
-        if value > SEQ_MAX:
-            raise ValueError(f"peer_seq[{r}] {value} does not fit 48 bits")
-        peer_seq[int(r)] = value
-    cert_raw = data.get("certificate", [])
-    if not isinstance(cert_raw, list) or len(cert_raw) > 64:
-        raise ValueError("'certificate' is not a list of at most 64 frames")
-    certificate: list[bytes] = []
-    for c in cert_raw:
-        if not isinstance(c, str) or len(c) > 512:
-            raise ValueError("a certificate frame is not a hex string")
-        certificate.append(bytes.fromhex(c))
+    peer_seq = _peer_seq(data.get("peer_seq", {}))
+    certificate = _certificate(data.get("certificate", []))
     problems = restored_problems(known, held)
     if plan is not None:
         # A holder the swarm does not have: a foreign or corrupt file. (A function the
@@ -179,6 +149,55 @@ def parse(data: Any, *, robot: int, swarm: int, plan: SwarmPlan | None = None) -
         peer_seq = {r: q for r, q in peer_seq.items() if r in plan.robots}
     return PersistedState(robot=robot, swarm=swarm, known=known, held=held, seq_reserved=seq,
                           peer_seq=peer_seq, certificate=tuple(certificate))
+
+
+def _known(known_raw: Any) -> dict[str, tuple[int, int]]:
+    """`known`: function -> [holder, epoch]."""
+    if not isinstance(known_raw, dict):
+        raise ValueError("'known' is not an object")
+    known: dict[str, tuple[int, int]] = {}
+    for f, pair in known_raw.items():
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise ValueError(f"known[{f!r}] is not [holder, epoch]")
+        known[f] = (_int(pair[0], f"known[{f!r}] holder"), _int(pair[1], f"known[{f!r}] epoch"))
+    return known
+
+
+def _held(held_raw: Any) -> tuple[str, int] | None:
+    """`held`: [function, epoch], or null."""
+    if held_raw is None:
+        return None
+    if (not isinstance(held_raw, list) or len(held_raw) != 2
+            or not isinstance(held_raw[0], str)):
+        raise ValueError("'held' is not [function, epoch] or null")
+    return (held_raw[0], _int(held_raw[1], "held epoch"))
+
+
+def _peer_seq(peer_raw: Any) -> dict[int, int]:
+    """`peer_seq`: robot id -> the highest sequence number accepted from it."""
+    if not isinstance(peer_raw, dict):
+        raise ValueError("'peer_seq' is not an object")
+    peer_seq: dict[int, int] = {}
+    for r, q in peer_raw.items():
+        if not isinstance(r, str) or not r.isdigit() or len(r) > 5:
+            raise ValueError(f"peer_seq key {r!r} is not a robot id")
+        value = _int(q, f"peer_seq[{r}]")
+        if value > SEQ_MAX:
+            raise ValueError(f"peer_seq[{r}] {value} does not fit 48 bits")
+        peer_seq[int(r)] = value
+    return peer_seq
+
+
+def _certificate(cert_raw: Any) -> list[bytes]:
+    """`certificate`: the signed frames proving `held`, as hex strings."""
+    if not isinstance(cert_raw, list) or len(cert_raw) > 64:
+        raise ValueError("'certificate' is not a list of at most 64 frames")
+    certificate: list[bytes] = []
+    for c in cert_raw:
+        if not isinstance(c, str) or len(c) > 512:
+            raise ValueError("a certificate frame is not a hex string")
+        certificate.append(bytes.fromhex(c))
+    return certificate
 
 
 def load(path: Path, *, robot: int, swarm: int,

@@ -115,14 +115,7 @@ class SE3Controller:
         rotation (3x3), `omega` the body-frame angular velocity."""
         g = self.g
         m = self.p.mass
-        ex = pos - cmd.position
-        dist = math.sqrt(float(ex @ ex))
-        horiz_err = math.hypot(ex[0], ex[1])
-        if horiz_err > g.err_sat:
-            ex[0] *= g.err_sat / horiz_err
-            ex[1] *= g.err_sat / horiz_err
-        if abs(ex[2]) > g.err_sat_z:
-            ex[2] = math.copysign(g.err_sat_z, ex[2])
+        ex, dist = self._position_error(pos, cmd)
         ev = vel - cmd.velocity
         if dist < g.int_radius and float(ev @ ev) < g.int_speed**2:
             self.integral += self.ki * ex * dt
@@ -150,6 +143,20 @@ class SE3Controller:
         er = np.array((e[2, 1], e[0, 2], e[1, 0]))
         moments = -self.kr * er - self.kw * omega + _cross(omega, self.j * omega)
         return thrust, moments
+
+    def _position_error(self, pos: Array, cmd: Command) -> tuple[Array, float]:
+        """The position error, saturated horizontally and vertically, and the distance
+        to the setpoint before saturation."""
+        g = self.g
+        ex = pos - cmd.position
+        dist = math.sqrt(float(ex @ ex))
+        horiz_err = math.hypot(ex[0], ex[1])
+        if horiz_err > g.err_sat:
+            ex[0] *= g.err_sat / horiz_err
+            ex[1] *= g.err_sat / horiz_err
+        if abs(ex[2]) > g.err_sat_z:
+            ex[2] = math.copysign(g.err_sat_z, ex[2])
+        return ex, dist
 
     def update(
         self, pos: Array, vel: Array, rot: Array, omega: Array, cmd: Command, dt: float

@@ -145,19 +145,25 @@ def quad_body(
         + "/>"
     )
     for i, (x, y) in enumerate(rotors):
-        parts.append(
-            f'<geom name="{name}_arm{i}" type="capsule" fromto="0 0 0 {_v(x, y, 0)}" '
-            f'size="{_f(hz * 0.4)}" contype="0" conaffinity="0" rgba="0.25 0.25 0.25 1"/>'
-        )
-        parts.append(
-            f'<geom name="{name}_prop{i}" type="cylinder" pos="{_v(x, y, hz)}" '
-            f'size="{_v(radius, hz * 0.15)}" contype="0" conaffinity="0" '
-            f'rgba="0.1 0.1 0.1 0.5"/>'
-        )
-        if free:
-            parts.append(f'<site name="{name}_rotor{i}" pos="{_v(x, y, hz)}"/>')
+        parts += _rotor_parts(name, i, x, y, hz, radius, free=free)
     parts.append("</body>")
     return "\n".join(parts)
+
+
+def _rotor_parts(name: str, i: int, x: float, y: float, hz: float, radius: float, *,
+                 free: bool) -> list[str]:
+    """Rotor `i` at (x, y): its arm and propeller disc, and with physics the site its
+    thrust acts at."""
+    parts = [
+        f'<geom name="{name}_arm{i}" type="capsule" fromto="0 0 0 {_v(x, y, 0)}" '
+        f'size="{_f(hz * 0.4)}" contype="0" conaffinity="0" rgba="0.25 0.25 0.25 1"/>',
+        f'<geom name="{name}_prop{i}" type="cylinder" pos="{_v(x, y, hz)}" '
+        f'size="{_v(radius, hz * 0.15)}" contype="0" conaffinity="0" '
+        f'rgba="0.1 0.1 0.1 0.5"/>',
+    ]
+    if free:
+        parts.append(f'<site name="{name}_rotor{i}" pos="{_v(x, y, hz)}"/>')
+    return parts
 
 
 def rotor_actuators(p: Preset, name: str) -> str:

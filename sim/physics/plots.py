@@ -12,7 +12,7 @@ spans.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -70,42 +70,53 @@ def role_spans(
     )
     t_end = end if end is not None else max((float(e.get("t", 0.0)) for e in evs), default=0.0)
     fold = HolderFold(down=DOWN_FAULTS)
-    state: dict[int, tuple[float, str, str | None]] = {}
-    spans: dict[int, list[Span]] = {}
-
-    def close(rid: int, t: float) -> None:
-        if rid in state:
-            t0, role, fn = state.pop(rid)
-            if t > t0:
-                spans.setdefault(rid, []).append(Span(rid, t0, t, role, fn))
-
-    def enter(rid: int, t: float, role: str, fn: str | None) -> None:
-        prev = state.get(rid)
-        if prev is not None and prev[1] == role and prev[2] == fn:
-            return
-        close(rid, t)
-        state[rid] = (t, role, fn)
-
+    lanes = _Lanes()
     for e in evs:
         rid, t = int(e["robot"]), float(e.get("t", 0.0))
-        prev = state.get(rid)
+        prev = lanes.state.get(rid)
         if prev is not None and prev[1] == "fenced" and t > prev[0] + FENCE_SHOW:
-            enter(rid, prev[0] + FENCE_SHOW, "standby", None)
+            lanes.enter(rid, prev[0] + FENCE_SHOW, "standby", None)
         holding = fold.feed(e)
         if holding is None:
             continue
         if holding.role == "stopped":
-            close(rid, t)
+            lanes.close(rid, t)
         else:
-            enter(rid, t, holding.role, holding.function)
-    for rid, (t0, role, _fn) in list(state.items()):
-        stop = t_end
-        if role == "fenced":
-            stop = min(t_end, t0 + FENCE_SHOW)
-        close(rid, max(stop, t0))
-        if role == "fenced" and stop < t_end:
-            spans.setdefault(rid, []).append(Span(rid, stop, t_end, "standby", None))
-    return spans
+            lanes.enter(rid, t, holding.role, holding.function)
+    lanes.finish(t_end)
+    return lanes.spans
+
+
+@dataclass
+class _Lanes:
+    """`role_spans` under way: each robot's open span (since, role, function) and the
+    spans already closed."""
+
+    state: dict[int, tuple[float, str, str | None]] = field(default_factory=dict)
+    spans: dict[int, list[Span]] = field(default_factory=dict)
+
+    def close(self, rid: int, t: float) -> None:
+        if rid in self.state:
+            t0, role, fn = self.state.pop(rid)
+            if t > t0:
+                self.spans.setdefault(rid, []).append(Span(rid, t0, t, role, fn))
+
+    def enter(self, rid: int, t: float, role: str, fn: str | None) -> None:
+        prev = self.state.get(rid)
+        if prev is not None and prev[1] == role and prev[2] == fn:
+            return
+        self.close(rid, t)
+        self.state[rid] = (t, role, fn)
+
+    def finish(self, t_end: float) -> None:
+        """Close every open span at `t_end` (a fenced one after FENCE_SHOW)."""
+        for rid, (t0, role, _fn) in list(self.state.items()):
+            stop = t_end
+            if role == "fenced":
+                stop = min(t_end, t0 + FENCE_SHOW)
+            self.close(rid, max(stop, t0))
+            if role == "fenced" and stop < t_end:
+                self.spans.setdefault(rid, []).append(Span(rid, stop, t_end, "standby", None))
 
 
 def role_at(spans: Sequence[Span], t: float) -> Span | None:
@@ -154,9 +165,6 @@ def timeline_png(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.artist import Artist
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
 
     spans = role_spans(events, end)
     robots = sorted(
@@ -175,28 +183,43 @@ def timeline_png(
                 ax.text((s.start + s.end) / 2, row, s.function, ha="center", va="center",
                         color="white", fontsize=8, fontweight="bold")
     for e in events:
-        event = event_of(e)
-        if event is None or type(event) not in _MARKERS:
-            continue
-        marker, colour, which = _MARKERS[type(event)]
-        who = e.get("subject") if which == "subject" else e.get("robot")
-        if not isinstance(who, int) or who not in lane:
-            if isinstance(event, Fault):  # robot 0: a partition; draw it across the chart
-                ax.axvline(float(e.get("t", 0.0)), color=colour, linestyle=":", linewidth=1)
-            continue
-        t = float(e.get("t", 0.0))
-        y = lane[who] + 0.38  # just below the bar (the y axis is inverted)
-        if marker == "!":
-            ax.text(t, y, "!", color=colour, fontsize=12, fontweight="bold", ha="center")
-        else:
-            ax.plot([t], [y], marker=marker, color=colour, markersize=8 if marker == "*" else 6,
-                    linestyle="none")
-        match event:
-            case Fault(kind=kind):
-                ax.text(t, y + 0.15, str(kind), fontsize=7, color=colour, ha="left")
-            case Takeover(function=function, epoch=epoch):
-                ax.text(t, y + 0.15, f"{function} e{epoch}", fontsize=7, color=colour,
-                        ha="left")
+        _draw_marker(ax, e, lane)
+    _timeline_axes(ax, robots, t_end)
+    return _save(fig, ax, title or "roles and functions over time", path)
+
+
+def _draw_marker(ax: Axes, e: Mapping[str, Any], lane: Mapping[int, int]) -> None:
+    """The event's marker on its robot's lane (`_MARKERS`), if it has one."""
+    event = event_of(e)
+    if event is None or type(event) not in _MARKERS:
+        return
+    marker, colour, which = _MARKERS[type(event)]
+    who = e.get("subject") if which == "subject" else e.get("robot")
+    if not isinstance(who, int) or who not in lane:
+        if isinstance(event, Fault):  # robot 0: a partition; draw it across the chart
+            ax.axvline(float(e.get("t", 0.0)), color=colour, linestyle=":", linewidth=1)
+        return
+    t = float(e.get("t", 0.0))
+    y = lane[who] + 0.38  # just below the bar (the y axis is inverted)
+    if marker == "!":
+        ax.text(t, y, "!", color=colour, fontsize=12, fontweight="bold", ha="center")
+    else:
+        ax.plot([t], [y], marker=marker, color=colour, markersize=8 if marker == "*" else 6,
+                linestyle="none")
+    match event:
+        case Fault(kind=kind):
+            ax.text(t, y + 0.15, str(kind), fontsize=7, color=colour, ha="left")
+        case Takeover(function=function, epoch=epoch):
+            ax.text(t, y + 0.15, f"{function} e{epoch}", fontsize=7, color=colour,
+                    ha="left")
+
+
+def _timeline_axes(ax: Axes, robots: Sequence[int], t_end: float) -> None:
+    """The timeline's lanes, time axis and legend of roles and markers."""
+    from matplotlib.artist import Artist
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     ax.set_yticks(range(len(robots)), [f"robot {r}" for r in robots])
     ax.set_ylim(-0.6, len(robots) - 0.2)
     ax.invert_yaxis()
@@ -211,7 +234,6 @@ def timeline_png(
     below = -0.18 - 0.3 / max(1, len(robots))
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, below),
               ncol=len(handles), fontsize=8, frameon=False)
-    return _save(fig, ax, title or "roles and functions over time", path)
 
 
 def trajectory_png(
@@ -227,23 +249,11 @@ def trajectory_png(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Circle
 
     fig, ax = plt.subplots(figsize=(8, 8), dpi=100)
     cmap = plt.get_cmap("tab10")
     for name, spec in (functions or {}).items():
-        kind = spec.get("kind", "slot")
-        if kind == "slot" and "position" in spec:
-            x, y = float(spec["position"][0]), float(spec["position"][1])
-            ax.add_patch(Circle((x, y), 0.25, fill=False, color="#555555", linewidth=1.5))
-            ax.text(x + 0.3, y + 0.3, name, fontsize=10, color="#333333")
-        elif kind == "patrol" and spec.get("waypoints"):
-            wps = [(float(w[0]), float(w[1])) for w in spec["waypoints"]]
-            xs = [w[0] for w in wps] + [wps[0][0]]
-            ys = [w[1] for w in wps] + [wps[0][1]]
-            ax.plot(xs, ys, linestyle="--", color="#555555", linewidth=1.2)
-            for i, (x, y) in enumerate(wps):
-                ax.text(x, y, f" {name}:{i}", fontsize=8, color="#333333")
+        _draw_function(ax, name, spec)
     for i, tr in enumerate(sorted(trajectories, key=lambda tr: tr.robot)):
         c = cmap(i % 10)
         ax.plot(tr.pos[:, 0], tr.pos[:, 1], color=c, linewidth=1.2, label=f"robot {tr.robot}")
@@ -259,3 +269,21 @@ def trajectory_png(
         ax.legend(loc="best", fontsize=8)
     return _save(fig, ax, title or "top-down trajectories (square: home, dot: end, X: crashed)",
                  path)
+
+
+def _draw_function(ax: Axes, name: str, spec: Mapping[str, Any]) -> None:
+    """A slot as a circle, a patrol loop as a dashed polygon, each named."""
+    from matplotlib.patches import Circle
+
+    kind = spec.get("kind", "slot")
+    if kind == "slot" and "position" in spec:
+        x, y = float(spec["position"][0]), float(spec["position"][1])
+        ax.add_patch(Circle((x, y), 0.25, fill=False, color="#555555", linewidth=1.5))
+        ax.text(x + 0.3, y + 0.3, name, fontsize=10, color="#333333")
+    elif kind == "patrol" and spec.get("waypoints"):
+        wps = [(float(w[0]), float(w[1])) for w in spec["waypoints"]]
+        xs = [w[0] for w in wps] + [wps[0][0]]
+        ys = [w[1] for w in wps] + [wps[0][1]]
+        ax.plot(xs, ys, linestyle="--", color="#555555", linewidth=1.2)
+        for i, (x, y) in enumerate(wps):
+            ax.text(x, y, f" {name}:{i}", fontsize=8, color="#333333")

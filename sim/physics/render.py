@@ -127,24 +127,31 @@ def render_swarm(
     out_dir.mkdir(parents=True, exist_ok=True)
     t_lo = start if start is not None else min(float(tr.t[0]) for tr in trajectories)
     t_hi = end if end is not None else max(float(tr.t[-1]) for tr in trajectories)
+    job = {
+        "robots": [tr.robot for tr in trajectories],
+        "events": [dict(e) for e in events],
+        "out_dir": str(out_dir),
+        "fps": fps,
+        "speed": speed,
+        "start": t_lo,
+        "end": t_hi,
+        "keyframes": keyframes,
+        "fmt": fmt,
+        "preset": preset_name,
+    }
+    return _render_in_child(job, trajectories, backend, timeout)
+
+
+def _render_in_child(job: dict[str, Any], trajectories: Sequence[Trajectory], backend: str,
+                     timeout: float) -> RenderResult:
+    """Run the render child on `job` and the trajectories (written to a temporary
+    directory for it): what it rendered, or why not."""
     with tempfile.TemporaryDirectory(prefix="swarmd-render-") as tmp:
         arrays: dict[str, Any] = {}
         for i, tr in enumerate(trajectories):
             arrays[f"t{i}"], arrays[f"p{i}"], arrays[f"q{i}"] = tr.t, tr.pos, tr.quat
         np.savez(Path(tmp) / "traj.npz", **arrays)
-        job = {
-            "robots": [tr.robot for tr in trajectories],
-            "events": [dict(e) for e in events],
-            "out_dir": str(out_dir),
-            "fps": fps,
-            "speed": speed,
-            "start": t_lo,
-            "end": t_hi,
-            "keyframes": keyframes,
-            "fmt": fmt,
-            "preset": preset_name,
-            "traj": str(Path(tmp) / "traj.npz"),
-        }
+        job = {**job, "traj": str(Path(tmp) / "traj.npz")}
         job_path = Path(tmp) / "job.json"
         job_path.write_text(json.dumps(job))
         try:
@@ -154,6 +161,11 @@ def render_swarm(
             )
         except subprocess.TimeoutExpired:
             return RenderResult(backend=backend, error=f"render took over {timeout:.0f} s")
+    return _result_of(proc, backend)
+
+
+def _result_of(proc: subprocess.CompletedProcess[str], backend: str) -> RenderResult:
+    """What the render child reported: its video and key frames, or why it failed."""
     if proc.returncode != 0:
         tail = " | ".join(proc.stderr.strip().splitlines()[-3:])
         return RenderResult(backend=backend, error=f"render child failed: {tail}")
@@ -205,17 +217,11 @@ def report_pictures(
     loads `swarm.mp4` (or `.gif`) and `key-*.png`. Returns what was written, and why
     not (`"video_error"`); never raises for a robot's broken trajectory file."""
     from sim.physics.plots import trajectory_png
-    from sim.physics.robot import load_trajectory
 
     paths = trajectory_files(report_dir)
     origin = t0 if t0 is not None else run_origin(paths)
-    trajs = []
     out: dict[str, Any] = {"trajectories": len(paths)}
-    for path in paths:
-        try:
-            trajs.append(load_trajectory(path, t0=origin))
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            out.setdefault("skipped", []).append(f"{path.name}: {exc}")
+    trajs = _load_trajectories(paths, origin, out)
     if not trajs:
         out["video_error"] = ("no trajectory files under realtime/state/ (a run without "
                               "physics, or one stopped before the robots flew)")
@@ -230,6 +236,20 @@ def report_pictures(
         if res.error:
             out["video_error"] = res.error
     return out
+
+
+def _load_trajectories(paths: Sequence[Path], origin: float | None,
+                       out: dict[str, Any]) -> list[Trajectory]:
+    """The trajectories that load; each that does not is listed in `out["skipped"]`."""
+    from sim.physics.robot import load_trajectory
+
+    trajs = []
+    for path in paths:
+        try:
+            trajs.append(load_trajectory(path, t0=origin))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            out.setdefault("skipped", []).append(f"{path.name}: {exc}")
+    return trajs
 
 
 FALL_STEP = 0.05

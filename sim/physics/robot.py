@@ -276,22 +276,8 @@ class QuadRobot:
         d = self.data
         pos = self.position
         z_home = self.home[2]
-        # Battery: drain in proportion to thrust, 1.0 = hover (per control period).
-        thrust = float(np.sum(d.actuator_force))
-        self.battery = max(
-            0.0,
-            self.battery
-            - thrust / (self.preset.mass * GRAVITY) * CONTROL_DT / self.battery_s,
-        )
-        # A craft with a motor out is falling whatever it was told (the daemon releases
-        # it after LEAVE, rule 7): touching the ground then is a crash, never a landing.
-        falling = bool(self.failed_motors) and self.mode is not Mode.PARKED
-        if self.mode in (Mode.TAKEOFF, Mode.FLYING) or falling:
-            if pos[2] > z_home + ARM_HEIGHT:
-                self.armed = True
-            if (self.armed or falling) and self._on_ground():
-                self.mode = Mode.CRASHED
-                self.crashed_at = self.t
+        self._drain_battery()
+        self._check_crash(pos)
         if self.mode in (Mode.PARKED, Mode.CRASHED):
             d.ctrl[:] = 0.0
             return
@@ -317,6 +303,27 @@ class QuadRobot:
         d.ctrl[:] = self.controller.update(
             d.qpos[0:3].copy(), d.qvel[0:3].copy(), rot, d.qvel[3:6].copy(), cmd, CONTROL_DT
         )
+
+    def _drain_battery(self) -> None:
+        # Battery: drain in proportion to thrust, 1.0 = hover (per control period).
+        thrust = float(np.sum(self.data.actuator_force))
+        self.battery = max(
+            0.0,
+            self.battery
+            - thrust / (self.preset.mass * GRAVITY) * CONTROL_DT / self.battery_s,
+        )
+
+    def _check_crash(self, pos: Vec3) -> None:
+        """Arm once above ARM_HEIGHT; an armed or falling craft on the ground crashed."""
+        # A craft with a motor out is falling whatever it was told (the daemon releases
+        # it after LEAVE, rule 7): touching the ground then is a crash, never a landing.
+        falling = bool(self.failed_motors) and self.mode is not Mode.PARKED
+        if self.mode in (Mode.TAKEOFF, Mode.FLYING) or falling:
+            if pos[2] > self.home[2] + ARM_HEIGHT:
+                self.armed = True
+            if (self.armed or falling) and self._on_ground():
+                self.mode = Mode.CRASHED
+                self.crashed_at = self.t
 
     def _landing_setpoint(self, pos: Vec3) -> tuple[Vec3, Vec3]:
         hx, hy, hz = self.home

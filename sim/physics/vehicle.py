@@ -17,6 +17,19 @@ from swarmd.link.mavlink_modes import Flavour
 HOST = "127.0.0.1"
 
 
+def _stop_on_signals(loop: asyncio.AbstractEventLoop,
+                     stop: asyncio.Event) -> list[signal.Signals]:
+    """SIGINT and SIGTERM set `stop` where the loop can handle them: the ones handled."""
+    handled: list[signal.Signals] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, stop.set)
+            handled.append(sig)
+        except (NotImplementedError, RuntimeError):  # not the main thread: `stop` only
+            pass
+    return handled
+
+
 async def run_vehicle(flavour: Flavour, port: int, sysid: int, *, physics: bool = True,
                       gcs_port: int = 0, say: Callable[[str], None] = print,
                       stop: asyncio.Event | None = None) -> None:
@@ -33,13 +46,7 @@ async def run_vehicle(flavour: Flavour, port: int, sysid: int, *, physics: bool 
     peers = [(HOST, gcs_port)] if gcs_port else []
     stop = stop or asyncio.Event()
     loop = asyncio.get_running_loop()
-    handled: list[signal.Signals] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        try:
-            loop.add_signal_handler(sig, stop.set)
-            handled.append(sig)
-        except (NotImplementedError, RuntimeError):  # not the main thread: `stop` only
-            pass
+    handled = _stop_on_signals(loop, stop)
     try:
         ap = await start_autopilot(craft, flavour, port, sysid=sysid, host=HOST, peers=peers)
     except OSError:

@@ -192,13 +192,7 @@ class Orchestrator:
         made is undone by `cleanup`, also after a failure half-way."""
         if self._run_dir is not None:
             return
-        if self._port:
-            self.port = self._port
-        else:
-            # The run's own multicast port, held until `cleanup` so that no other run on
-            # this machine is handed it while these robots use it (sim/realtime/ports.py).
-            self.port_lease = PortLease(self.group)
-            self.port = self.port_lease.port
+        self._pick_port()
         self.robots = robot_ids(self.swarm_path)
         self.ready_timeout = READY_TIMEOUT + READY_PER_ROBOT * len(self.robots)
         self.view = SwarmView(self.robots)
@@ -221,15 +215,28 @@ class Orchestrator:
             from sim.realtime.ros2_robot import DomainLease
 
             self.ros_domain = DomainLease()
+        if self.transport in ("xbee", "serial"):
+            self._start_radios(self._run_dir)
+
+    def _pick_port(self) -> None:
+        """The given multicast port, or a leased one."""
+        if self._port:
+            self.port = self._port
+        else:
+            # The run's own multicast port, held until `cleanup` so that no other run on
+            # this machine is handed it while these robots use it (sim/realtime/ports.py).
+            self.port_lease = PortLease(self.group)
+            self.port = self.port_lease.port
+
+    def _start_radios(self, run_dir: Path) -> None:
         # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
         # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
         # same radios in transparent mode, AP=0, under the serial transport).
-        if self.transport in ("xbee", "serial"):
-            from sim.xbee_emu.medium import Medium
+        from sim.xbee_emu.medium import Medium
 
-            self.medium = Medium(len(self.robots), protocol="802.15.4",
-                                 directory=self._run_dir / "radios", seed=self.seed,
-                                 transparent=self.transport == "serial").start()
+        self.medium = Medium(len(self.robots), protocol="802.15.4",
+                             directory=run_dir / "radios", seed=self.seed,
+                             transparent=self.transport == "serial").start()
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, robot: int, t0: float | None) -> RobotProcess:

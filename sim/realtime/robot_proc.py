@@ -459,31 +459,16 @@ class _Robot:
         assert self.t0 is not None
         # All robots start together at t0 (a wall-clock time the orchestrator picked).
         await asyncio.sleep(max(0.0, self.t0 - time.time()))
-
-        def sink(record: Mapping[str, Any]) -> None:
-            self.emit(Logged(dict(record)))
-
-        def ready(daemon: Daemon) -> None:
-            self.liar.runtime = daemon.runtime
-            self.forger.daemon = daemon
-            self.drops.daemon = daemon
-
-        def hear(data: bytes, now: float) -> bool:
-            if not self.filter(data, now):
-                return False
-            self.forger.hear(data)  # the insider's radio records what this robot hears
-            return True
-
         self.probe.start()
         self.drops.start()
         try:
             return await run_daemon(
                 self.cfg,
                 link=self.link,
-                receive_filter=hear,
-                event_sink=sink,
+                receive_filter=self._hear,
+                event_sink=self._sink,
                 stop_event=self.stop_event,
-                on_ready=ready,
+                on_ready=self._ready,
                 time_origin=self.t0,
                 handle_signals=self.control is None,
                 config_path=Path(self.spec.config_path),
@@ -493,6 +478,20 @@ class _Robot:
             self.forger.stop()
             self.probe.stop()
             self.drops.stop()
+
+    def _sink(self, record: Mapping[str, Any]) -> None:
+        self.emit(Logged(dict(record)))
+
+    def _ready(self, daemon: Daemon) -> None:
+        self.liar.runtime = daemon.runtime
+        self.forger.daemon = daemon
+        self.drops.daemon = daemon
+
+    def _hear(self, data: bytes, now: float) -> bool:
+        if not self.filter(data, now):
+            return False
+        self.forger.hear(data)  # the insider's radio records what this robot hears
+        return True
 
 
 def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None:

@@ -239,6 +239,10 @@ def markdown_table() -> str:
     return "\n".join(["| SPEC | what it does |", "|---|---|", *rows, "", _SEVERAL])
 
 
+_Bad = Callable[[str], FaultSpecError]
+"""Builds the error for one SPEC: `bad(what)` names what is wrong and the form."""
+
+
 def parse_fault(spec: str) -> Fault:
     """Parse one SPEC. Raises FaultSpecError naming what is wrong and the expected form.
 
@@ -248,14 +252,7 @@ def parse_fault(spec: str) -> Fault:
     text = spec.strip()
     shown = _clip(spec)
     head, colon, rest = text.partition(":")
-    word = head.strip()
-    if word not in KINDS:
-        close = difflib.get_close_matches(word.lower()[:40], KINDS, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise FaultSpecError(
-            f"fault {shown}: unknown kind {_clip(word)}{hint}; kinds: {', '.join(KINDS)}"
-        )
-    kind = FaultKind(word)
+    kind = _kind_of(head.strip(), shown)
     form = _FORMS[kind]
 
     def bad(what: str) -> FaultSpecError:
@@ -266,6 +263,34 @@ def parse_fault(spec: str) -> Fault:
     who, at_sign, when = rest.partition("@")
     if not at_sign:
         raise bad("no '@T' (the time the fault starts)")
+    when, attack = _split_attack(kind, when, bad)
+    senders: tuple[int, ...] = ()
+    if kind is FaultKind.DEAF:
+        target, colon3, heard = who.partition(":")
+        if not colon3:
+            raise bad("no ':S' (the robot(s) it does not hear)")
+        who = target
+        senders = tuple(_robot(r, bad) for r in heard.split(","))
+    at, dur = _times(kind, when, bad)
+    if kind is FaultKind.PARTITION:
+        return _partition(who, at, dur, bad)
+    return _targeted(kind, who, at, dur, senders, attack, bad)
+
+
+def _kind_of(word: str, shown: str) -> FaultKind:
+    """The kind a SPEC starts with, or an error suggesting the closest one."""
+    if word not in KINDS:
+        close = difflib.get_close_matches(word.lower()[:40], KINDS, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise FaultSpecError(
+            f"fault {shown}: unknown kind {_clip(word)}{hint}; kinds: {', '.join(KINDS)}"
+        )
+    return FaultKind(word)
+
+
+def _split_attack(kind: FaultKind, when: str, bad: _Bad) -> tuple[str, str]:
+    """The part after '@' without a forge's `:ATTACK`, and that attack ("" for the
+    other kinds, which take no ':' after their time)."""
     attack = ""
     if kind is FaultKind.FORGE:
         when, colon2, attack = when.partition(":")
@@ -274,13 +299,11 @@ def parse_fault(spec: str) -> Fault:
             raise bad(f"unknown or missing attack {attack!r}")
     elif ":" in when:
         raise bad(f"a {kind} takes no ':' after its time")
-    senders: tuple[int, ...] = ()
-    if kind is FaultKind.DEAF:
-        target, colon3, heard = who.partition(":")
-        if not colon3:
-            raise bad("no ':S' (the robot(s) it does not hear)")
-        who = target
-        senders = tuple(_robot(r, bad) for r in heard.split(","))
+    return when, attack
+
+
+def _times(kind: FaultKind, when: str, bad: _Bad) -> tuple[float, float | None]:
+    """`T` or `T+D`: the start and the duration, which only the kinds that last have."""
     at_text, plus, dur_text = when.partition("+")
     at = _seconds(at_text, "time T", bad)
     dur = _seconds(dur_text, "duration D", bad) if plus else None
@@ -290,22 +313,31 @@ def parse_fault(spec: str) -> Fault:
         raise bad(f"duration D must be positive, got {dur_text.strip()!r}")
     if kind not in _DURATION_KINDS and dur is not None:
         raise bad(f"a {kind} takes no duration '+{dur_text.strip()}'")
-    if kind is not FaultKind.PARTITION:
-        if "|" in who:
-            raise bad(f"a {kind} has no groups, got {who.strip()!r}")
-        robots = tuple(_robot(r, bad) for r in who.split(","))
-        twice = sorted({r for r in robots if robots.count(r) > 1})
-        if twice:
-            raise bad(f"robot {twice[0]} is named twice")
-        if kind is FaultKind.COLLIDE and len(robots) < 2:
-            raise bad(f"a collision needs two or more robots, got {who.strip()!r}")
-        if kind is FaultKind.DEAF:
-            if len(robots) != 1:
-                raise bad("a deaf fault names one robot that does not hear")
-            if robots[0] in senders or len(set(senders)) != len(senders):
-                raise bad("a robot hears itself; name each sender once")
-            return Fault(kind, at, robots, dur, (senders,))
-        return Fault(kind, at, robots, dur, attack=attack)
+    return at, dur
+
+
+def _targeted(kind: FaultKind, who: str, at: float, dur: float | None,
+              senders: tuple[int, ...], attack: str, bad: _Bad) -> Fault:
+    """A fault on one robot or several (every kind but partition)."""
+    if "|" in who:
+        raise bad(f"a {kind} has no groups, got {who.strip()!r}")
+    robots = tuple(_robot(r, bad) for r in who.split(","))
+    twice = sorted({r for r in robots if robots.count(r) > 1})
+    if twice:
+        raise bad(f"robot {twice[0]} is named twice")
+    if kind is FaultKind.COLLIDE and len(robots) < 2:
+        raise bad(f"a collision needs two or more robots, got {who.strip()!r}")
+    if kind is FaultKind.DEAF:
+        if len(robots) != 1:
+            raise bad("a deaf fault names one robot that does not hear")
+        if robots[0] in senders or len(set(senders)) != len(senders):
+            raise bad("a robot hears itself; name each sender once")
+        return Fault(kind, at, robots, dur, (senders,))
+    return Fault(kind, at, robots, dur, attack=attack)
+
+
+def _partition(who: str, at: float, dur: float | None, bad: _Bad) -> Fault:
+    """A partition: two or more groups split by '|', or two by '>' (one way)."""
     oneway = ">" in who
     if oneway and "|" in who:
         raise bad("a partition is two-way ('|') or one-way ('>'), not both")
@@ -319,7 +351,7 @@ def parse_fault(spec: str) -> Fault:
     twice = sorted({r for r in named if named.count(r) > 1})
     if twice:
         raise bad(f"robot {twice[0]} is named twice")
-    return Fault(kind, at, tuple(named), dur, groups, oneway=oneway)
+    return Fault(FaultKind.PARTITION, at, tuple(named), dur, groups, oneway=oneway)
 
 
 _MAX_NUMBER_CHARS = 32

@@ -22,6 +22,7 @@ hears them too (the insider is another radio with R's key).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 from swarmd.core import wire
 from swarmd.core.auth import Signer
@@ -35,6 +36,30 @@ CAPTURE = 512
 """How many of the last frames on the channel a `replay` insider keeps."""
 
 
+@dataclass
+class _Insider:
+    """The frames insider `snap.robot_id` has forged so far, and what it forges them
+    with (`forged_frames`)."""
+
+    plan: SwarmPlan
+    snap: Snapshot
+    seqs: Mapping[int, int]
+    key: bytes | None
+    signer: Signer | None
+    out: list[bytes] = field(default_factory=list)
+
+    def frame(self, sender: int, msg: wire.Message, seq: int | None = None) -> None:
+        if seq is None:  # a little ahead of the last one heard, so it is not a replay
+            seq = min(self.seqs.get(sender, self.snap.seq) + 8 + len(self.out), wire.SEQ_MAX)
+        if self.signer is not None and isinstance(msg, wire.Heartbeat):
+            # Per-robot mode: R's key signs a heartbeat of its own as an anchor, on a
+            # chain of its own making (it cannot make another robot's links).
+            msg = wire.Heartbeat(msg.function, msg.epoch, msg.role, msg.health, 0,
+                                 bytes(LINK_LEN), anchor=True)
+        self.out.append(wire.encode(wire.Frame(self.plan.swarm_id, sender, seq, msg),
+                                    self.key, self.signer))
+
+
 def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequence[bytes],
                   signer: Signer | None, round_: int,
                   sniffed: Mapping[int, int] | None = None,
@@ -46,47 +71,56 @@ def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequenc
     seqs = sniffed if sniffed is not None else snap.peer_seq
     me = snap.robot_id
     key = keys[0] if keys else None
-    out: list[bytes] = []
-
-    def frame(sender: int, msg: wire.Message, seq: int | None = None) -> None:
-        if seq is None:  # a little ahead of the last one heard, so it is not a replay
-            seq = min(seqs.get(sender, snap.seq) + 8 + len(out), wire.SEQ_MAX)
-        if signer is not None and isinstance(msg, wire.Heartbeat):
-            # Per-robot mode: R's key signs a heartbeat of its own as an anchor, on a
-            # chain of its own making (it cannot make another robot's links).
-            msg = wire.Heartbeat(msg.function, msg.epoch, msg.role, msg.health, 0,
-                                 bytes(LINK_LEN), anchor=True)
-        out.append(wire.encode(wire.Frame(plan.swarm_id, sender, seq, msg), key, signer))
-
+    insider = _Insider(plan, snap, seqs, key, signer)
     held = {f for f, (holder, _) in snap.known.items() if holder == me}
     match attack:
         case "epoch":
             for f in plan.functions:
                 if f not in held:
-                    frame(me, wire.Heartbeat(plan.slot(f), 0xFFFF, 1, 0), snap.seq + 1)
+                    insider.frame(me, wire.Heartbeat(plan.slot(f), 0xFFFF, 1, 0), snap.seq + 1)
         case "seq":
-            mine = snap.function
-            slot = plan.slot(mine) if mine is not None else 0
-            frame(me, wire.Heartbeat(slot, snap.epoch if slot else 0, int(snap.role), 0),
-                  wire.SEQ_MAX - 1)
-            some = plan.functions[0]
-            holder, epoch = snap.known[some]
-            frame(me, wire.Warn(holder, plan.slot(some), max(0, epoch - 1)), wire.SEQ_MAX)
+            _seq_probe(insider)
         case "claim":
-            for f in plan.functions:
-                if f not in held:
-                    holder, epoch = snap.known[f]
-                    frame(me, wire.Claim(holder, plan.slot(f), min(0xFFFF, epoch + 1 + round_)),
-                          snap.seq + 1 + round_ * len(plan.functions) + len(out))
+            _claims(insider, held, round_)
         case "warn":
-            for f in plan.functions:
-                holder, epoch = snap.known[f]
-                for g in plan.watched_by(f):
-                    witness = snap.known[g][0]
-                    if witness not in (me, holder, 0):
-                        frame(witness, wire.Warn(holder, plan.slot(f), epoch))
+            _warns(insider)
         case "replay":
-            out.extend(recorded[-CAPTURE:])
+            insider.out.extend(recorded[-CAPTURE:])
         case _:
             raise ValueError(f"unknown attack {attack!r}")
-    return out
+    return insider.out
+
+
+def _seq_probe(insider: _Insider) -> None:
+    """`seq`: a heartbeat and a warning as R at the highest sequence numbers."""
+    plan, snap = insider.plan, insider.snap
+    me = snap.robot_id
+    mine = snap.function
+    slot = plan.slot(mine) if mine is not None else 0
+    insider.frame(me, wire.Heartbeat(slot, snap.epoch if slot else 0, int(snap.role), 0),
+                  wire.SEQ_MAX - 1)
+    some = plan.functions[0]
+    holder, epoch = snap.known[some]
+    insider.frame(me, wire.Warn(holder, plan.slot(some), max(0, epoch - 1)), wire.SEQ_MAX)
+
+
+def _claims(insider: _Insider, held: set[str], round_: int) -> None:
+    """`claim`: a claim as R for every slot it does not hold, a new epoch each round."""
+    plan, snap = insider.plan, insider.snap
+    for f in plan.functions:
+        if f not in held:
+            holder, epoch = snap.known[f]
+            insider.frame(snap.robot_id,
+                          wire.Claim(holder, plan.slot(f), min(0xFFFF, epoch + 1 + round_)),
+                          snap.seq + 1 + round_ * len(plan.functions) + len(insider.out))
+
+
+def _warns(insider: _Insider) -> None:
+    """`warn`: warnings in every other witness's name about each slot's holder."""
+    plan, snap = insider.plan, insider.snap
+    for f in plan.functions:
+        holder, epoch = snap.known[f]
+        for g in plan.watched_by(f):
+            witness = snap.known[g][0]
+            if witness not in (snap.robot_id, holder, 0):
+                insider.frame(witness, wire.Warn(holder, plan.slot(f), epoch))

@@ -277,20 +277,9 @@ class Checker:
         t, r, name = float(rec["t"]), int(rec["robot"]), name_of(rec)
         self.holding.feed(rec)
         if name == "fenced":
-            f, epoch = rec["function"], int(rec["epoch"])
-            if epoch and (f, epoch) not in self.epochs:
-                self.violations.append(Violation(
-                    t, "fenced_without_takeover", r,
-                    f"robot {r} fenced on {f} at epoch {epoch}, which no takeover produced: "
-                    f"a forged epoch; {f} is orphaned"))
+            self._fenced(t, r, rec)
         if name == "takeover":
-            f = rec["function"]
-            self.epochs.add((f, int(rec["epoch"])))
-            for key in [k for k in self.episodes if k[1] == f]:
-                del self.episodes[key]  # the warning ended in a takeover
-            self.held_since[(f, r)] = t
-            self.replaced_at[(f, int(rec.get("replaced", 0)))] = t
-            self._takeover(t, r, f, int(rec.get("replaced", 0)))
+            self._on_takeover(t, r, rec)
         elif name == "started":
             self.started.add(r)
             self.started_at.setdefault(r, []).append(t)
@@ -302,25 +291,51 @@ class Checker:
         elif name in ("fenced", "leave", "stopped"):
             self._close_watcher(r)
         elif name == "warn":
-            key = (r, rec["function"])
-            about = (str(rec["function"]), int(rec["subject"]))
-            if self.replaced_at.get(about, -1.0) > self.held_since.get(about, -1.0):
-                # About a holder already replaced: this watcher had not heard the takeover
-                # yet (a partition, loss); the takeover it missed resolves the warning.
-                pass
-            elif key not in self.episodes:
-                self.episodes[key] = (t, int(rec["subject"]))
+            self._on_warn(t, r, rec)
         elif name in ("refute", "alert"):
-            f = rec.get("function")
-            if f is not None:
-                self.episodes.pop((r, f), None)
-                if name == "refute":
-                    subject = rec.get("subject")
-                    if subject == r:  # the suspect itself answered: its watchers' too
-                        for key in [k for k, v in self.episodes.items()
-                                    if k[1] == f and v[1] == r]:
-                            self.episodes.pop(key, None)
+            self._on_answer(r, name, rec)
         self._dual_update(t)
+
+    def _fenced(self, t: float, r: int, rec: dict[str, Any]) -> None:
+        """A robot fenced on an epoch no takeover produced: a forged epoch."""
+        f, epoch = rec["function"], int(rec["epoch"])
+        if epoch and (f, epoch) not in self.epochs:
+            self.violations.append(Violation(
+                t, "fenced_without_takeover", r,
+                f"robot {r} fenced on {f} at epoch {epoch}, which no takeover produced: "
+                f"a forged epoch; {f} is orphaned"))
+
+    def _on_takeover(self, t: float, r: int, rec: dict[str, Any]) -> None:
+        f = rec["function"]
+        self.epochs.add((f, int(rec["epoch"])))
+        for key in [k for k in self.episodes if k[1] == f]:
+            del self.episodes[key]  # the warning ended in a takeover
+        self.held_since[(f, r)] = t
+        self.replaced_at[(f, int(rec.get("replaced", 0)))] = t
+        self._takeover(t, r, f, int(rec.get("replaced", 0)))
+
+    def _on_warn(self, t: float, r: int, rec: dict[str, Any]) -> None:
+        """A warning opens an episode, unless one is open or its subject is replaced."""
+        key = (r, rec["function"])
+        about = (str(rec["function"]), int(rec["subject"]))
+        if self.replaced_at.get(about, -1.0) > self.held_since.get(about, -1.0):
+            # About a holder already replaced: this watcher had not heard the takeover
+            # yet (a partition, loss); the takeover it missed resolves the warning.
+            pass
+        elif key not in self.episodes:
+            self.episodes[key] = (t, int(rec["subject"]))
+
+    def _on_answer(self, r: int, name: str, rec: dict[str, Any]) -> None:
+        """A refute or an alert closes the robot's warning episode on its function."""
+        f = rec.get("function")
+        if f is not None:
+            self.episodes.pop((r, f), None)
+            if name == "refute":
+                subject = rec.get("subject")
+                if subject == r:  # the suspect itself answered: its watchers' too
+                    for key in [k for k, v in self.episodes.items()
+                                if k[1] == f and v[1] == r]:
+                        self.episodes.pop(key, None)
 
     def outage(self, sender: int, receiver: int, start: float, heal: float) -> None:
         """The channel lost every frame from `sender` to `receiver` in [start, heal)."""
@@ -426,29 +441,9 @@ class Checker:
         hood = {*self.plan.covered_by(e.function), *e.standbys, *e.watchers}
         mates = [x for x in self.failures if x.robot != e.robot
                  and (x.robot in hood or x.function in near)]
-        deadline = e.t + bound
-        moved = True
-        while moved:  # each failure in the neighbourhood restarts the clock
-            moved = False
-            for x in mates:
-                if e.t < x.start <= deadline < x.start + bound:
-                    deadline, moved = x.start + bound, True
-        # A covering standby that (re)started shortly before the failure still waits out
-        # its start-up grace (DESIGN rule 5) before it may count silence: give it that.
-        grace = self.params.startup_grace
-        for r in e.standbys:
-            before = [s for s in self.started_at.get(r, ()) if s <= e.t]
-            if before and before[-1] > 0.5 and e.t - before[-1] < grace:
-                deadline = max(deadline, before[-1] + grace + bound)
-        if e.done is not None and e.done <= deadline:
+        deadline = self._expect_deadline(e, mates)
+        if self._excused(e, deadline, duration):
             return None
-        if duration < deadline:
-            return None  # the run ended too soon to tell
-        if any(s <= deadline and h >= e.t for s, h in self.partitions):
-            return None  # a partition is another kind of trouble (invariant 2)
-        if any(fl.kind is FaultKind.RESTART and e.robot in fl.robots and e.t < ft <= deadline
-               for ft, fl in self.faults):
-            return None  # the robot is back and may take its slot back (rule 2)
         watchers = [w for w in e.watchers if not self._failed_in(w, e.t, deadline)]
         silent = e.kind in _SILENT
         if silent and not watchers:
@@ -468,6 +463,38 @@ class Checker:
             f"{'no takeover' if e.done is None else f'taken over only at {e.done:.2f} s'} by "
             f"{deadline:.2f} s although standby(s) {', '.join(map(str, live))} and "
             f"watcher(s) {', '.join(map(str, watchers)) or 'none needed'} stayed alive")
+
+    def _expect_deadline(self, e: _Expect, mates: list[_Failure]) -> float:
+        """By when the failure's slot must be taken over: the takeover bound, restarted
+        by each failure in its neighbourhood and stretched by a standby's grace."""
+        bound = self.bounds.takeover
+        deadline = e.t + bound
+        moved = True
+        while moved:  # each failure in the neighbourhood restarts the clock
+            moved = False
+            for x in mates:
+                if e.t < x.start <= deadline < x.start + bound:
+                    deadline, moved = x.start + bound, True
+        # A covering standby that (re)started shortly before the failure still waits out
+        # its start-up grace (DESIGN rule 5) before it may count silence: give it that.
+        grace = self.params.startup_grace
+        for r in e.standbys:
+            before = [s for s in self.started_at.get(r, ()) if s <= e.t]
+            if before and before[-1] > 0.5 and e.t - before[-1] < grace:
+                deadline = max(deadline, before[-1] + grace + bound)
+        return deadline
+
+    def _excused(self, e: _Expect, deadline: float, duration: float) -> bool:
+        """Whether the slot was taken over in time, or the miss is no violation."""
+        if e.done is not None and e.done <= deadline:
+            return True
+        if duration < deadline:
+            return True  # the run ended too soon to tell
+        if any(s <= deadline and h >= e.t for s, h in self.partitions):
+            return True  # a partition is another kind of trouble (invariant 2)
+        # The robot is back and may take its slot back (rule 2).
+        return any(fl.kind is FaultKind.RESTART and e.robot in fl.robots
+                   and e.t < ft <= deadline for ft, fl in self.faults)
 
     # ------------------------------------------------------------------ end
     def finish(self, events: Iterable[dict[str, Any]], duration: float) -> list[Violation]:

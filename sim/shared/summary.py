@@ -174,45 +174,8 @@ def summarize(
     checker = check_events(events, [*faults, *died], plan, params, loss=loss,
                            duration=duration)
     violations = list(checker.violations) + list(extra_violations or [])
-    # Checker and a simulator may both report a raise; keep one of each.
-    seen: set[tuple[float, str, int | None]] = set()
-    unique = []
-    for v in sorted(violations, key=lambda v: v.t):
-        key = (round(v.t, 6), v.kind, v.robot)
-        if key not in seen:
-            seen.add(key)
-            unique.append(v)
-    outcomes = []
-    credited: set[int] = set()  # takeovers already explained by an earlier fault
-    # A fault on several robots gets a row a robot: `collide:1,2@5 (robot 1)`.
-    labelled = [(part, f.spec() if part is f else f"{f.spec()} (robot {part.robot})")
-                for f in faults for part in f.split()]
-    labelled += [(f, f"died:{f.robot}@{f.at:.2f}") for f in died]
-    for fault, spec in sorted(labelled, key=lambda fs: fs[0].at):
-        if fault.kind not in _REPLACEABLE:
-            outcomes.append(FaultOutcome(spec, fault.kind, None if fault.kind is
-                                         FaultKind.PARTITION else fault.robot, fault.at, None,
-                                         None, None, None, None))
-            continue
-        r = fault.robot
-        f, down = _state_at(events, r, fault.at)
-        detected = taken = by = epoch = None
-        for i, (t, robot, event) in enumerate(typed):
-            if down:
-                break  # a fault on a robot already dead explains nothing
-            if t < fault.at:
-                continue
-            if detected is None and (
-                (isinstance(event, Suspect) and event.subject == r)
-                or (isinstance(event, Leave) and robot == r)
-            ):
-                detected = t - fault.at
-            if taken is None and isinstance(event, Takeover) and event.replaced == r \
-                    and (f is None or event.function == f) and i not in credited:
-                credited.add(i)
-                taken, by, epoch = t - fault.at, robot, event.epoch
-        outcomes.append(FaultOutcome(spec, fault.kind, r, fault.at, f, detected,
-                                     taken, by, epoch))
+    unique = _unique(violations)
+    outcomes = _outcomes(faults, died, events, typed)
     dead = set(checker.dead)
     return Summary(
         mode=mode,
@@ -227,6 +190,62 @@ def summarize(
         holders=holders_at_end(events, dead),
         false_suspicions=checker.false_suspicions,
     )
+
+
+def _unique(violations: list[Violation]) -> list[Violation]:
+    """The violations oldest first, each reported once."""
+    # Checker and a simulator may both report a raise; keep one of each.
+    seen: set[tuple[float, str, int | None]] = set()
+    unique = []
+    for v in sorted(violations, key=lambda v: v.t):
+        key = (round(v.t, 6), v.kind, v.robot)
+        if key not in seen:
+            seen.add(key)
+            unique.append(v)
+    return unique
+
+
+def _outcomes(faults: list[Fault], died: list[Fault], events: list[dict[str, Any]],
+              typed: list[tuple[float, int, Event | None]]) -> list[FaultOutcome]:
+    """A row of the fault table for each fault on each robot, and for each death."""
+    outcomes = []
+    credited: set[int] = set()  # takeovers already explained by an earlier fault
+    # A fault on several robots gets a row a robot: `collide:1,2@5 (robot 1)`.
+    labelled = [(part, f.spec() if part is f else f"{f.spec()} (robot {part.robot})")
+                for f in faults for part in f.split()]
+    labelled += [(f, f"died:{f.robot}@{f.at:.2f}") for f in died]
+    for fault, spec in sorted(labelled, key=lambda fs: fs[0].at):
+        if fault.kind not in _REPLACEABLE:
+            outcomes.append(FaultOutcome(spec, fault.kind, None if fault.kind is
+                                         FaultKind.PARTITION else fault.robot, fault.at, None,
+                                         None, None, None, None))
+        else:
+            outcomes.append(_outcome(fault, spec, events, typed, credited))
+    return outcomes
+
+
+def _outcome(fault: Fault, spec: str, events: list[dict[str, Any]],
+             typed: list[tuple[float, int, Event | None]], credited: set[int]) -> FaultOutcome:
+    """How the swarm answered a fault on one robot: when it was detected, and who took
+    its slot over (a takeover it explains joins `credited`)."""
+    r = fault.robot
+    f, down = _state_at(events, r, fault.at)
+    detected = taken = by = epoch = None
+    for i, (t, robot, event) in enumerate(typed):
+        if down:
+            break  # a fault on a robot already dead explains nothing
+        if t < fault.at:
+            continue
+        if detected is None and (
+            (isinstance(event, Suspect) and event.subject == r)
+            or (isinstance(event, Leave) and robot == r)
+        ):
+            detected = t - fault.at
+        if taken is None and isinstance(event, Takeover) and event.replaced == r \
+                and (f is None or event.function == f) and i not in credited:
+            credited.add(i)
+            taken, by, epoch = t - fault.at, robot, event.epoch
+    return FaultOutcome(spec, fault.kind, r, fault.at, f, detected, taken, by, epoch)
 
 
 # -- real time ------------------------------------------------------------------------------

@@ -121,6 +121,28 @@ class VirtualSwarm:
         self.faults = sorted((part for f in faults for part in f.split()), key=lambda f: f.at)
         self.channel = channel or Channel()
         self.rng = random.Random(seed)
+        self._init_auth(auth, keys, identities, seed)
+        self.on_event = on_event
+        self.now = 0.0
+        self._heap: list[tuple[float, int, int, Any, Any]] = []
+        self._counter = itertools.count()
+        self.events: list[dict[str, Any]] = []
+        self.frames_sent = 0
+        self.deliveries = 0
+        self._init_links()
+        self._changed: dict[int, float] = {}
+        self.checker = Checker(plan, params, loss=self.channel.loss)
+        self.robots: dict[int, _Robot] = {}
+        self._relevant_to = self._interest()
+        self._receivers = self._relevant_to if interest else None
+        self._all = tuple(sorted(plan.robots))
+        self._init_recorders()
+        self._schedule(start_spread)
+
+    # ------------------------------------------------------------------ set-up
+    def _init_auth(self, auth: str, keys: Sequence[bytes],
+                   identities: dict[int, Identity] | None, seed: int) -> None:
+        """The run's keys, authentication mode, identities and verifier."""
         if auth not in AUTH_MODES:
             raise ValueError(f"auth must be one of {', '.join(AUTH_MODES)}, not {auth!r}")
         if auth != "none" and not keys:
@@ -131,16 +153,12 @@ class VirtualSwarm:
         self.identities: dict[int, Identity] = {}
         if self.auth == "per-robot":
             self.identities = identities if identities is not None else \
-                fake_identities(plan.robots, seed)
+                fake_identities(self.plan.robots, seed)
         self.verifier = self.identities[min(self.identities)].verifier \
             if self.identities else None
-        self.on_event = on_event
-        self.now = 0.0
-        self._heap: list[tuple[float, int, int, Any, Any]] = []
-        self._counter = itertools.count()
-        self.events: list[dict[str, Any]] = []
-        self.frames_sent = 0
-        self.deliveries = 0
+
+    def _init_links(self) -> None:
+        """The link faults in force and the channel's losses, per link."""
         self.partition: dict[int, int] | None = None  # robot -> group while partitioned
         self.cuts: list[LinkCut] = []  # one-way link faults in force (fade, deaf, A>B)
         self.cuts_seen: list[LinkCut] = []
@@ -151,17 +169,16 @@ class VirtualSwarm:
             raise ValueError(f"loss model must be one of {', '.join(LOSS_MODELS)}")
         self._burst = GilbertElliott(self.channel.loss, self.channel.burst_len, self.rng) \
             if self.channel.loss_model == "burst" else None
-        self._changed: dict[int, float] = {}
-        self.checker = Checker(plan, params, loss=self.channel.loss)
-        self.robots: dict[int, _Robot] = {}
-        self._relevant_to = self._interest()
-        self._receivers = self._relevant_to if interest else None
-        self._all = tuple(sorted(plan.robots))
+
+    def _init_recorders(self) -> None:
         # `forge:R@T:replay`: R's radio records the channel until T (`sim.shared.forge`).
         self._recording: dict[int, collections.deque[bytes]] = {
             r: collections.deque(maxlen=CAPTURE) for f in self.faults
             if f.kind is FaultKind.FORGE and f.attack == "replay" for r in f.robots}
         self._tapes: dict[int, tuple[bytes, ...]] = {}
+
+    def _schedule(self, start_spread: float) -> None:
+        """Each robot's boot at a spread time, then each fault's begin and end."""
         for rid in self._all:
             start = self.rng.uniform(0.0, start_spread)
             self.robots[rid] = _Robot(node=None)
@@ -171,7 +188,6 @@ class VirtualSwarm:
             if fault.end is not None:
                 self._push(fault.end, _FAULT, i, "end")
 
-    # ------------------------------------------------------------------ set-up
     def _interest(self) -> dict[int, tuple[int, ...]]:
         """slot -> robots to which a frame about it matters, from `SwarmPlan.relevant`
         (the same sets `Node` drops irrelevant frames by); standby heartbeats go by
@@ -208,51 +224,14 @@ class VirtualSwarm:
         while heap and heap[0][0] <= self.duration:
             t, _, kind, a, b = heapq.heappop(heap)
             self.now = t
-            if kind == _TICK:
-                r = self.robots[a]
-                if b != r.timer_gen or not r.alive or r.paused or r.node is None:
-                    continue
-                r.timer_at = None
-                self._call(a, _OP_TICK, None)
-            elif kind == _DELIVER:
-                r = self.robots[a]
-                if not r.alive or r.node is None:
-                    continue
-                if r.paused:
-                    if len(r.buffered) < 512:  # a socket buffer holds a few hundred frames
-                        r.buffered.append(b)
-                    continue
-                self.deliveries += 1
-                self._call(a, _OP_RECEIVE, b)
-            elif kind == _FAULT:
-                if a == -1:
-                    self._boot(b)
-                else:
-                    self._fault(self.faults[a], b)
-            elif kind == _LIAR:
-                self._lie(a)
-            elif kind == _FORGE:
-                self._forge(a, b)
-            elif kind == _DELIVER_RAW:
-                r = self.robots[a]
-                if r.alive and r.node is not None and not r.paused:
-                    self.deliveries += 1
-                    self._call(a, _OP_RAW, b)
+            self._step(kind, a, b)
         self.now = self.duration
         for link, run in self._losing.items():
             self._outage(link, run, self.duration)
         violations = self.checker.finish(self.events, self.duration) + muted(self) \
             + views(self)
         violations.sort(key=lambda v: v.t)
-        final = {}
-        drops = {}
-        for rid, r in self.robots.items():
-            total = collections.Counter(r.dropped)
-            if r.alive and r.node is not None:
-                snap = r.node.snapshot()
-                final[rid] = (snap.role.name.lower(), snap.function, snap.epoch)
-                total.update(snap.drops)
-            drops[rid] = dict(total)
+        final, drops = self._final_states()
         return VirtualResult(
             events=self.events,
             violations=violations,
@@ -263,6 +242,54 @@ class VirtualSwarm:
             drops=drops,
             final=final,
         )
+
+    def _step(self, kind: int, a: Any, b: Any) -> None:
+        """Handle one event popped off the heap at `self.now`."""
+        if kind == _TICK:
+            r = self.robots[a]
+            if b != r.timer_gen or not r.alive or r.paused or r.node is None:
+                return
+            r.timer_at = None
+            self._call(a, _OP_TICK, None)
+        elif kind == _DELIVER:
+            r = self.robots[a]
+            if not r.alive or r.node is None:
+                return
+            if r.paused:
+                if len(r.buffered) < 512:  # a socket buffer holds a few hundred frames
+                    r.buffered.append(b)
+                return
+            self.deliveries += 1
+            self._call(a, _OP_RECEIVE, b)
+        elif kind == _FAULT:
+            if a == -1:
+                self._boot(b)
+            else:
+                self._fault(self.faults[a], b)
+        elif kind == _LIAR:
+            self._lie(a)
+        elif kind == _FORGE:
+            self._forge(a, b)
+        elif kind == _DELIVER_RAW:
+            r = self.robots[a]
+            if r.alive and r.node is not None and not r.paused:
+                self.deliveries += 1
+                self._call(a, _OP_RAW, b)
+
+    def _final_states(self) -> tuple[dict[int, tuple[str, str | None, int]],
+                                     dict[int, dict[str, int]]]:
+        """Each live robot's (role, function, epoch) at the end, and every robot's
+        drops by reason over all its nodes."""
+        final = {}
+        drops = {}
+        for rid, r in self.robots.items():
+            total = collections.Counter(r.dropped)
+            if r.alive and r.node is not None:
+                snap = r.node.snapshot()
+                final[rid] = (snap.role.name.lower(), snap.function, snap.epoch)
+                total.update(snap.drops)
+            drops[rid] = dict(total)
+        return final, drops
 
     def audience(self, sender: int, slot: int) -> tuple[int, ...]:
         """Who should hear `sender`'s heartbeat for `slot` (0: its standby heartbeat)."""

@@ -96,19 +96,24 @@ class FrameParser:
                     self._escaped = True
                     continue
             self._buf.append(b)
-            if len(self._buf) < 2:
-                continue
-            length = int.from_bytes(self._buf[:2], "big")
-            if len(self._buf) == 2 and not 0 < length <= self.max_length:
-                self.drops["length"] += 1  # hunt for the next start delimiter
-                self._in_frame = False
-                self._buf.clear()
-            elif len(self._buf) == length + 3:
-                data_part = bytes(self._buf[2:-1])
-                if checksum(data_part) == self._buf[-1]:
-                    frames.append(data_part)
-                else:
-                    self.drops["checksum"] += 1
-                self._in_frame = False
-                self._buf.clear()
+            self._check_length(frames)
         return frames
+
+    def _check_length(self, frames: list[bytes]) -> None:
+        """After each byte of a frame: drop it once its length field is impossible;
+        once it is complete, append its data to `frames` if the checksum agrees."""
+        if len(self._buf) < 2:
+            return
+        length = int.from_bytes(self._buf[:2], "big")
+        if len(self._buf) == 2 and not 0 < length <= self.max_length:
+            self.drops["length"] += 1  # hunt for the next start delimiter
+            self._in_frame = False
+            self._buf.clear()
+        elif len(self._buf) == length + 3:
+            data_part = bytes(self._buf[2:-1])
+            if checksum(data_part) == self._buf[-1]:
+                frames.append(data_part)
+            else:
+                self.drops["checksum"] += 1
+            self._in_frame = False
+            self._buf.clear()

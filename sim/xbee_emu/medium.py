@@ -104,21 +104,26 @@ class Medium:
         }
         self._rng = random.Random(seed)
         self._ports: dict[int, _Port] = {}
-        self._timers: list[_Timer] = []
-        self._order = itertools.count()
         self._busy_until: dict[tuple[str, bytes, bytes], float] = {}
         self._lock = threading.RLock()
+        self._init_loop()
+        self._made_dir = False
+        self.delivered = 0
+        self.lost = 0
+        self.uart_overflows = 0
+
+    def _init_loop(self) -> None:
+        """The medium's thread, not yet started: its timers, and the selector it waits
+        on with the pipe that wakes it."""
+        self._timers: list[_Timer] = []
+        self._order = itertools.count()
+        self._thread: threading.Thread | None = None
+        self._stopping = False
         self._selector = selectors.DefaultSelector()
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
         self._selector.register(self._wake_r, selectors.EVENT_READ, 0)
-        self._thread: threading.Thread | None = None
-        self._stopping = False
-        self._made_dir = False
-        self.delivered = 0
-        self.lost = 0
-        self.uart_overflows = 0
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self) -> Medium:
@@ -343,20 +348,25 @@ class Medium:
             frame = peer.receive_frame(radio, request.data, broadcast, method)
             self.delivered += 1
             self._at(done, functools.partial(self._write, m, frame))
+        status = self._tx_status(radio, request, addressees, delivered)
+        if status is not None:
+            self._at(max(done, self.reply_delay), functools.partial(self._write, n, status))
+
+    def _tx_status(self, radio: EmulatedRadio, request: Transmit, addressees: list[int],
+                   delivered: list[int]) -> bytes | None:
+        """The transmit status frame the sender's UART gets (None: it asked for none)."""
         # Broadcasts are never acknowledged, so they always report success. A unicast
         # reports what its firmware reports when nobody acknowledged it (radio.py).
+        broadcast = request.broadcast
         if broadcast or delivered:
             to16 = 0xFFFE
             if delivered and not broadcast and radio.protocol == "zigbee":
                 to16 = self.radios[delivered[0]].my16  # where it was delivered
-            status = radio.status_frame(request, TX_OK, to16=to16)
-        else:
-            code, discovery = radio.unicast_failure(request, lost=bool(addressees))
-            status = radio.status_frame(request, code, discovery=discovery,
-                                        to16=UNKNOWN16 if radio.protocol == "zigbee"
-                                        else 0xFFFE)
-        if status is not None:
-            self._at(max(done, self.reply_delay), functools.partial(self._write, n, status))
+            return radio.status_frame(request, TX_OK, to16=to16)
+        code, discovery = radio.unicast_failure(request, lost=bool(addressees))
+        return radio.status_frame(request, code, discovery=discovery,
+                                  to16=UNKNOWN16 if radio.protocol == "zigbee"
+                                  else 0xFFFE)
 
     def _remote(self, radio: EmulatedRadio, request: RemoteCommand) -> None:
         """A remote AT command: over the air to its target(s), which run it and answer

@@ -147,23 +147,7 @@ class EmulatedRadio:
         if self.api_mode not in (1, 2):
             raise ValueError("api_mode must be 1 or 2")
         n = self.number
-        p: dict[str, bytes] = {
-            "AP": bytes((self.api_mode,)),
-            "HV": HV_XBEE3,
-            "VR": _VR[self.protocol],
-            "SH": (0x0013A200).to_bytes(4, "big"),
-            "SL": (0x40000000 + n).to_bytes(4, "big"),
-            "NI": f"robot{n}".encode(),
-            "CE": b"\x01" if self.coordinator else b"\x00",
-            "ID": self.pan_id.to_bytes(2, "big"),
-            "CH": bytes((self.channel,)),
-            "DH": b"\x00\x00\x00\x00",
-            "DL": b"\x00\x00\x00\x00",
-            "NP": MAX_PAYLOAD[self.protocol].to_bytes(2, "big"),
-            "EE": b"\x00",
-            "AI": b"\x00",
-            "BD": b"\x03",  # 9600 baud
-        }
+        p = self._factory_params()
         if self.protocol == "zigbee":
             # Zigbee: the network assigns MY; the coordinator is always 0x0000. CH is the
             # operating channel (read-only), picked from the SC mask (every radio of a
@@ -184,6 +168,28 @@ class EmulatedRadio:
         # DigiMesh has no MY and no SS on XBee 3: both answer "invalid command".
         self.params = p
         self.saved = dict(p)
+
+    def _factory_params(self) -> dict[str, bytes]:
+        """The AT parameters every protocol has, at their factory values (with this
+        radio's number, network and API mode)."""
+        n = self.number
+        return {
+            "AP": bytes((self.api_mode,)),
+            "HV": HV_XBEE3,
+            "VR": _VR[self.protocol],
+            "SH": (0x0013A200).to_bytes(4, "big"),
+            "SL": (0x40000000 + n).to_bytes(4, "big"),
+            "NI": f"robot{n}".encode(),
+            "CE": b"\x01" if self.coordinator else b"\x00",
+            "ID": self.pan_id.to_bytes(2, "big"),
+            "CH": bytes((self.channel,)),
+            "DH": b"\x00\x00\x00\x00",
+            "DL": b"\x00\x00\x00\x00",
+            "NP": MAX_PAYLOAD[self.protocol].to_bytes(2, "big"),
+            "EE": b"\x00",
+            "AI": b"\x00",
+            "BD": b"\x03",  # 9600 baud
+        }
 
     # -- derived ------------------------------------------------------------------------
     @property

@@ -4,9 +4,12 @@ swarm file (DESIGN.md section 3)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
+
+if TYPE_CHECKING:
+    from swarmd.config import SwarmConfig
 
 
 def register(app: typer.Typer) -> None:
@@ -42,47 +45,65 @@ def register(app: typer.Typer) -> None:
 
         Example: swarmd import-launch tests/fixtures/paper.launch -o my-swarm.yaml
         """
-        from swarmd.config import ConfigError, parse_swarm
-        from swarmd.files import FileRefused, output_problem
-        from swarmd.launch import LaunchError, import_launch_file
+        _import_launch(file, output, swarm_id, name)
 
-        # The output path is checked before anything runs: a FIFO would block the write
-        # forever, a device or a directory is never a swarm file.
-        if output is not None and (why := output_problem(output)) is not None:
-            typer.echo(f"{output}: cannot write: {why}", err=True)
-            raise typer.Exit(2)
+
+def _import_launch(file: Path, output: Path | None, swarm_id: int, name: str | None) -> None:
+    """`swarmd import-launch`: convert, validate, write; raises typer.Exit on failure."""
+    from swarmd.files import output_problem
+
+    # The output path is checked before anything runs: a FIFO would block the write
+    # forever, a device or a directory is never a swarm file.
+    if output is not None and (why := output_problem(output)) is not None:
+        typer.echo(f"{output}: cannot write: {why}", err=True)
+        raise typer.Exit(2)
+    text = _convert(file, swarm_id, name)
+    cfg = _validated(text, file, output)
+    for w in cfg.warnings:
+        typer.echo(str(w), err=True)
+    if output is None:
+        typer.echo(text, nl=False)
+    else:
         try:
-            text = import_launch_file(file, swarm_id=swarm_id, name=name)
-        except FileRefused as exc:
-            typer.echo(f"{file}: cannot read the file: {exc.reason}", err=True)
+            output.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            typer.echo(f"{output}: cannot write: {exc}", err=True)
             raise typer.Exit(2) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            typer.echo(f"{file}: cannot read the file: {exc}", err=True)
-            raise typer.Exit(2) from None
-        except LaunchError as exc:
-            typer.echo(str(exc), err=True)
-            raise typer.Exit(1) from None
-        # The result must be a valid swarm (an unknown neighbour in the launch file, a
-        # slot with too few watchers): say so in the launch file's terms, write nothing.
-        # Name the problems after the converted text, never after `output`: nothing was
-        # written there, so a line number in that file would point at nothing.
-        target = output if output is not None else Path(file.name)
-        try:
-            cfg = parse_swarm(text, f"<{file.name} converted>", target)
-        except ConfigError as exc:
-            typer.echo(f"{file}: the converted swarm is not valid:", err=True)
-            for p in exc.problems:
-                typer.echo(f"  {p}", err=True)
-            raise typer.Exit(1) from None
-        for w in cfg.warnings:
-            typer.echo(str(w), err=True)
-        if output is None:
-            typer.echo(text, nl=False)
-        else:
-            try:
-                output.write_text(text, encoding="utf-8")
-            except OSError as exc:
-                typer.echo(f"{output}: cannot write: {exc}", err=True)
-                raise typer.Exit(2) from None
-            typer.echo(f"wrote {output} ({len(cfg.robots)} robots, "
-                       f"{len(cfg.functions)} functions)", err=True)
+        typer.echo(f"wrote {output} ({len(cfg.robots)} robots, "
+                   f"{len(cfg.functions)} functions)", err=True)
+
+
+def _convert(file: Path, swarm_id: int, name: str | None) -> str:
+    """The swarm file's text converted from the launch file."""
+    from swarmd.files import FileRefused
+    from swarmd.launch import LaunchError, import_launch_file
+
+    try:
+        return import_launch_file(file, swarm_id=swarm_id, name=name)
+    except FileRefused as exc:
+        typer.echo(f"{file}: cannot read the file: {exc.reason}", err=True)
+        raise typer.Exit(2) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        typer.echo(f"{file}: cannot read the file: {exc}", err=True)
+        raise typer.Exit(2) from None
+    except LaunchError as exc:
+        typer.echo(str(exc), err=True)
+        raise typer.Exit(1) from None
+
+
+def _validated(text: str, file: Path, output: Path | None) -> SwarmConfig:
+    """The converted swarm, checked as `swarmd check` would."""
+    from swarmd.config import ConfigError, parse_swarm
+
+    # The result must be a valid swarm (an unknown neighbour in the launch file, a
+    # slot with too few watchers): say so in the launch file's terms, write nothing.
+    # Name the problems after the converted text, never after `output`: nothing was
+    # written there, so a line number in that file would point at nothing.
+    target = output if output is not None else Path(file.name)
+    try:
+        return parse_swarm(text, f"<{file.name} converted>", target)
+    except ConfigError as exc:
+        typer.echo(f"{file}: the converted swarm is not valid:", err=True)
+        for p in exc.problems:
+            typer.echo(f"  {p}", err=True)
+        raise typer.Exit(1) from None

@@ -61,21 +61,27 @@ def register(app: typer.Typer) -> None:
         Example: swarmd keygen --swarm configs/paper.yaml configs/keys (also:
         swarmd keygen --robot 3 configs/keys; swarmd keygen swarm.key)
         """
-        from swarmd.keys import KeyFileError
+        _keygen(path, robot, swarm, force, hex_format)
 
-        if robot is not None and swarm is not None:
-            raise _fail("give --robot or --swarm, not both")
-        try:
-            if robot is not None:
-                _one_robot(path, robot, force)
-            elif swarm is not None:
-                _whole_swarm(path, swarm, force)
-            else:
-                _shared_key(path, force, hex_format)
-        except KeyFileError as exc:
-            raise _fail(str(exc)) from None
-        except OSError as exc:
-            raise _fail(f"cannot write {exc.filename or path}: {exc.strerror}") from None
+
+def _keygen(path: Path, robot: int | None, swarm: Path | None, force: bool,
+            hex_format: bool) -> None:
+    """`swarmd keygen`: one robot's key pair, a whole swarm's, or a shared key."""
+    from swarmd.keys import KeyFileError
+
+    if robot is not None and swarm is not None:
+        raise _fail("give --robot or --swarm, not both")
+    try:
+        if robot is not None:
+            _one_robot(path, robot, force)
+        elif swarm is not None:
+            _whole_swarm(path, swarm, force)
+        else:
+            _shared_key(path, force, hex_format)
+    except KeyFileError as exc:
+        raise _fail(str(exc)) from None
+    except OSError as exc:
+        raise _fail(f"cannot write {exc.filename or path}: {exc.strerror}") from None
 
 
 def _shared_key(path: Path, force: bool, hex_format: bool) -> None:

@@ -59,25 +59,30 @@ def register(app: typer.Typer) -> None:
 
         Example: swarmd start --config /etc/swarmd/robot.yaml
         """
-        import asyncio
-        import logging
+        _start(config, log_level, log_format)
 
-        from swarmd.config import ConfigError, load_robot
-        from swarmd.daemon import EXIT_CONFIG, run_daemon
-        from swarmd.logs import LogFormat, default_format, setup_logging
 
-        fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"
-        setup_logging(log_level, fmt=fmt)
-        log = logging.getLogger("swarmd.start")
-        try:
-            cfg = load_robot(config)
-        except ConfigError as exc:
-            # Every problem on its own line, each naming file and field.
-            for problem in exc.problems:
-                log.error(str(problem), extra={"config": str(config)})
-            raise typer.Exit(EXIT_CONFIG) from None
-        setup_logging(log_level, fmt=fmt, robot=cfg.robot)
-        for warning in cfg.warnings:
-            log.warning(str(warning))
-        code = asyncio.run(run_daemon(cfg, handle_signals=True, config_path=config))
-        raise typer.Exit(code)
+def _start(config: Path, log_level: str, log_format: str | None) -> None:
+    """`swarmd start`: load the robot file and run its daemon; raises typer.Exit."""
+    import asyncio
+    import logging
+
+    from swarmd.config import ConfigError, load_robot
+    from swarmd.daemon import EXIT_CONFIG, run_daemon
+    from swarmd.logs import LogFormat, default_format, setup_logging
+
+    fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"
+    setup_logging(log_level, fmt=fmt)
+    log = logging.getLogger("swarmd.start")
+    try:
+        cfg = load_robot(config)
+    except ConfigError as exc:
+        # Every problem on its own line, each naming file and field.
+        for problem in exc.problems:
+            log.error(str(problem), extra={"config": str(config)})
+        raise typer.Exit(EXIT_CONFIG) from None
+    setup_logging(log_level, fmt=fmt, robot=cfg.robot)
+    for warning in cfg.warnings:
+        log.warning(str(warning))
+    code = asyncio.run(run_daemon(cfg, handle_signals=True, config_path=config))
+    raise typer.Exit(code)

@@ -43,26 +43,32 @@ def register(sim_app: typer.Typer) -> None:
 
         Example: swarmd sim vehicle --autopilot ardupilot --port 14580 --no-physics
         """
-        import asyncio
+        _vehicle(autopilot, port, sysid, gcs_port, no_physics)
 
-        from sim.run import EXTRA_HINT, PHYSICS_MODULES, installed
-        from swarmd.link.mavlink_modes import Flavour
 
-        if autopilot not in ("px4", "ardupilot"):
-            typer.echo(f"--autopilot: {autopilot!r} is not one of px4, ardupilot", err=True)
-            raise typer.Exit(2)
-        missing = [m for m in PHYSICS_MODULES if not installed(m)]
-        if missing:  # the autopilot's craft models import them, also the point mass
-            typer.echo(f"swarmd sim vehicle: needs the simulation extra ({', '.join(missing)} "
-                       f"not installed): {EXTRA_HINT}", err=True)
-            raise typer.Exit(2)
-        from sim.physics.vehicle import run_vehicle
-        flavour: Flavour = "px4" if autopilot == "px4" else "ardupilot"
-        try:
-            asyncio.run(run_vehicle(flavour, port, sysid, physics=not no_physics,
-                                    gcs_port=gcs_port,
-                                    say=lambda line: typer.echo(line)))
-        except OSError as exc:
-            typer.echo(f"--port: cannot listen on 127.0.0.1:{port}: {exc.strerror or exc}",
-                       err=True)
-            raise typer.Exit(1) from None
+def _vehicle(autopilot: str, port: int, sysid: int, gcs_port: int, no_physics: bool) -> None:
+    """`swarmd sim vehicle`: check the input, then serve the vehicle; raises typer.Exit
+    on failure."""
+    import asyncio
+
+    from sim.run import EXTRA_HINT, PHYSICS_MODULES, installed
+    from swarmd.link.mavlink_modes import Flavour
+
+    if autopilot not in ("px4", "ardupilot"):
+        typer.echo(f"--autopilot: {autopilot!r} is not one of px4, ardupilot", err=True)
+        raise typer.Exit(2)
+    missing = [m for m in PHYSICS_MODULES if not installed(m)]
+    if missing:  # the autopilot's craft models import them, also the point mass
+        typer.echo(f"swarmd sim vehicle: needs the simulation extra ({', '.join(missing)} "
+                   f"not installed): {EXTRA_HINT}", err=True)
+        raise typer.Exit(2)
+    from sim.physics.vehicle import run_vehicle
+    flavour: Flavour = "px4" if autopilot == "px4" else "ardupilot"
+    try:
+        asyncio.run(run_vehicle(flavour, port, sysid, physics=not no_physics,
+                                gcs_port=gcs_port,
+                                say=lambda line: typer.echo(line)))
+    except OSError as exc:
+        typer.echo(f"--port: cannot listen on 127.0.0.1:{port}: {exc.strerror or exc}",
+                   err=True)
+        raise typer.Exit(1) from None

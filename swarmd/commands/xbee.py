@@ -164,50 +164,8 @@ def register(app: typer.Typer) -> None:
 
         Example: swarmd xbee configure --port /dev/xbee --role router --pan 0x607 --write
         """
-        from digi.xbee.exception import XBeeException
-
-        if role not in ("coordinator", "router"):
-            raise typer.BadParameter("--role must be coordinator or router")
-        if api_mode not in (None, 1, 2):
-            raise typer.BadParameter("--api-mode must be 1 or 2 (digi-xbee needs API mode)")
-        pan_id = _int(pan)
-        ch = _int(channel) if channel is not None else None
-        if ch is not None and ch not in CHANNELS:
-            raise typer.BadParameter(f"--channel must be 0x0B..0x1A (11-26), got 0x{ch:02X}")
-        dev = _open(port, baud)
-        try:
-            actual = _protocol(dev)
-            if protocol is not None and protocol != actual:
-                typer.echo(f"the radio on {port} runs {actual} firmware, not {protocol}; "
-                           "load the firmware with XCTU first", err=True)
-                raise typer.Exit(1)
-            before = _read(dev)
-            wanted = paper_settings(actual, role, pan_id, ch, api_mode)
-            name, value = "AC", b""
-            try:
-                for name, value in wanted.items():
-                    dev.set_parameter(name, value, apply=False)  # queued (0x09) ...
-                name, value = "AC", b""
-                dev.apply_changes()  # ... and applied together (AC)
-                if write:
-                    name = "WR"
-                    dev.write_changes()  # WR
-            except XBeeException as exc:
-                status = getattr(exc, "status", None)
-                why = status.description if status is not None else str(exc)
-                typer.echo(f"the radio refused {name}"
-                           f"{'=0x' + value.hex().upper() if value else ''}: {why}; "
-                           "nothing was saved", err=True)
-                raise typer.Exit(1) from None
-            after = _read(dev)
-        finally:
-            dev.close()
-        typer.echo(f"{'':<4} {'before':>18} {'after':>18}")
-        for name in SETTINGS:
-            mark = "  *" if before[name] != after[name] else ""
-            typer.echo(f"{name:<4} {before[name]:>18} {after[name]:>18}{mark}")
-        typer.echo("saved to flash (WR)" if write else
-                   "applied but not saved: add --write to keep it across a power cycle")
+        _configure(port, role=role, pan=pan, channel=channel, protocol=protocol,
+                   api_mode=api_mode, baud=baud, write=write)
 
     @xbee.command("emulate")
     def emulate(
@@ -244,33 +202,106 @@ def register(app: typer.Typer) -> None:
 
         Example: swarmd xbee emulate 6 --protocol 802.15.4 --loss 0.05
         """
-        import sys
+        _emulate(count, protocol=protocol, api_mode=api_mode, directory=directory,
+                 pan=pan, channel=channel, loss=loss, delay=delay, seed=seed,
+                 transparent=transparent)
 
-        from sim.xbee_emu import Medium
 
-        if protocol not in PROTOCOLS:
-            raise typer.BadParameter(f"--protocol must be one of {', '.join(PROTOCOLS)}")
-        if api_mode not in (1, 2):
-            raise typer.BadParameter("--api-mode must be 1 or 2")
-        if not 0 <= loss <= 1:
-            raise typer.BadParameter("--loss must be between 0 and 1")
-        medium = Medium(count, protocol=protocol, api_mode=api_mode, directory=directory,
-                        pan_id=_int(pan), channel=_int(channel), loss=loss, delay=delay,
-                        seed=seed, transparent=transparent)
-        medium.start()
-        try:
-            mode = "transparent (AP=0)" if transparent else f"API mode {api_mode}"
-            typer.echo(f"{count} emulated {protocol} radios, {mode}, PAN "
-                       f"0x{_int(pan):04X}, channel 0x{_int(channel):02X}:")
-            for n in medium.radios:
-                typer.echo(f"  robot{n}: {medium.path(n)}")
-            typer.echo("commands on stdin: unplug N | replug N | loss N P | delay N S; "
-                       "Ctrl-C stops")
-            _command_loop(medium, sys.stdin)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            medium.stop()
+def _emulate(count: int, *, protocol: str, api_mode: int, directory: str, pan: str,
+             channel: str, loss: float, delay: float, seed: int | None,
+             transparent: bool) -> None:
+    """`swarmd xbee emulate`: check the options, run the radios until Ctrl-C."""
+    import sys
+
+    from sim.xbee_emu import Medium
+
+    if protocol not in PROTOCOLS:
+        raise typer.BadParameter(f"--protocol must be one of {', '.join(PROTOCOLS)}")
+    if api_mode not in (1, 2):
+        raise typer.BadParameter("--api-mode must be 1 or 2")
+    if not 0 <= loss <= 1:
+        raise typer.BadParameter("--loss must be between 0 and 1")
+    medium = Medium(count, protocol=protocol, api_mode=api_mode, directory=directory,
+                    pan_id=_int(pan), channel=_int(channel), loss=loss, delay=delay,
+                    seed=seed, transparent=transparent)
+    medium.start()
+    try:
+        mode = "transparent (AP=0)" if transparent else f"API mode {api_mode}"
+        typer.echo(f"{count} emulated {protocol} radios, {mode}, PAN "
+                   f"0x{_int(pan):04X}, channel 0x{_int(channel):02X}:")
+        for n in medium.radios:
+            typer.echo(f"  robot{n}: {medium.path(n)}")
+        typer.echo("commands on stdin: unplug N | replug N | loss N P | delay N S; "
+                   "Ctrl-C stops")
+        _command_loop(medium, sys.stdin)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        medium.stop()
+
+
+def _configure(port: str, *, role: str, pan: str, channel: str | None, protocol: str | None,
+               api_mode: int | None, baud: int, write: bool) -> None:
+    """`swarmd xbee configure`: check the options, apply, print the settings."""
+    if role not in ("coordinator", "router"):
+        raise typer.BadParameter("--role must be coordinator or router")
+    if api_mode not in (None, 1, 2):
+        raise typer.BadParameter("--api-mode must be 1 or 2 (digi-xbee needs API mode)")
+    pan_id = _int(pan)
+    ch = _int(channel) if channel is not None else None
+    if ch is not None and ch not in CHANNELS:
+        raise typer.BadParameter(f"--channel must be 0x0B..0x1A (11-26), got 0x{ch:02X}")
+    before, after = _reconfigure(port, baud, protocol, write,
+                                 role=role, pan_id=pan_id, channel=ch, api_mode=api_mode)
+    typer.echo(f"{'':<4} {'before':>18} {'after':>18}")
+    for name in SETTINGS:
+        mark = "  *" if before[name] != after[name] else ""
+        typer.echo(f"{name:<4} {before[name]:>18} {after[name]:>18}{mark}")
+    typer.echo("saved to flash (WR)" if write else
+               "applied but not saved: add --write to keep it across a power cycle")
+
+
+def _reconfigure(port: str, baud: int, protocol: str | None, write: bool, *, role: str,
+                 pan_id: int, channel: int | None,
+                 api_mode: int | None) -> tuple[dict[str, str], dict[str, str]]:
+    """Open the radio, check its firmware, apply the paper's settings (and save them
+    with `write`): the settings read before and after."""
+    dev = _open(port, baud)
+    try:
+        actual = _protocol(dev)
+        if protocol is not None and protocol != actual:
+            typer.echo(f"the radio on {port} runs {actual} firmware, not {protocol}; "
+                       "load the firmware with XCTU first", err=True)
+            raise typer.Exit(1)
+        before = _read(dev)
+        _apply(dev, paper_settings(actual, role, pan_id, channel, api_mode), write)
+        after = _read(dev)
+    finally:
+        dev.close()
+    return before, after
+
+
+def _apply(dev: Any, wanted: dict[str, bytes], write: bool) -> None:
+    """Queue every setting, apply them together, save them with `write`; a refusal
+    is reported and exits 1."""
+    from digi.xbee.exception import XBeeException
+
+    name, value = "AC", b""
+    try:
+        for name, value in wanted.items():
+            dev.set_parameter(name, value, apply=False)  # queued (0x09) ...
+        name, value = "AC", b""
+        dev.apply_changes()  # ... and applied together (AC)
+        if write:
+            name = "WR"
+            dev.write_changes()  # WR
+    except XBeeException as exc:
+        status = getattr(exc, "status", None)
+        why = status.description if status is not None else str(exc)
+        typer.echo(f"the radio refused {name}"
+                   f"{'=0x' + value.hex().upper() if value else ''}: {why}; "
+                   "nothing was saved", err=True)
+        raise typer.Exit(1) from None
 
 
 def _command_loop(medium: Any, stream: Any) -> None:

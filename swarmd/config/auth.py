@@ -116,31 +116,39 @@ def auth_issues(cfg: SwarmConfig, *, deploying: bool = False) -> list[AuthIssue]
         except KeyFileError as exc:
             out.append(AuthIssue(loc, str(exc)))
     if isinstance(auth, PerRobotAuth):
-        ids = set(cfg.robot_ids())
-        for i, r in enumerate(auth.revoked):
-            if r not in ids:
-                out.append(AuthIssue(("auth", "revoked", i), f"robot {r} is not in the "
-                                     "swarm", "warning"))
-        keys_dir = cfg.keys_dir_path
-        assert keys_dir is not None
-        if not keys_dir.is_dir():
-            # A plan may be checked and simulated (throwaway keys) before its keys are
-            # made: `swarmd check` says so in its auth line; a robot cannot start.
-            if deploying or keys_dir.exists():
-                what = "is not a directory" if keys_dir.exists() else "does not exist"
-                out.append(AuthIssue(
-                    ("auth", "keys_dir"),
-                    f"keys dir {keys_dir} {what}: make the swarm's keys with "
-                    f"{keygen_hint(cfg, keys_dir)}"))
-            return out
-        for r in sorted(ids - set(auth.revoked)):
-            try:
-                read_public_keys(public_key_path(keys_dir, r))
-            except IdentityFileError as exc:
-                out.append(AuthIssue(
-                    ("auth", "keys_dir"),
-                    f"robot {r}: {exc} (make it: swarmd keygen --robot {r} {keys_dir}, "
-                    "then copy robot-N.pub to every robot)"))
+        out += _per_robot_issues(cfg, auth, deploying=deploying)
+    return out
+
+
+def _per_robot_issues(cfg: SwarmConfig, auth: PerRobotAuth, *,
+                      deploying: bool) -> list[AuthIssue]:
+    """Revoked robots the swarm does not have; a keys dir or public key missing."""
+    out: list[AuthIssue] = []
+    ids = set(cfg.robot_ids())
+    for i, r in enumerate(auth.revoked):
+        if r not in ids:
+            out.append(AuthIssue(("auth", "revoked", i), f"robot {r} is not in the "
+                                 "swarm", "warning"))
+    keys_dir = cfg.keys_dir_path
+    assert keys_dir is not None
+    if not keys_dir.is_dir():
+        # A plan may be checked and simulated (throwaway keys) before its keys are
+        # made: `swarmd check` says so in its auth line; a robot cannot start.
+        if deploying or keys_dir.exists():
+            what = "is not a directory" if keys_dir.exists() else "does not exist"
+            out.append(AuthIssue(
+                ("auth", "keys_dir"),
+                f"keys dir {keys_dir} {what}: make the swarm's keys with "
+                f"{keygen_hint(cfg, keys_dir)}"))
+        return out
+    for r in sorted(ids - set(auth.revoked)):
+        try:
+            read_public_keys(public_key_path(keys_dir, r))
+        except IdentityFileError as exc:
+            out.append(AuthIssue(
+                ("auth", "keys_dir"),
+                f"robot {r}: {exc} (make it: swarmd keygen --robot {r} {keys_dir}, "
+                "then copy robot-N.pub to every robot)"))
     return out
 
 

@@ -335,13 +335,7 @@ def load_referenced_swarm(src: Source, name: str, problems: list[Problem]) -> Sw
 
 def from_source(src: Source) -> RobotConfig:
     """Validate a parsed robot file and load its swarm file. Raises ConfigError."""
-    data = src.data
-    if isinstance(data, dict) and "robots" in data and "robot" not in data:
-        # A swarm file where a robot file belongs (`swarmd start -c paper.yaml`): one
-        # clear problem instead of a schema error for every swarm-file field.
-        raise ConfigError([src.problem((), "this is a swarm file (it has `robots:`); give "
-                                       "a robot file that names it (`robot: <id>`, "
-                                       "`swarm: <this file>`; docs/config.md)")])
+    _refuse_swarm_file(src)
     f: RobotFile = validate(RobotFile, src)
     problems: list[Problem] = []
     swarm = load_referenced_swarm(src, f.swarm, problems)
@@ -357,23 +351,8 @@ def from_source(src: Source) -> RobotConfig:
     if swarm is not None:
         problems = _deployable(swarm, f.robot, identity_file, src, problems)
     key_files = tuple(src.resolve(k) for k in f.key_files)
-    for i, k in enumerate(key_files):
-        try:
-            load_key(k)
-        except KeyFileError as exc:
-            problems.append(src.problem(("key_files", i), str(exc)))
-    if f.metrics is not None and not f.metrics.allow_remote and not _is_loopback(f.metrics.host):
-        problems.append(
-            src.problem(("metrics", "host"), f"{f.metrics.host} is not a loopback address; "
-                        "set `allow_remote: true` to serve metrics off this machine")
-        )
-    link = f.link
-    if isinstance(link, SocketLinkConfig):
-        link = link.model_copy(update={"path": str(src.resolve(link.path))})
-    elif isinstance(link, Ros2LinkConfig):
-        link = link.model_copy(update={
-            "node_name": link.node_name or f"swarmd_robot{f.robot}",
-            "hardware_id": link.hardware_id or f"robot{f.robot}"})
+    _check_keys_and_metrics(f, key_files, src, problems)
+    link = _resolved_link(f, src)
     if swarm is None or any(p.severity == "error" for p in problems):
         raise ConfigError(problems)
     return RobotConfig(
@@ -391,6 +370,45 @@ def from_source(src: Source) -> RobotConfig:
         warnings=tuple(p for p in problems if p.severity == "warning"),
         identity_file=identity_file,
     )
+
+
+def _refuse_swarm_file(src: Source) -> None:
+    """Raise ConfigError when `src` is a swarm file where a robot file belongs."""
+    data = src.data
+    if isinstance(data, dict) and "robots" in data and "robot" not in data:
+        # A swarm file where a robot file belongs (`swarmd start -c paper.yaml`): one
+        # clear problem instead of a schema error for every swarm-file field.
+        raise ConfigError([src.problem((), "this is a swarm file (it has `robots:`); give "
+                                       "a robot file that names it (`robot: <id>`, "
+                                       "`swarm: <this file>`; docs/config.md)")])
+
+
+def _check_keys_and_metrics(f: RobotFile, key_files: tuple[Path, ...], src: Source,
+                            problems: list[Problem]) -> None:
+    """Append a problem for each unreadable key file and for metrics served off this
+    machine without `allow_remote`."""
+    for i, k in enumerate(key_files):
+        try:
+            load_key(k)
+        except KeyFileError as exc:
+            problems.append(src.problem(("key_files", i), str(exc)))
+    if f.metrics is not None and not f.metrics.allow_remote and not _is_loopback(f.metrics.host):
+        problems.append(
+            src.problem(("metrics", "host"), f"{f.metrics.host} is not a loopback address; "
+                        "set `allow_remote: true` to serve metrics off this machine")
+        )
+
+
+def _resolved_link(f: RobotFile, src: Source) -> LinkConfig:
+    """The robot file's link, its socket path resolved and a ros2 link's names filled."""
+    link = f.link
+    if isinstance(link, SocketLinkConfig):
+        link = link.model_copy(update={"path": str(src.resolve(link.path))})
+    elif isinstance(link, Ros2LinkConfig):
+        link = link.model_copy(update={
+            "node_name": link.node_name or f"swarmd_robot{f.robot}",
+            "hardware_id": link.hardware_id or f"robot{f.robot}"})
+    return link
 
 
 def _deployable(swarm: SwarmConfig, robot: int, identity_file: Path | None, src: Source,
@@ -414,30 +432,37 @@ def _deployable(swarm: SwarmConfig, robot: int, identity_file: Path | None, src:
         out.append(src.problem(("robot",), f"robot {robot} is revoked in swarm file "
                                f"{swarm.source} (auth.revoked): no robot accepts its frames"))
         return out
-    keys_dir = swarm.keys_dir_path
     if any(p.severity == "error" for p in deploying):
         return out  # no keys dir: its message says how to make every key
+    problem = _identity_problem(swarm, robot, identity_file, src)
+    if problem is not None:
+        out.append(problem)
+    return out
+
+
+def _identity_problem(swarm: SwarmConfig, robot: int, identity_file: Path | None,
+                      src: Source) -> Problem | None:
+    """Per-robot mode: what is wrong with this robot's private key, if anything."""
+    keys_dir = swarm.keys_dir_path
     if identity_file is None:
-        out.append(src.problem(("identity_file",), f"swarm {swarm.source} is signed per "
-                               "robot: set identity_file to this robot's private key "
-                               f"(make it: swarmd keygen --robot {robot} {keys_dir})"))
-        return out
+        return src.problem(("identity_file",), f"swarm {swarm.source} is signed per "
+                           "robot: set identity_file to this robot's private key "
+                           f"(make it: swarmd keygen --robot {robot} {keys_dir})")
     try:
         private = read_private_key(identity_file)
     except KeyFileError as exc:
-        out.append(src.problem(("identity_file",),
-                               str(exc).replace("--robot ID", f"--robot {robot}")))
-        return out
+        return src.problem(("identity_file",),
+                           str(exc).replace("--robot ID", f"--robot {robot}"))
     try:
         mine = public_keys(swarm).get(robot, ())
     except KeyFileError:
-        return out  # reported by the swarm file's own checks
+        return None  # reported by the swarm file's own checks
     if public_key_of(private) not in mine:
-        out.append(src.problem(("identity_file",), f"{identity_file} is not robot {robot}'s "
-                               f"key: it does not match {keys_dir}/robot-{robot}.pub (a key "
-                               "of another robot, or the .pub was not updated after "
-                               "a new key was made)"))
-    return out
+        return src.problem(("identity_file",), f"{identity_file} is not robot {robot}'s "
+                           f"key: it does not match {keys_dir}/robot-{robot}.pub (a key "
+                           "of another robot, or the .pub was not updated after "
+                           "a new key was made)")
+    return None
 
 
 def _is_loopback(host: str) -> bool:

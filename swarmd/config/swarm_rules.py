@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmd.config.auth import auth_issues
@@ -70,130 +71,174 @@ def _finish(source: Source) -> SwarmConfig:
     return cfg
 
 
+@dataclass
+class _Problems:
+    """The problems `cross_check` finds, in the order found, located in `src`."""
+
+    src: Source
+    out: list[Problem] = field(default_factory=list)
+
+    def err(self, loc: Loc, msg: str) -> None:
+        self.out.append(self.src.problem(loc, msg))
+
+    def warn(self, loc: Loc, msg: str) -> None:
+        self.out.append(self.src.problem(loc, msg, "warning"))
+
+
 def cross_check(cfg: SwarmConfig, src: Source) -> list[Problem]:
-    out: list[Problem] = []
-
-    def err(loc: Loc, msg: str) -> None:
-        out.append(src.problem(loc, msg))
-
-    def warn(loc: Loc, msg: str) -> None:
-        out.append(src.problem(loc, msg, "warning"))
-
-    # Functions: names and count (a 16-bit slot on the wire, swarmd.core.wire).
-    for name in cfg.functions:
-        if not FUNCTION_NAME.match(name):
-            err(("functions", name), f"function name {name!r} must start with a letter or "
-                "'_' and use letters, digits, '_', '.', '-' (at most 32)")
-    if len(cfg.functions) > MAX_FUNCTIONS:
-        err(("functions",), f"{len(cfg.functions)} functions; a swarm has at most "
-            f"{MAX_FUNCTIONS} (the slot index is 16 bits on the wire)")
-
-    # Timing: Params validates itself; name the field its message is about.
-    quorum: int | None = None
-    try:
-        params = cfg.params()
-    except (ParamsError, TypeError) as exc:
-        err(("timing", _params_field(str(exc), cfg.timing)), str(exc))
-    else:
-        quorum = params.quorum
-        for loc, msg, severity in timing_bounds(params):
-            out.append(src.problem(("timing", loc), msg, severity))
+    p = _Problems(src)
+    _check_functions(cfg, p)
+    quorum = _check_timing(cfg, p)
 
     # Signing (config/auth.py): a bad key is an error; an unsigned swarm, or a keys
     # dir not made yet, a warning here (`swarmd start` refuses both).
     for issue in auth_issues(cfg):
-        out.append(src.problem(issue.loc, issue.message, issue.severity))
+        p.out.append(src.problem(issue.loc, issue.message, issue.severity))
 
     # Robots, one at a time.
+    by_id = _robots_by_id(cfg, p)
+    holder_of: dict[str, int] = {}
+    for i, r in enumerate(cfg.robots):
+        here: Loc = ("robots", i)
+        _check_role(cfg, r, here, holder_of, p)
+        _check_neighbors(r, here, by_id, p)
+        _check_subs(cfg, r, here, by_id, p)
+        if r.state == "standby" and not r.subs:
+            p.warn((*here, "subs"), f"standby robot {r.id} covers no function; it will "
+                   "never take over")
+
+    _check_coverage(cfg, quorum, p)
+    _check_homes(cfg, p)
+    return p.out
+
+
+def _check_functions(cfg: SwarmConfig, p: _Problems) -> None:
+    # Functions: names and count (a 16-bit slot on the wire, swarmd.core.wire).
+    for name in cfg.functions:
+        if not FUNCTION_NAME.match(name):
+            p.err(("functions", name), f"function name {name!r} must start with a letter or "
+                  "'_' and use letters, digits, '_', '.', '-' (at most 32)")
+    if len(cfg.functions) > MAX_FUNCTIONS:
+        p.err(("functions",), f"{len(cfg.functions)} functions; a swarm has at most "
+              f"{MAX_FUNCTIONS} (the slot index is 16 bits on the wire)")
+
+
+def _check_timing(cfg: SwarmConfig, p: _Problems) -> int | None:
+    """The timing's problems; returns its quorum (None when the timing is invalid)."""
+    # Timing: Params validates itself; name the field its message is about.
+    try:
+        params = cfg.params()
+    except (ParamsError, TypeError) as exc:
+        p.err(("timing", _params_field(str(exc), cfg.timing)), str(exc))
+        return None
+    for loc, msg, severity in timing_bounds(params):
+        p.out.append(p.src.problem(("timing", loc), msg, severity))
+    return params.quorum
+
+
+def _robots_by_id(cfg: SwarmConfig, p: _Problems) -> dict[int, RobotEntry]:
+    """Each robot by its id (the first robot with an id; a reuse is an error)."""
     by_id: dict[int, RobotEntry] = {}
     first_index: dict[int, int] = {}
     for i, r in enumerate(cfg.robots):
         if r.id in by_id:
-            err(("robots", i, "id"),
-                f"robot id {r.id} is used twice (also robots[{first_index[r.id]}])")
+            p.err(("robots", i, "id"),
+                  f"robot id {r.id} is used twice (also robots[{first_index[r.id]}])")
         else:
             by_id[r.id] = r
             first_index[r.id] = i
-    holder_of: dict[str, int] = {}
-    for i, r in enumerate(cfg.robots):
-        here: Loc = ("robots", i)
-        if r.state == "standby":
-            if r.function is not None:
-                err((*here, "function"), f"robot {r.id} is a standby and holds no function "
-                    "(make it active, or drop `function`)")
-            if r.neighbors:
-                err((*here, "neighbors"), f"robot {r.id} is a standby; standbys watch nobody "
-                    "(they count warnings from the active robots, paper Fig. 9)")
-        else:
-            if r.subs:
-                err((*here, "subs"), f"robot {r.id} is active; only standby robots "
-                    "substitute others")
-            f = r.holds
-            assert f is not None
-            if f not in cfg.functions:
-                how = "" if r.function is not None else " (the default for an active robot)"
-                err((*here, "function"), f"function {f!r}{how} is not defined under "
-                    "`functions`")
-            elif f in holder_of:
-                err((*here, "function"), f"function {f} is already held by robot "
-                    f"{holder_of[f]}; each function has one holder at start")
-            else:
-                holder_of[f] = r.id
-        seen: set[int] = set()
-        for n in r.neighbors:
-            if n in seen:
-                err((*here, "neighbors"), f"robot {n} is listed twice")
-            seen.add(n)
-            if n == r.id:
-                err((*here, "neighbors"), f"robot {r.id} lists itself; a robot cannot "
-                    "witness its own failure (DESIGN rule 3)")
-            elif n not in by_id:
-                err((*here, "neighbors"), f"robot {n} is not in the swarm")
-            elif by_id[n].state == "standby" and r.state == "active":
-                err((*here, "neighbors"), f"robot {n} is a standby; neighbours are the "
-                    "robots executing functions (DESIGN rule 1)")
-        seen_subs: set[int | str] = set()
-        for ref in r.subs:
-            if ref in seen_subs:
-                err((*here, "subs"), f"{ref!r} is listed twice")
-            seen_subs.add(ref)
-            if isinstance(ref, int):
-                if ref not in by_id:
-                    err((*here, "subs"), f"robot {ref} is not in the swarm")
-                elif by_id[ref].state != "active":
-                    err((*here, "subs"), f"robot {ref} is a standby and has no function "
-                        "to substitute")
-            elif ref not in cfg.functions:
-                err((*here, "subs"), f"function {ref!r} is not defined under `functions`")
-        if r.state == "standby" and not r.subs:
-            warn((*here, "subs"), f"standby robot {r.id} covers no function; it will "
-                 "never take over")
+    return by_id
 
+
+def _check_role(cfg: SwarmConfig, r: RobotEntry, here: Loc, holder_of: dict[str, int],
+                p: _Problems) -> None:
+    """A standby holds and watches nothing; an active robot substitutes nobody and
+    holds a defined function no other robot holds (recorded in `holder_of`)."""
+    if r.state == "standby":
+        if r.function is not None:
+            p.err((*here, "function"), f"robot {r.id} is a standby and holds no function "
+                  "(make it active, or drop `function`)")
+        if r.neighbors:
+            p.err((*here, "neighbors"), f"robot {r.id} is a standby; standbys watch nobody "
+                  "(they count warnings from the active robots, paper Fig. 9)")
+        return
+    if r.subs:
+        p.err((*here, "subs"), f"robot {r.id} is active; only standby robots "
+              "substitute others")
+    f = r.holds
+    assert f is not None
+    if f not in cfg.functions:
+        how = "" if r.function is not None else " (the default for an active robot)"
+        p.err((*here, "function"), f"function {f!r}{how} is not defined under "
+              "`functions`")
+    elif f in holder_of:
+        p.err((*here, "function"), f"function {f} is already held by robot "
+              f"{holder_of[f]}; each function has one holder at start")
+    else:
+        holder_of[f] = r.id
+
+
+def _check_neighbors(r: RobotEntry, here: Loc, by_id: dict[int, RobotEntry],
+                     p: _Problems) -> None:
+    seen: set[int] = set()
+    for n in r.neighbors:
+        if n in seen:
+            p.err((*here, "neighbors"), f"robot {n} is listed twice")
+        seen.add(n)
+        if n == r.id:
+            p.err((*here, "neighbors"), f"robot {r.id} lists itself; a robot cannot "
+                  "witness its own failure (DESIGN rule 3)")
+        elif n not in by_id:
+            p.err((*here, "neighbors"), f"robot {n} is not in the swarm")
+        elif by_id[n].state == "standby" and r.state == "active":
+            p.err((*here, "neighbors"), f"robot {n} is a standby; neighbours are the "
+                  "robots executing functions (DESIGN rule 1)")
+
+
+def _check_subs(cfg: SwarmConfig, r: RobotEntry, here: Loc, by_id: dict[int, RobotEntry],
+                p: _Problems) -> None:
+    seen_subs: set[int | str] = set()
+    for ref in r.subs:
+        if ref in seen_subs:
+            p.err((*here, "subs"), f"{ref!r} is listed twice")
+        seen_subs.add(ref)
+        if isinstance(ref, int):
+            if ref not in by_id:
+                p.err((*here, "subs"), f"robot {ref} is not in the swarm")
+            elif by_id[ref].state != "active":
+                p.err((*here, "subs"), f"robot {ref} is a standby and has no function "
+                      "to substitute")
+        elif ref not in cfg.functions:
+            p.err((*here, "subs"), f"function {ref!r} is not defined under `functions`")
+
+
+def _check_coverage(cfg: SwarmConfig, quorum: int | None, p: _Problems) -> None:
     # Per function: a holder, enough witnesses (rule 3), some standby (rule 8).
     for row in cfg.coverage():
-        here = ("functions", row.function)
+        here: Loc = ("functions", row.function)
         if not row.holders:
-            err(here, f"no active robot holds {row.function} (an active robot holds "
-                "`f<id>` unless it names another function)")
+            p.err(here, f"no active robot holds {row.function} (an active robot holds "
+                  "`f<id>` unless it names another function)")
             continue
         if quorum is not None and len(row.watchers) < quorum:
             who = ", ".join(map(str, row.watchers)) or "none"
-            err(here, f"watched by {len(row.watchers)} robot(s) ({who}), fewer than the "
-                f"quorum of {quorum}: its failure could never be confirmed (DESIGN rule 3); "
-                "add its holder to more robots' neighbors")
+            p.err(here, f"watched by {len(row.watchers)} robot(s) ({who}), fewer than the "
+                  f"quorum of {quorum}: its failure could never be confirmed (DESIGN rule 3); "
+                  "add its holder to more robots' neighbors")
         if not row.standbys:
-            warn(here, f"no standby covers {row.function}: if its holder fails the function "
-                 "is lost and an alert is raised (DESIGN rule 8)")
+            p.warn(here, f"no standby covers {row.function}: if its holder fails the function "
+                   "is lost and an alert is raised (DESIGN rule 8)")
 
+
+def _check_homes(cfg: SwarmConfig, p: _Problems) -> None:
     # Homes: parking spots on the ground, apart from each other (MuJoCo sim).
     homes = [(i, r) for i, r in enumerate(cfg.robots) if r.home is not None]
     for a, (i, r) in enumerate(homes):
         for j, s in homes[:a]:
             assert r.home is not None and s.home is not None
             if math.dist(r.home, s.home) < MIN_HOME_SPACING:
-                warn(("robots", i, "home"), f"robot {r.id}'s home is within "
-                     f"{MIN_HOME_SPACING} m of robot {s.id}'s (robots[{j}])")
-    return out
+                p.warn(("robots", i, "home"), f"robot {r.id}'s home is within "
+                       f"{MIN_HOME_SPACING} m of robot {s.id}'s (robots[{j}])")
 
 
 MIN_HEARTBEAT = 0.005

@@ -118,6 +118,10 @@ class MavlinkLink:
         self.last: Assessment | None = None
         self.counters: dict[str, int] = {"opens": 0, "open_errors": 0, "io_errors": 0,
                                          "bad_data": 0, "bursts": 0}
+        self._init_reporting()
+
+    def _init_reporting(self) -> None:
+        """The health not yet handed to the daemon, and the logs of changes and bad data."""
         self._latest: Health | None = None
         self._handed_at = float("-inf")  # thread time of the last hand-over (`_report`)
         self._dirty = False  # a health not yet handed over
@@ -186,24 +190,33 @@ class MavlinkLink:
                     next_open = now + self.reopen_interval
                     log.warning("cannot open MAVLink %s: %s (retrying)", self.url, exc)
                     continue
-            try:
-                msg = conn.recv_match(blocking=True, timeout=self.poll)
-                read += msg is not None
-                now = self._clock()
-                out = self._tick(msg, now)
-                for m in out:
-                    conn.mav.send(m)
-            except Exception as exc:  # unplugged serial, reset TCP, a pymavlink bug
-                self.counters["io_errors"] += 1
-                log.warning("MAVLink %s failed: %s (reopening)", self.url, exc)
-                with contextlib.suppress(Exception):
-                    conn.close()
-                conn = None
+            conn, got = self._exchange(conn)
+            read += got
+            if conn is None:
                 next_open = self._clock() + self.reopen_interval
             last_report = self._report(self._clock(), last_report)
         if conn is not None:
             with contextlib.suppress(Exception):
                 conn.close()
+
+    def _exchange(self, conn: Any) -> tuple[Any, bool]:
+        """Read a message (or time out), tick the pilot and send what it answers: the
+        connection (None once it failed and was closed) and whether a message came."""
+        got = False
+        try:
+            msg = conn.recv_match(blocking=True, timeout=self.poll)
+            got = msg is not None
+            now = self._clock()
+            out = self._tick(msg, now)
+            for m in out:
+                conn.mav.send(m)
+        except Exception as exc:  # unplugged serial, reset TCP, a pymavlink bug
+            self.counters["io_errors"] += 1
+            log.warning("MAVLink %s failed: %s (reopening)", self.url, exc)
+            with contextlib.suppress(Exception):
+                conn.close()
+            return None, got
+        return conn, got
 
     def _tick(self, msg: Any, now: float) -> list[Any]:
         pilot = self.pilot

@@ -180,18 +180,8 @@ class Reassembler:
         if key in self._done:
             self.drops[FragmentDrop.DUPLICATE] += 1
             return None
-        part = self._partial.get(key)
+        part = self._partial_for(key, count, now)
         if part is None:
-            mine = [k for k in self._partial if k[0] == sender]
-            if len(mine) >= self.max_per_sender:
-                del self._partial[mine[0]]  # arrival order: that sender's oldest
-                self.drops[FragmentDrop.EVICTED_SENDER] += 1
-            while len(self._partial) >= self.max_partial:
-                self._partial.popitem(last=False)
-                self.drops[FragmentDrop.EVICTED] += 1
-            part = self._partial[key] = _Partial(count, now, [None] * count)
-        elif part.count != count:
-            self.drops[FragmentDrop.INCONSISTENT] += 1
             return None
         if part.pieces[index] is not None:
             self.drops[FragmentDrop.DUPLICATE] += 1
@@ -206,10 +196,32 @@ class Reassembler:
         part.have += 1
         if part.have < count:
             return None
+        return self._complete(key, part, now)
+
+    def _partial_for(self, key: tuple[int, int], count: int, now: float) -> _Partial | None:
+        """The message `key` in reassembly, started (evicting to make room) if new;
+        None when a piece disagrees with it on the count (dropped)."""
+        part = self._partial.get(key)
+        if part is None:
+            mine = [k for k in self._partial if k[0] == key[0]]
+            if len(mine) >= self.max_per_sender:
+                del self._partial[mine[0]]  # arrival order: that sender's oldest
+                self.drops[FragmentDrop.EVICTED_SENDER] += 1
+            while len(self._partial) >= self.max_partial:
+                self._partial.popitem(last=False)
+                self.drops[FragmentDrop.EVICTED] += 1
+            part = self._partial[key] = _Partial(count, now, [None] * count)
+        elif part.count != count:
+            self.drops[FragmentDrop.INCONSISTENT] += 1
+            return None
+        return part
+
+    def _complete(self, key: tuple[int, int], part: _Partial, now: float) -> bytes | None:
+        """The frame of a message with every piece in, if it is the sender's own."""
         del self._partial[key]
         self._remember(key, now)
         frame = b"".join(p for p in part.pieces if p is not None)
-        if len(frame) < _SENDER.stop or int.from_bytes(frame[_SENDER], "big") != sender:
+        if len(frame) < _SENDER.stop or int.from_bytes(frame[_SENDER], "big") != key[0]:
             self.drops[FragmentDrop.SENDER_MISMATCH] += 1
             return None
         self.completed += 1

@@ -69,6 +69,19 @@ __all__ = ["RadioInfo", "RadioMismatch", "RadioRefused", "RadioSetupError", "XBe
 log = logging.getLogger(__name__)
 
 
+def _check_options(protocol: str, api_mode: int, role: str | None, max_in_flight: int) -> None:
+    """Raise TransportError for an option digi-xbee or the radio cannot work with."""
+    if protocol not in PROTOCOLS:
+        raise TransportError(f"unknown XBee protocol {protocol!r}; one of {PROTOCOLS}")
+    if api_mode not in (1, 2):
+        raise TransportError(f"api_mode must be 1 or 2 (digi-xbee needs API mode), "
+                             f"got {api_mode}")
+    if role not in (None, "coordinator", "router"):
+        raise TransportError(f"role must be coordinator or router, got {role!r}")
+    if not 1 <= max_in_flight <= 64:
+        raise TransportError("max_in_flight must be 1..64 (frame ids wrap at 255)")
+
+
 class XBeeTransport:
     """Broadcast frames through a local XBee in API mode (see the module docstring)."""
 
@@ -91,15 +104,7 @@ class XBeeTransport:
         watchdog_interval: float = 0.5,
         close_timeout: float = 3.0,
     ) -> None:
-        if protocol not in PROTOCOLS:
-            raise TransportError(f"unknown XBee protocol {protocol!r}; one of {PROTOCOLS}")
-        if api_mode not in (1, 2):
-            raise TransportError(f"api_mode must be 1 or 2 (digi-xbee needs API mode), "
-                                 f"got {api_mode}")
-        if role not in (None, "coordinator", "router"):
-            raise TransportError(f"role must be coordinator or router, got {role!r}")
-        if not 1 <= max_in_flight <= 64:
-            raise TransportError("max_in_flight must be 1..64 (frame ids wrap at 255)")
+        _check_options(protocol, api_mode, role, max_in_flight)
         self.port = port
         self.baud = baud
         self.protocol = protocol
@@ -115,10 +120,15 @@ class XBeeTransport:
         self.watchdog_interval = watchdog_interval
         self.close_timeout = close_timeout
         """s. How long `close()` waits for digi-xbee's close before abandoning it."""
-        self.info: RadioInfo | None = None
         self.counters: Counter[str] = Counter()
         self._events = ChannelEvents("xbee", self.counters, log)
         self._max_payload = MAX_PAYLOAD[protocol]
+        self._init_radio_state(SendWindow(max_in_flight=max_in_flight, queue_size=send_queue,
+                                          status_timeout=status_timeout))
+
+    def _init_radio_state(self, window: SendWindow) -> None:
+        """The radio (none open yet), whether it is up, and what is in flight on it."""
+        self.info: RadioInfo | None = None
         self._radio: DeviceThread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._up = False
@@ -126,8 +136,7 @@ class XBeeTransport:
         self._down_since = 0.0
         self._reopener: Reopener | None = None
         self._watchdog: asyncio.TimerHandle | None = None
-        self._window = SendWindow(max_in_flight=max_in_flight, queue_size=send_queue,
-                                  status_timeout=status_timeout)
+        self._window = window
         self._status_timer: asyncio.TimerHandle | None = None
         self._reassembler = fragment.Reassembler()
         self._on_frame: FrameCallback | None = None

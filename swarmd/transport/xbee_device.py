@@ -277,27 +277,10 @@ class DeviceThread:
             dev.open()
             info = self._inspect(dev, OperatingMode)
             if info.protocol == "802.15.4":
-                my = bytes(dev.get_parameter("MY"))
-                if int.from_bytes(my, "big") != 0xFFFE:
-                    # Applied (0x08), not written: redone on every open, the radio's saved
-                    # settings stay the user's.
-                    self._set(dev, "MY", b"\xff\xfe")
-                    log.info("XBee %s: MY %s -> FFFE (64-bit source addresses)",
-                             self.port, my.hex().upper())
+                self._use_64bit_source(dev)
             dev.add_data_received_callback(self._on_data)
             dev.add_packet_received_callback(self._on_packet)
-            serial_port = getattr(dev, "serial_port", None)
-            if serial_port is not None:
-                # A radio that stops reading its UART fails the write (-> down, reopen)
-                # instead of blocking this thread, and with it close(), for good.
-                serial_port.write_timeout = self.write_timeout
-                # digi-xbee's reader trusts a frame's length and reads that many bytes,
-                # each with the port's read timeout (4 s by default): one corrupt
-                # length (7E FF FF) kept the daemon deaf until 64 KiB or a 4 s silence
-                # came, and a busy channel has no such silence. A byte that does not
-                # come within READ_GAP ends the frame and the reader hunts for the
-                # next 0x7E. (digi-xbee's own AT and send timeouts are separate.)
-                serial_port.timeout = READ_GAP
+            self._set_port_timeouts(dev)
         except BaseException:
             try:
                 dev.close()
@@ -311,6 +294,30 @@ class DeviceThread:
         if isinstance(listener, threading.Thread):
             _HANGUPS.watch(listener, self)
         return info
+
+    def _use_64bit_source(self, dev: Any) -> None:
+        """An 802.15.4 radio sends with 64-bit source addresses (MY = FFFE)."""
+        my = bytes(dev.get_parameter("MY"))
+        if int.from_bytes(my, "big") != 0xFFFE:
+            # Applied (0x08), not written: redone on every open, the radio's saved
+            # settings stay the user's.
+            self._set(dev, "MY", b"\xff\xfe")
+            log.info("XBee %s: MY %s -> FFFE (64-bit source addresses)",
+                     self.port, my.hex().upper())
+
+    def _set_port_timeouts(self, dev: Any) -> None:
+        serial_port = getattr(dev, "serial_port", None)
+        if serial_port is not None:
+            # A radio that stops reading its UART fails the write (-> down, reopen)
+            # instead of blocking this thread, and with it close(), for good.
+            serial_port.write_timeout = self.write_timeout
+            # digi-xbee's reader trusts a frame's length and reads that many bytes,
+            # each with the port's read timeout (4 s by default): one corrupt
+            # length (7E FF FF) kept the daemon deaf until 64 KiB or a 4 s silence
+            # came, and a busy channel has no such silence. A byte that does not
+            # come within READ_GAP ends the frame and the reader hunts for the
+            # next 0x7E. (digi-xbee's own AT and send timeouts are separate.)
+            serial_port.timeout = READ_GAP
 
     def _ignored(self, what: str, exc: Exception) -> None:
         """An error this thread goes on after: counted as `ignored:<what>`, and logged
