@@ -89,7 +89,13 @@ from sim.realtime.procs import (
     main_not_reimported,
 )
 from sim.realtime.result import RealtimeResult
-from sim.realtime.robotfiles import emulated_radio, robot_ids, sign_for_run, write_robot_file
+from sim.realtime.robotfiles import (
+    emulated_radio,
+    robot_ids,
+    sign_for_run,
+    start_medium,
+    write_robot_file,
+)
 from sim.realtime.schedule import FaultSchedule
 from sim.realtime.view import SwarmView
 from sim.shared.eventlog import write_events
@@ -216,7 +222,8 @@ class Orchestrator:
 
             self.ros_domain = DomainLease()
         if self.transport in ("xbee", "serial"):
-            self._start_radios(self._run_dir)
+            self.medium = start_medium(len(self.robots), self._run_dir, self.seed,
+                                       self.transport)
 
     def _pick_port(self) -> None:
         """The given multicast port, or a leased one."""
@@ -227,16 +234,6 @@ class Orchestrator:
             # this machine is handed it while these robots use it (sim/realtime/ports.py).
             self.port_lease = PortLease(self.group)
             self.port = self.port_lease.port
-
-    def _start_radios(self, run_dir: Path) -> None:
-        # `--transport xbee|serial`: every robot gets an emulated radio on a pty, all on
-        # one simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the
-        # same radios in transparent mode, AP=0, under the serial transport).
-        from sim.xbee_emu.medium import Medium
-
-        self.medium = Medium(len(self.robots), protocol="802.15.4",
-                             directory=run_dir / "radios", seed=self.seed,
-                             transparent=self.transport == "serial").start()
 
     # -- processes --------------------------------------------------------------------------
     def _spawn(self, robot: int, t0: float | None) -> RobotProcess:

@@ -31,6 +31,16 @@ def free_udp_port() -> int:
         return port
 
 
+def start_medium(robots: int, run_dir: Path, seed: int, transport: str) -> Medium:
+    """`--transport xbee|serial`: every robot gets an emulated radio on a pty, all on one
+    simulated 802.15.4 medium (xbee: API mode 1 through digi-xbee; serial: the same
+    radios in transparent mode, AP=0, under the serial transport)."""
+    from sim.xbee_emu.medium import Medium
+
+    return Medium(robots, protocol="802.15.4", directory=run_dir / "radios", seed=seed,
+                  transparent=transport == "serial").start()
+
+
 def emulated_radio(transport: str, medium: Medium | None, radio: int) -> dict[str, Any] | None:
     """The `transport` section of a robot file whose robot speaks through radio number
     `radio` of an emulated `medium` (sim.xbee_emu; None: UDP multicast, no section)."""
