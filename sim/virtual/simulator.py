@@ -28,6 +28,7 @@ from sim.shared.faults import Fault, FaultKind, fault_record
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
+from sim.virtual.agenda import Boot, Deliver, DeliverRaw, Entry, FaultPhase, Forge, Lie, Tick
 from sim.virtual.judge import muted, views
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
@@ -38,7 +39,6 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
 
-_TICK, _DELIVER, _FAULT, _LIAR, _FORGE, _DELIVER_RAW = 0, 1, 2, 3, 4, 5
 AUTH_MODES = ("none", "shared", "per-robot")
 """`none`: unsigned; `shared`: one swarm key (HMAC); `per-robot`: each robot its own
 key for WARN, CLAIM and LEAVE, the swarm key on heartbeats (DESIGN section 2)."""
@@ -124,7 +124,7 @@ class VirtualSwarm:
         self._init_auth(auth, keys, identities, seed)
         self.on_event = on_event
         self.now = 0.0
-        self._heap: list[tuple[float, int, int, Any, Any]] = []
+        self._heap: list[tuple[float, int, Entry]] = []
         self._counter = itertools.count()
         self.events: list[dict[str, Any]] = []
         self.frames_sent = 0
@@ -182,11 +182,11 @@ class VirtualSwarm:
         for rid in self._all:
             start = self.rng.uniform(0.0, start_spread)
             self.robots[rid] = _Robot(node=None)
-            self._push(start, _FAULT, -1, rid)  # "boot" pseudo-fault at a spread time
+            self._push(start, Boot(rid))  # at a spread time
         for i, fault in enumerate(self.faults):
-            self._push(fault.at, _FAULT, i, "begin")
+            self._push(fault.at, FaultPhase(i, "begin"))
             if fault.end is not None:
-                self._push(fault.end, _FAULT, i, "end")
+                self._push(fault.end, FaultPhase(i, "end"))
 
     def _interest(self) -> dict[int, tuple[int, ...]]:
         """slot -> robots to which a frame about it matters, from `SwarmPlan.relevant`
@@ -215,16 +215,16 @@ class VirtualSwarm:
             return self._standby_targets.get(sender, ())
         return self._all  # garbage: every receiver counts it as it would
 
-    def _push(self, t: float, kind: int, a: Any, b: Any) -> None:
-        heapq.heappush(self._heap, (t, next(self._counter), kind, a, b))
+    def _push(self, t: float, entry: Entry) -> None:
+        heapq.heappush(self._heap, (t, next(self._counter), entry))
 
     # ------------------------------------------------------------------ main loop
     def run(self) -> VirtualResult:
         heap = self._heap
         while heap and heap[0][0] <= self.duration:
-            t, _, kind, a, b = heapq.heappop(heap)
+            t, _, entry = heapq.heappop(heap)
             self.now = t
-            self._step(kind, a, b)
+            self._step(entry)
         self.now = self.duration
         for link, run in self._losing.items():
             self._outage(link, run, self.duration)
@@ -243,38 +243,38 @@ class VirtualSwarm:
             final=final,
         )
 
-    def _step(self, kind: int, a: Any, b: Any) -> None:
-        """Handle one event popped off the heap at `self.now`."""
-        if kind == _TICK:
-            r = self.robots[a]
-            if b != r.timer_gen or not r.alive or r.paused or r.node is None:
-                return
-            r.timer_at = None
-            self._call(a, _OP_TICK, None)
-        elif kind == _DELIVER:
-            r = self.robots[a]
-            if not r.alive or r.node is None:
-                return
-            if r.paused:
-                if len(r.buffered) < 512:  # a socket buffer holds a few hundred frames
-                    r.buffered.append(b)
-                return
-            self.deliveries += 1
-            self._call(a, _OP_RECEIVE, b)
-        elif kind == _FAULT:
-            if a == -1:
-                self._boot(b)
-            else:
-                self._fault(self.faults[a], b)
-        elif kind == _LIAR:
-            self._lie(a)
-        elif kind == _FORGE:
-            self._forge(a, b)
-        elif kind == _DELIVER_RAW:
-            r = self.robots[a]
-            if r.alive and r.node is not None and not r.paused:
+    def _step(self, entry: Entry) -> None:
+        """Handle one entry popped off the heap at `self.now`."""
+        match entry:
+            case Tick(rid, gen):
+                r = self.robots[rid]
+                if gen != r.timer_gen or not r.alive or r.paused or r.node is None:
+                    return
+                r.timer_at = None
+                self._call(rid, _OP_TICK, None)
+            case Deliver(rid, frame):
+                r = self.robots[rid]
+                if not r.alive or r.node is None:
+                    return
+                if r.paused:
+                    if len(r.buffered) < 512:  # a socket buffer holds a few hundred frames
+                        r.buffered.append(frame)
+                    return
                 self.deliveries += 1
-                self._call(a, _OP_RAW, b)
+                self._call(rid, _OP_RECEIVE, frame)
+            case Boot(rid):
+                self._boot(rid)
+            case FaultPhase(index, phase):
+                self._fault(self.faults[index], phase)
+            case Lie(rid):
+                self._lie(rid)
+            case Forge(rid, attack, round_):
+                self._forge(rid, attack, round_)
+            case DeliverRaw(rid, data):
+                r = self.robots[rid]
+                if r.alive and r.node is not None and not r.paused:
+                    self.deliveries += 1
+                    self._call(rid, _OP_RAW, data)
 
     def _final_states(self) -> tuple[dict[int, tuple[str, str | None, int]],
                                      dict[int, dict[str, int]]]:
@@ -336,7 +336,7 @@ class VirtualSwarm:
         r.timer_gen += 1
         r.timer_at = deadline
         if deadline is not None:
-            self._push(max(deadline, self.now), _TICK, rid, r.timer_gen)
+            self._push(max(deadline, self.now), Tick(rid, r.timer_gen))
 
     def _execute(self, rid: int, actions: list[Action]) -> None:
         for action in actions:
@@ -374,9 +374,9 @@ class VirtualSwarm:
             if self._lost(sender, rid):
                 continue
             at = self.now + ch.delay + (rng.random() * ch.jitter if ch.jitter else 0.0)
-            self._push(at, _DELIVER, rid, frame)
+            self._push(at, Deliver(rid, frame))
             if ch.duplicate and rng.random() < ch.duplicate:
-                self._push(at + rng.random() * ch.jitter, _DELIVER, rid, frame)
+                self._push(at + rng.random() * ch.jitter, Deliver(rid, frame))
 
     def _lost(self, sender: int, receiver: int) -> bool:
         """Is this frame lost on the link sender -> receiver (a cut, or the channel)?
@@ -469,9 +469,9 @@ class VirtualSwarm:
                 if node is not None and r.alive:
                     self._call(rid, _OP_HEALTH, Health.FAULTY)
             case FaultKind.LIAR, _:
-                self._push(t, _LIAR, rid, None)
+                self._push(t, Lie(rid))
             case FaultKind.FORGE, _:
-                self._push(t, _FORGE, rid, (fault.attack, 0))
+                self._push(t, Forge(rid, fault.attack, 0))
 
     def _unpause(self, rid: int, r: _Robot) -> None:
         """The end of a pause: what the robot missed arrives at once, then its timers."""
@@ -504,11 +504,10 @@ class VirtualSwarm:
         r.seq_high = snap.seq
         r.dropped.update(snap.drops)
 
-    def _forge(self, rid: int, what: tuple[str, int]) -> None:
+    def _forge(self, rid: int, attack: str, round_: int) -> None:
         """`forge:R@T:ATTACK`: R's forged frames (`sim.shared.forge`), delivered to every
         robot, R's own node and the ones it names included, as raw bytes (they go
         through `Node.receive`: decoding and verifying are what is attacked)."""
-        attack, round_ = what
         r = self.robots[rid]
         if not r.alive or r.paused or r.node is None:
             return
@@ -530,9 +529,9 @@ class VirtualSwarm:
                     continue
                 if self._lost(rid, target):
                     continue
-                self._push(self.now + ch.delay, _DELIVER_RAW, target, data)
+                self._push(self.now + ch.delay, DeliverRaw(target, data))
         if attack in REPEATING:
-            self._push(self.now + self.params.warn_interval, _FORGE, rid, (attack, round_ + 1))
+            self._push(self.now + self.params.warn_interval, Forge(rid, attack, round_ + 1))
 
     def _lie(self, rid: int) -> None:
         """`liar:R@T`: every warn interval while R is alive, the WARN frames
@@ -542,7 +541,7 @@ class VirtualSwarm:
             return
         for msg in liar_warnings(self.plan, r.node.snapshot()):
             self._call(rid, _OP_SEND, msg)
-        self._push(self.now + self.params.warn_interval, _LIAR, rid, None)
+        self._push(self.now + self.params.warn_interval, Lie(rid))
 
 
 def run_virtual(
