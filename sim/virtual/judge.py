@@ -51,6 +51,7 @@ def muted(swarm: VirtualSwarm) -> list[Violation]:
                 break
     return out
 
+
 def views(swarm: VirtualSwarm) -> list[Violation]:
     """Invariant 8 (`sim.shared.invariants`): at the end of a run that has been quiet
     for `Bounds.settle`, every live robot that hears a slot holds one view of it
@@ -67,23 +68,23 @@ def views(swarm: VirtualSwarm) -> list[Violation]:
     out: list[Violation] = []
     for f in swarm.plan.functions:
         slot = swarm.plan.slot(f)
-        views = {rid: sx.known[f] for rid, sx in snaps.items()
-                 if slot in swarm.plan.relevant(rid).slots or sx.function == f}
-        named = {h[0] for h in views.values()}
+        seen = {rid: sx.known[f] for rid, sx in snaps.items()
+                if slot in swarm.plan.relevant(rid).slots or sx.function == f}
+        named = {h[0] for h in seen.values()}
         executing = {rid for rid, sx in snaps.items()
                      if sx.role == Role.ACTIVE and sx.function == f}
-        if len(set(views.values())) > 1 and (named & set(snaps) or executing):
+        if len(set(seen.values())) > 1 and (named & set(snaps) or executing):
             # (Views that all name dead robots are an unheld slot: invariant 1 and
             # rule 8's alert judge it; no live robot can relay a dead holder's
             # certificate.)
-            shown = ", ".join(f"{r}: {h[0]}@{h[1]}" for r, h in sorted(views.items()))
+            shown = ", ".join(f"{r}: {h[0]}@{h[1]}" for r, h in sorted(seen.items()))
             out.append(Violation(swarm.duration, "views_disagree", None,
                                  f"{f} is held by different robots in different views "
                                  f"({shown})"))
             continue
-        if not views:
+        if not seen:
             continue
-        holder = next(iter(views.values()))[0]
+        holder = next(iter(seen.values()))[0]
         sh = snaps.get(holder)
         if sh is not None and sh.health == Health.OK and not (
                 sh.role == Role.ACTIVE and sh.function == f):

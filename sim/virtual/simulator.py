@@ -384,10 +384,12 @@ class VirtualSwarm:
         nor bursts are in use, so older runs replay byte for byte."""
         if self.cuts and any(c.cuts(sender, receiver, self.now) for c in self.cuts):
             return True
+        if not self.channel.loss:
+            return False  # a clean channel: nothing drawn, no run of losses to follow
         if self._burst is not None:
             lost = self._burst.lost(sender, receiver)
         else:
-            lost = bool(self.channel.loss) and self.rng.random() < self.channel.loss
+            lost = self.rng.random() < self.channel.loss
         link = (sender, receiver)
         if lost:
             self._losing[link] = (self._losing.get(link, (self.now, 0.0))[0], self.now)
