@@ -307,6 +307,14 @@ def test_per_robot_frame_sizes_and_verification(paper: Paper) -> None:
     assert exc.value.reason == "auth"
     got = wire.decode(relay, (key,), verifier)
     assert isinstance(got.msg, wire.Cert) and got.msg.inner.sender == 3
+    # A relayed CLAIM (a takeover shown whole to a robot with an older view) verifies
+    # with its claimant's key; a relayed heartbeat is no evidence of anything.
+    blank = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
+    got = wire.decode(enc(3, wire.Cert(2, blank, claim)), (key,), verifier)
+    assert isinstance(got.msg, wire.Cert) and got.msg.inner.msg == wire.Claim(2, 2, 1)
+    with pytest.raises(wire.CodecError) as exc:
+        wire.decode(enc(3, wire.Cert(2, blank, anchor)), (key,), verifier)
+    assert exc.value.reason == "malformed"
     assert wire.decode(warn, (key,), verifier).raw == warn
     # A WARN in robot 3's name signed with robot 6's key, bare or relayed: refused.
     forged = enc(3, wire.Warn(2, 2, 0), signer_of=6)

@@ -243,3 +243,59 @@ def test_two_holders_of_one_epoch_on_a_lossy_channel_end_within_the_bound(
                       seed=seed, faults=[parse_fault(s) for s in specs])
     assert [v.kind for v in res.violations] == []
     assert res.holders()["f2"] == [5]
+
+
+def _run(paper: Paper, auth: str, specs: list[str], duration: float = 15.0):  # type: ignore[no-untyped-def]
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+
+    plan, params = paper
+    return run_virtual(plan, params, duration=duration, auth=auth,
+                       faults=[parse_fault(s) for s in specs])
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_new_holder_gone_before_a_cut_off_watcher_heard_it_is_replaced(
+        paper: Paper, auth: str) -> None:
+    """Watcher 1 is cut off from 3 s to 6 s. Robot 2 crashes: 6 takes f2 over at epoch
+    1 (robot 3's warnings and its own ears, rule 9) and crashes too, before robot 1
+    heard it; robot 2 restarts as a standby (it hears 6's takeover in the warnings).
+    After the heal robot 1 warns about 2 at epoch 0, robot 3 about 6 at epoch 1: robot
+    1's view must rise to 6's takeover (per robot: the certificate, relayed whole; with
+    no signatures: robot 3's warning), so that 2, the one robot left that covers f2,
+    counts two witnesses of one episode and takes f2 back at epoch 2."""
+    res = _run(paper, auth, ["partition:1|2,3,4,5,6@3+3", "crash:2@3", "crash:6@4.5",
+                             "restart:2@5"])
+    assert [v.kind for v in res.violations] == []
+    assert [(e["robot"], e["epoch"]) for e in res.events
+            if e["event"] == "takeover" and e["function"] == "f2"] == [(6, 1), (2, 2)]
+    assert res.holders()["f2"] == [2]
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_holder_cut_off_through_its_takeover_keeps_the_slot_when_the_new_holder_died(
+        paper: Paper, auth: str) -> None:
+    """Robot 2 is cut off from 3 s to 5 s and executes on: 6 takes f2 over at epoch 1
+    on the others' side, and crashes at 4.5 s. After the heal every view comes back to
+    2, the robot that executes f2 (per robot: 2's signed REFUTEs void the warnings that
+    backed 6; with no signatures, 2's heartbeats while 6 stays silent, rule 4)."""
+    res = _run(paper, auth, ["partition:2|1,3,4,5,6@3+2", "crash:6@4.5"])
+    assert [v.kind for v in res.violations] == []
+    assert [e["robot"] for e in res.events if e["event"] == "takeover"] == [6]
+    assert res.holders()["f2"] == [2]
+    assert res.final[2] == ("active", "f2", 0)
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_stalled_holder_that_answers_out_of_its_buffer_does_not_pull_views_back(
+        paper: Paper, auth: str) -> None:
+    """Robot 2 freezes from 3 s to 5.5 s; 6 takes f2 over and crashes at 4.3 s. On
+    resume 2 answers the buffered warnings about it with a heartbeat at epoch 0, then
+    reads 6's epoch 1 in the same buffer and fences itself (rule 2). That one heartbeat
+    must not bring the watchers' views back to 2 (they would then warn about a robot
+    that no longer holds f2, and 2 would never count them): 2 takes f2 back at epoch 2."""
+    res = _run(paper, auth, ["pause:2@3+2.5", "crash:6@4.3"])
+    assert [v.kind for v in res.violations] == []
+    assert [(e["robot"], e["epoch"]) for e in res.events
+            if e["event"] == "takeover"] == [(6, 1), (2, 2)]
+    assert res.holders()["f2"] == [2]

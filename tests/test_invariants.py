@@ -139,6 +139,21 @@ def test_a_warning_about_a_holder_that_took_its_slot_back_still_counts(
     assert ("warning_unresolved", 1) in kinds(checker)
 
 
+def test_a_warning_about_a_holder_that_then_fences_itself_is_answered_by_the_fence(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # 6 took f2 over from 2 at 4.5 s while 2 was away; 2 came back and resumed f2 at
+    # epoch 0 (a restart's rejoin), robot 1 heard it, lost it and warned at 6.0 s, and
+    # 2 fenced itself on hearing 6's epoch at 6.2 s: the fence answers the warning
+    # (robot 1 then learns the newer holder); without it, nothing does.
+    resumed = {"t": 5.5, "robot": 2, "event": "started", "role": "active", "function": "f2"}
+    fenced = {"t": 6.2, "robot": 2, "event": "fenced", "function": "f2", "epoch": 1}
+    events = [takeover(4.5, 6, "f2", 2), resumed, warn(6.0, 1, 2, "f2")]
+    checker = judge(paper, ["restart:2@3"], [*events, fenced], duration=14.0)
+    assert ("warning_unresolved", 1) not in kinds(checker)
+    checker = judge(paper, ["restart:2@3"], events, duration=14.0)
+    assert ("warning_unresolved", 1) in kinds(checker)
+
+
 def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace(
         paper: tuple[SwarmPlan, Params]) -> None:
     # Standby 6 restarted at 2.9 s (logged `started` again at 3.0 s); robot 2 crashes at

@@ -297,8 +297,13 @@ class Checker:
         self._dual_update(t)
 
     def _fenced(self, t: float, r: int, rec: dict[str, Any]) -> None:
-        """A robot fenced on an epoch no takeover produced: a forged epoch."""
+        """A robot fenced on an epoch no takeover produced: a forged epoch. A fence
+        that a takeover did produce answers the warnings about the fenced robot on that
+        slot: its watchers learn the newer holder (rule 2), whose takeover may have come
+        before the warning (the suspect resumed the slot after a restart, say)."""
         f, epoch = rec["function"], int(rec["epoch"])
+        for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
+            del self.episodes[key]
         if epoch and (f, epoch) not in self.epochs:
             self.violations.append(Violation(
                 t, "fenced_without_takeover", r,

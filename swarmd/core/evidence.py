@@ -23,8 +23,11 @@ the oldest, it cannot grow the store):
 - `refutes`: {(holder, epoch): {witness: (highest refuted seq, the signed REFUTE)}}.
 - `certified`: {(claimant, epoch): (failed, {backer: seq})} of the CLAIMs a certificate
   backed here, re-judged against the refutes whenever it is asked about.
-- `pending`: {(claimant, epoch): (failed, first heard)}, claims heard before their
+- `pending`: {(claimant, epoch): (failed, first heard, raw)}, claims heard before their
   certificate (a channel that reorders), counted once it comes, if still fresh.
+- `claims`: {(claimant, epoch): the claimant's signed CLAIM} of the claims certified
+  here, so that the whole certificate of a takeover — the evidence and the claim it
+  backs — can be shown to a robot whose view of f is older (`view_frames`).
 - `mine`: (failed, frames), the certificate of this robot's own hold of f.
 - `relayed_at`: when `mine`, or the refutes of f, were last relayed (once per T_max).
 
@@ -67,7 +70,8 @@ class EvidenceStore:
         self._evidence: dict[str, dict[tuple[int, int], dict[int, bytes]]] = {}
         self._refutes: dict[str, dict[tuple[int, int], dict[int, tuple[int, bytes]]]] = {}
         self._certified: dict[str, dict[tuple[int, int], tuple[int, dict[int, int]]]] = {}
-        self._pending: dict[str, dict[tuple[int, int], tuple[int, float]]] = {}
+        self._pending: dict[str, dict[tuple[int, int], tuple[int, float, bytes]]] = {}
+        self._claims: dict[str, dict[tuple[int, int], bytes]] = {}
         self._mine: dict[str, tuple[int, tuple[bytes, ...]]] = {}
         self._relayed_at: dict[str, float] = {}
         self._refutes_relayed_at: dict[str, float] = {}
@@ -77,10 +81,12 @@ class EvidenceStore:
 
     # ------------------------------------------------------------------ evidence
     def record(self, f: str, witness: int, suspect: int, epoch: int, raw: bytes,
-               floor: int, now: float | None = None) -> list[tuple[int, wire.Claim]] | None:
+               floor: int, now: float | None = None,
+               ) -> list[tuple[int, wire.Claim, bytes]] | None:
         """Keep `witness`'s signed frame `raw` against `suspect` at `epoch` (`floor`:
         the epoch of f as known). None when the suspect refuted it; otherwise the
-        pending claims it now certifies, still fresh at `now`, for the node to count."""
+        pending claims it now certifies (claimant, claim, its signed bytes), still
+        fresh at `now`, for the node to count."""
         if not raw or epoch + 1 < floor:
             # Older than the takeover we know of. Evidence about the epoch just below it
             # is kept: it may back a rival claim of that same takeover, which the lower
@@ -99,10 +105,10 @@ class EvidenceStore:
         old = got.get(witness)
         if old is None or seq_of(old) < seq_of(raw):
             got[witness] = raw  # the latest: the least likely to be refuted
-        ready: list[tuple[int, wire.Claim]] = []
+        ready: list[tuple[int, wire.Claim, bytes]] = []
         pending = self._pending.get(f)
         if pending:
-            for (claimant, new_epoch), (failed, heard) in list(pending.items()):
+            for (claimant, new_epoch), (failed, heard, signed) in list(pending.items()):
                 claim = wire.Claim(failed, self._plan.slot(f), new_epoch)
                 if (failed, new_epoch - 1) == (suspect, epoch) \
                         and self.certify(f, claimant, claim, floor):
@@ -110,7 +116,7 @@ class EvidenceStore:
                     # claim counts now, if it is still a fresh one.
                     del pending[(claimant, new_epoch)]
                     if now is not None and now - heard <= self._params.claim_hold:
-                        ready.append((claimant, claim))
+                        ready.append((claimant, claim, signed))
         return ready
 
     def _backers(self, f: str, suspect: int, epoch: int, claimant: int) -> dict[int, int]:
@@ -188,12 +194,23 @@ class EvidenceStore:
         entry = self._certified.get(f, {}).get((claimant, epoch))
         return entry[0] if entry is not None else None
 
-    def hold_pending(self, f: str, claimant: int, c: wire.Claim, now: float) -> None:
+    def hold_pending(self, f: str, claimant: int, c: wire.Claim, now: float,
+                     raw: bytes = b"") -> None:
         """Keep an uncertified claim a while, in case its certificate comes later."""
         pending = self._pending.setdefault(f, {})
         if len(pending) >= CLAIMS_REMEMBERED:
             del pending[next(iter(pending))]
-        pending[(claimant, c.epoch)] = (c.failed, now)
+        pending[(claimant, c.epoch)] = (c.failed, now, raw)
+
+    def keep_claim(self, f: str, claimant: int, epoch: int, raw: bytes) -> None:
+        """Keep the signed CLAIM of a takeover certified here (`view_frames` relays it).
+        Bounded like the certificates: the oldest epoch goes first."""
+        if not raw:
+            return
+        kept = self._claims.setdefault(f, {})
+        if (claimant, epoch) not in kept and len(kept) >= CLAIMS_REMEMBERED:
+            del kept[min(kept, key=lambda k: k[1])]
+        kept[(claimant, epoch)] = raw
 
     def cert_frames(self, f: str, suspect: int, epoch: int,
                     claimant: int | None = None) -> tuple[bytes, ...]:
@@ -204,18 +221,22 @@ class EvidenceStore:
         who = self._robot_id if claimant is None else claimant
         return tuple(got[w] for w in self._backers(f, suspect, epoch, who))
 
-    def stale_frames(self, f: str, holder: int, epoch: int, stale: int,
-                     now: float) -> tuple[bytes, ...]:
-        """A robot still heartbeats f as its holder at epoch `stale`, which the takeover
-        by `holder` at `epoch` (certified here) ended: the evidence against it, to relay
-        so that it fences itself or refutes (DESIGN, "Convergence"); at most once per
-        T_max (empty otherwise, or when this robot certified no such takeover)."""
+    def view_frames(self, f: str, holder: int, epoch: int, now: float) -> tuple[bytes, ...]:
+        """Another robot's view of f is older than the takeover by `holder` at `epoch`
+        certified here (it heartbeats f at an older epoch, or warns about an older
+        holder): the whole certificate — the evidence against the robot replaced, then
+        `holder`'s signed CLAIM — to relay, so that a stale holder fences itself or
+        refutes and any other robot certifies the takeover and moves its view (DESIGN,
+        "Convergence"); at most once per T_max (empty otherwise, or when this robot
+        certified no such takeover)."""
         failed = self.replaced(f, holder, epoch)
-        if failed is None or epoch - 1 != stale \
+        if failed is None or epoch == 0 \
                 or now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
             return ()
         self._evidence_relayed_at[f] = now
-        return self.cert_frames(f, failed, stale, holder)
+        frames = self.cert_frames(f, failed, epoch - 1, holder)
+        claim = self._claims.get(f, {}).get((holder, epoch))
+        return (*frames, claim) if claim is not None and frames else frames
 
     def took_over(self, f: str, failed: int, old_epoch: int, epoch: int) -> None:
         """This robot holds f at `epoch` now: keep the certificate of its hold."""

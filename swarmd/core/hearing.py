@@ -30,6 +30,8 @@ class Hearing(NodeBase):
         holder, epoch = self._known[f]
         newer = hb.epoch > epoch or (hb.epoch == epoch and (sender == holder or sender < holder))
         newer = newer or (hb.epoch == epoch and self._holder_silent(f, holder, epoch, now))
+        if not newer and hb.epoch < epoch and self._identity is None:
+            newer = self._older_alive(f, sender, hb, Holder(holder, epoch), now)
         if newer and self._identity is not None and (sender, hb.epoch) != (holder, epoch) \
                 and not self._ev.is_certified(f, sender, hb.epoch):
             self._uncertified_beat(f, hb, now)
@@ -64,8 +66,7 @@ class Hearing(NodeBase):
             # Per-robot mode, a takeover it missed whose new holder may be gone:
             # whoever certified it shows the stale holder the evidence against it
             # (it fences itself, or refutes and keeps its slot everywhere).
-            for raw in self._ev.stale_frames(f, known.robot, known.epoch, hb.epoch, now):
-                self._send_cert(f, raw)
+            self._relay_view(f, now)
 
     def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
@@ -146,6 +147,23 @@ class Hearing(NodeBase):
             return False
         return not self._ears.heard_lately(f, holder, epoch, now, self._params.t_max)
 
+    def _older_alive(self, f: str, sender: int, hb: wire.Heartbeat, known: Holder,
+                     now: float) -> bool:
+        """Unsigned or shared-key mode: does f's holder as we know it (`known`) yield to
+        `sender`, heartbeating f at an older epoch? Yes when `known` has been silent for
+        T_max (`_holder_silent`) while `sender` has heartbeated on for a heartbeat
+        interval: the takeover of its hold happened while it was cut off from its
+        watchers, and the new holder is gone. Per robot, its signed REFUTEs undo that
+        takeover everywhere (`_rejudge`); with no signatures its heartbeats are its
+        refutation (rule 4), so views come back to the robot that executes the slot
+        (DESIGN, "Convergence"). One heartbeat is not enough: a stale holder answering
+        warnings out of its buffer after a stall fences itself a moment later when it
+        reads the newer epoch there (rule 2). If the newer holder is alive after all,
+        its next heartbeat moves the view up again and fences the older one."""
+        sustained = self._ears.older_beat(f, sender, hb.epoch, now)
+        return sustained >= self._params.heartbeat_interval \
+            and self._holder_silent(f, known.robot, known.epoch, now)
+
     # ------------------------------------------------------------------ WARN
     def _on_warn(self, sender: int, w: wire.Warn, now: float, raw: bytes = b"",
                  seq: int = 0) -> None:
@@ -157,6 +175,10 @@ class Hearing(NodeBase):
             if f == self._function and self._role == Role.ACTIVE \
                     and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
                 self._relay_cert(f, now)  # a watcher that missed our takeover
+            elif w.epoch < self._known[f].epoch:
+                self._relay_view(f, now)  # one that missed a takeover we certified
+        else:
+            self._warned_newer(f, sender, w, now)
         holder, epoch = self._known[f]
         if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
             return
@@ -168,8 +190,10 @@ class Hearing(NodeBase):
             return  # about an older holder: stale
         # A warning at a newer epoch than we know means we missed a takeover (we were
         # partitioned, or lost its heartbeats) and the new holder may be dead already:
-        # count it, keyed by (suspect, epoch), without believing it into `known` — a
-        # single liar cannot reach the quorum, and the holder's heartbeat refutes it.
+        # count it, keyed by (suspect, epoch), without believing it into `known` (only
+        # a certificate does, per robot; `_warned_newer` in the other modes, when the
+        # holder we know is silent here too) — a single liar cannot reach the quorum,
+        # and the holder's heartbeat refutes it.
         # Rule 3: only the holders of the slots that watch f are witnesses; never the
         # suspect itself.
         if sender == w.suspect or sender not in witnesses(self._plan, self._known, f):
@@ -184,6 +208,36 @@ class Hearing(NodeBase):
         if count >= self._params.quorum and not self._ears.heard_lately(
                 f, w.suspect, w.epoch, now, self._params.t_max / 2):
             self._start_claim(f, w.suspect, w.epoch, now)
+
+    def _warned_newer(self, f: str, sender: int, w: wire.Warn, now: float) -> None:
+        """Unsigned or shared-key mode: a witness of f (rule 3) warns about a holder at
+        a newer epoch than our view: it heard that holder's heartbeat, which we missed
+        (a partition, a fade), and the holder may be dead since. Our view rises to it
+        (DESIGN, "Convergence"), or our warnings would name an older holder than the
+        other witnesses' and the slot's standby would never count a quorum. In these
+        modes any heartbeat moves a view as far (DESIGN section 2, "Who can
+        still do what"); per robot, the certificate does it (`_relay_view`)."""
+        known = self._known[f]
+        if w.epoch <= known.epoch or w.suspect in (self._robot_id, sender) \
+                or sender not in witnesses(self._plan, self._known, f) \
+                or (self._claim is not None and self._claim.function == f) \
+                or (f == self._function and self._role == Role.ACTIVE):
+            return  # our own claim or hold settles it (rule 2; `_older_alive`)
+        if self._ears.heard_lately(f, known.robot, known.epoch, now, self._params.t_max):
+            return  # the holder we know is alive: views come back to it (`_older_alive`)
+        self._learn_holder(f, Holder(w.suspect, w.epoch), now)
+
+    def _learn_holder(self, f: str, new: Holder, now: float) -> None:
+        """Our view of f rises to `new`, a takeover we learn of without hearing its
+        holder (`_warned_newer`, `_relay_view`'s receivers). Not a sign of life: the
+        watch treats it as a CLAIM heard (the new holder gets `claim_hold + t_max` to
+        heartbeat; rule 10, once an episode), then suspects it."""
+        self._known[f] = new
+        watch = self._watches.get(f)
+        if watch is not None:
+            watch.claim_heard(now)
+        if self._rejoin is not None and self._rejoin.function == f:
+            self._rejoin_superseded(f, new.epoch)
 
     def _ours_unheld(self, f: str, sender: int, w: wire.Warn, seq: int, now: float) -> bool:
         """A warning about ourselves. Holding the slot, we answer it (rule 4). Not
@@ -227,21 +281,26 @@ class Hearing(NodeBase):
         return count
 
     # ------------------------------------------------------------------ CLAIM
-    def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
+    def _on_claim(self, sender: int, c: wire.Claim, now: float, raw: bytes = b"") -> None:
         f = self._slot(c.function)
         if f is None:
             return
         if self._identity is not None:
             if (sender, c.epoch) == tuple(self._known[f]):
-                return  # the holder re-announcing its certificate (`_relay_cert`)
+                # The holder re-announcing its certificate (`_relay_cert`): its signed
+                # claim is kept for `_relay_view` if we missed the first one.
+                if self._ev.is_certified(f, sender, c.epoch):
+                    self._ev.keep_claim(f, sender, c.epoch, raw)
+                return
             if not self._ev.certify(f, sender, c, self._known[f].epoch):
                 # Per-robot mode: a claim without a certificate this robot verified
                 # silences nobody and makes nobody back off (one robot alone cannot
                 # start a takeover); kept a while in case its certificate comes later.
-                self._ev.hold_pending(f, sender, c, now)
+                self._ev.hold_pending(f, sender, c, now, raw)
                 self._drops[DropReason.UNCERTIFIED] += 1
                 self._relay_refutes(f, now)
                 return
+            self._ev.keep_claim(f, sender, c.epoch, raw)
         if not self._claims_seen.believed(f, sender, c.epoch, now):
             self._drops[DropReason.STALE_CLAIM] += 1
             return

@@ -45,7 +45,9 @@ class Moves(NodeBase):
         if self._identity is not None:
             for raw in self._ev.cert_frames(c.function, c.failed, c.old_epoch):
                 self._send_cert(c.function, raw)
-        self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
+        signed = self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
+        if self._identity is not None:
+            self._ev.keep_claim(c.function, self._robot_id, c.epoch, signed)
 
     def _claim_due(self, now: float) -> None:
         """The wait state's deadlines: take over at the end of the hold, else repeat the

@@ -208,7 +208,7 @@ class Node(Hearing, Moves, Signed, Restart):
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
             case wire.Claim() as c:
-                self._on_claim(sender, c, now)
+                self._on_claim(sender, c, now, frame.raw)
             case wire.Leave() as lv:
                 self._on_leave(sender, lv, now, frame.raw)
             case wire.Refute() as rf:

@@ -130,7 +130,13 @@ class NodeBase:
 
     # ------------------------------------------------------------------ across modules
     # Defined in `hearing.py`, `moves.py` and `signed.py`.
-    def _on_claim(self, sender: int, c: wire.Claim, now: float) -> None:
+    def _on_claim(self, sender: int, c: wire.Claim, now: float, raw: bytes = b"") -> None:
+        raise NotImplementedError
+
+    def _learn_holder(self, f: str, new: Holder, now: float) -> None:
+        raise NotImplementedError
+
+    def _relay_view(self, f: str, now: float) -> None:
         raise NotImplementedError
 
     def _fence(self, epoch: int, now: float) -> None:

@@ -62,9 +62,9 @@ class Signed(NodeBase):
             if suspect != self._robot_id:  # what we refuted ourselves is no news
                 self._drops[DropReason.STALE_EVIDENCE] += 1
             return
-        for claimant, claim in ready:
+        for claimant, claim, signed in ready:
             assert now is not None  # `record` readies a claim only with a `now`
-            self._on_claim(claimant, claim, now)
+            self._on_claim(claimant, claim, now, signed)
 
     def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
         """Someone still believes an older holder of our slot: relay the certificate of
@@ -98,12 +98,50 @@ class Signed(NodeBase):
         f = self._slot(cert.function)
         if f is None:
             return
-        if isinstance(cert.inner.msg, wire.Refute):
-            self._on_refute(cert.inner.sender, cert.inner.msg, now, cert.raw)
+        msg = cert.inner.msg
+        if isinstance(msg, wire.Refute):
+            self._on_refute(cert.inner.sender, msg, now, cert.raw)
+            return
+        if isinstance(msg, wire.Claim):
+            self._on_relayed_claim(f, cert.inner.sender, msg, cert.raw, now)
             return
         said = cert_says(cert)
         if said is not None:
             self._record_evidence(f, *said, cert.raw, now)
+
+    def _relay_view(self, f: str, now: float) -> None:
+        """Someone's view of f is older than ours (it heartbeats f, or warns about f's
+        holder, at an older epoch): if a certificate here backs our view, relay it
+        whole, the signed CLAIM last (`EvidenceStore.view_frames`), at most once per
+        T_max. Without it, a robot that missed a takeover whose new holder died before
+        it heard a heartbeat would warn about the old holder for ever, the others
+        about the new one, and the slot's standby would count no quorum (DESIGN,
+        "Convergence")."""
+        holder, epoch = self._known[f]
+        for raw in self._ev.view_frames(f, holder, epoch, now):
+            self._send_cert(f, raw)
+
+    def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
+                          now: float) -> None:
+        """A signed CLAIM relayed inside a CERT (`_relay_view`): heard as a claim (rule
+        10 bounds what a repeat does), and, if the evidence here certifies it and it is
+        newer than our view of f, our view rises to it (`_learn_holder`) — as far as a
+        heartbeat of its claimant would have moved it, since a robot relays only the
+        takeover its own view holds. Holding f at an older epoch, we fence (rule 2), as
+        that heartbeat would have fenced us: had the takeover been of our hold at our
+        epoch, the evidence against us came first in the relay and we refuted it (rule
+        4), so it is no longer certified here — unless we were stalled, and then the
+        takeover was right. Not over our own claim of f: its end settles it."""
+        if claimant == self._robot_id:
+            return
+        self._on_claim(claimant, c, now, raw)
+        if c.epoch <= self._known[f].epoch or not self._ev.is_certified(f, claimant, c.epoch) \
+                or (self._claim is not None and self._claim.function == f):
+            return
+        holding = f == self._function and self._role == Role.ACTIVE
+        self._learn_holder(f, Holder(claimant, c.epoch), now)
+        if holding:
+            self._fence(c.epoch, now)
 
     # ------------------------------------------------------------------ refutes
     # A holder's signed word that it was alive after a warning voids that warning

@@ -121,9 +121,10 @@ class Leave:
 @dataclass(frozen=True, slots=True)
 class Cert:
     """One piece of a takeover's certificate (per-robot mode): another robot's signed
-    WARN or LEAVE frame about `function`, relayed verbatim by a claimant or holder.
-    `inner` is that frame decoded and verified with its own sender's key; `raw` its
-    bytes, to relay again."""
+    WARN, LEAVE, REFUTE or CLAIM frame about `function`, relayed verbatim by a claimant,
+    a holder, or a robot showing an older view the takeover it missed. `inner` is that
+    frame decoded and verified with its own sender's key; `raw` its bytes, to relay
+    again."""
 
     function: int
     inner: Frame
@@ -384,10 +385,10 @@ def _decode_cert(data: bytes, swarm_id: int, sender: int, seq_bytes: bytes, slot
     if len(raw) < _INNER_MIN:
         raise CodecError("malformed", f"certificate of {len(data)} bytes is too short")
     got = decode(raw, (), verifier, inner=True)  # raises CodecError("auth") if forged
-    if not isinstance(got.msg, (Warn, Leave, Refute)) or got.msg.function != slot \
+    if not isinstance(got.msg, (Warn, Leave, Refute, Claim)) or got.msg.function != slot \
             or got.swarm_id != swarm_id:
         raise CodecError("malformed",
-                         "a certificate relays a WARN, LEAVE or REFUTE of its slot")
+                         "a certificate relays a WARN, LEAVE, REFUTE or CLAIM of its slot")
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), Cert(slot, got, raw))
 
 
