@@ -75,8 +75,7 @@ def views(swarm: VirtualSwarm) -> list[Violation]:
                      if sx.role == Role.ACTIVE and sx.function == f}
         if len(set(seen.values())) > 1 and (named & set(snaps) or executing):
             # (Views that all name dead robots are an unheld slot: invariant 1 and
-            # rule 8's alert judge it; no live robot can relay a dead holder's
-            # certificate.)
+            # rule 8's alert judge it.)
             shown = ", ".join(f"{r}: {h[0]}@{h[1]}" for r, h in sorted(seen.items()))
             out.append(Violation(swarm.duration, "views_disagree", None,
                                  f"{f} is held by different robots in different views "
