@@ -170,15 +170,7 @@ class Hearing(NodeBase):
         f = self._slot(w.function)
         if f is None:
             return
-        if self._identity is not None:
-            self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
-            if f == self._function and self._role == Role.ACTIVE \
-                    and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
-                self._relay_cert(f, now)  # a watcher that missed our takeover
-            elif w.epoch < self._known[f].epoch:
-                self._relay_view(f, now)  # one that missed a takeover we certified
-        else:
-            self._warned_newer(f, sender, w, now)
+        self._views_from_warn(f, sender, w, raw, now)
         holder, epoch = self._known[f]
         if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
             return
@@ -208,6 +200,22 @@ class Hearing(NodeBase):
         if count >= self._params.quorum and not self._ears.heard_lately(
                 f, w.suspect, w.epoch, now, self._params.t_max / 2):
             self._start_claim(f, w.suspect, w.epoch, now)
+
+    def _views_from_warn(self, f: str, sender: int, w: wire.Warn, raw: bytes,
+                         now: float) -> None:
+        """A warning about f's holder, before any standby counts it: per robot, its
+        evidence is kept, and a robot whose view of f is newer than the warning's shows
+        the warner its certificate; in the other modes a newer epoch in it may raise our
+        view (DESIGN, "Convergence")."""
+        if self._identity is None:
+            self._warned_newer(f, sender, w, now)
+            return
+        self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
+        if f == self._function and self._role == Role.ACTIVE \
+                and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
+            self._relay_cert(f, now)  # a watcher that missed our takeover
+        elif w.epoch < self._known[f].epoch:
+            self._relay_view(f, now)  # one that missed a takeover we certified
 
     def _warned_newer(self, f: str, sender: int, w: wire.Warn, now: float) -> None:
         """Unsigned or shared-key mode: a witness of f (rule 3) warns about a holder at
@@ -285,22 +293,8 @@ class Hearing(NodeBase):
         f = self._slot(c.function)
         if f is None:
             return
-        if self._identity is not None:
-            if (sender, c.epoch) == tuple(self._known[f]):
-                # The holder re-announcing its certificate (`_relay_cert`): its signed
-                # claim is kept for `_relay_view` if we missed the first one.
-                if self._ev.is_certified(f, sender, c.epoch):
-                    self._ev.keep_claim(f, sender, c.epoch, raw)
-                return
-            if not self._ev.certify(f, sender, c, self._known[f].epoch):
-                # Per-robot mode: a claim without a certificate this robot verified
-                # silences nobody and makes nobody back off (one robot alone cannot
-                # start a takeover); kept a while in case its certificate comes later.
-                self._ev.hold_pending(f, sender, c, now, raw)
-                self._drops[DropReason.UNCERTIFIED] += 1
-                self._relay_refutes(f, now)
-                return
-            self._ev.keep_claim(f, sender, c.epoch, raw)
+        if self._identity is not None and not self._claim_certified(f, sender, c, raw, now):
+            return
         if not self._claims_seen.believed(f, sender, c.epoch, now):
             self._drops[DropReason.STALE_CLAIM] += 1
             return
@@ -325,6 +319,27 @@ class Hearing(NodeBase):
             votes.clear()
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, c.epoch)
+
+    def _claim_certified(self, f: str, sender: int, c: wire.Claim, raw: bytes,
+                         now: float) -> bool:
+        """Per-robot mode: does this CLAIM (signed bytes `raw`) act here? Only with a
+        certificate this robot verified; its signed bytes are kept for `_relay_view`."""
+        if (sender, c.epoch) == tuple(self._known[f]):
+            # The holder re-announcing its certificate (`_relay_cert`): its signed claim
+            # is kept in case we missed the first one.
+            if self._ev.is_certified(f, sender, c.epoch):
+                self._ev.keep_claim(f, sender, c.epoch, raw)
+            return False
+        if not self._ev.certify(f, sender, c, self._known[f].epoch):
+            # A claim without a certificate this robot verified silences nobody and
+            # makes nobody back off (one robot alone cannot start a takeover); kept a
+            # while in case its certificate comes later.
+            self._ev.hold_pending(f, sender, c, now, raw)
+            self._drops[DropReason.UNCERTIFIED] += 1
+            self._relay_refutes(f, now)
+            return False
+        self._ev.keep_claim(f, sender, c.epoch, raw)
+        return True
 
     # ------------------------------------------------------------------ LEAVE
     def _on_leave(self, sender: int, lv: wire.Leave, now: float, raw: bytes = b"") -> None:
