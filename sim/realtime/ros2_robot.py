@@ -32,7 +32,7 @@ from swarmd.link.ros2_node import RosThread
 HEALTH_PERIOD = 0.5
 """s between two health statuses of the stack (diagnostic_updater's default is 1 s)."""
 LEVEL = {Health.OK: 0, Health.DEGRADED: 1, Health.FAULTY: 2}
-SIM_HEALTH_TIMEOUT = 6.0
+SIM_HEALTH_TIMEOUT = 20.0
 """s: the simulated robots' ros2 link health_timeout (`DomainLease.link_doc`)."""
 
 
@@ -222,9 +222,10 @@ class DomainLease:
         # after its start, and the robot is reported faulty. The simulated stack starts
         # with the daemon, in its process, and its DDS participant and the link's found
         # each other only after more than the default 2 s when tests ran in parallel on
-        # two cores: robots left as faulty before any fault. Here the stack never falls
-        # silent on its own (its faults are explicit: ERROR, or the whole process), so a
-        # longer timeout costs nothing.
+        # two cores, and after more than 6 s with two suites at once: robots left as
+        # faulty before any fault. DDS discovery has no bound on a loaded machine. Here
+        # the stack never falls silent on its own (its faults are explicit: ERROR, or
+        # the whole process), so a long timeout costs nothing.
         return {"kind": "ros2", "domain_id": self.domain_id, "namespace": f"robot{robot}",
                 "health_timeout": SIM_HEALTH_TIMEOUT}
 
