@@ -259,8 +259,13 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     assert listener.late["/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
     assert listener.late["/robot1/swarmd/function"][:1] == ["f1"]
     # The swarm on /diagnostics: f2's holder goes 2 -> 6, as robots 1, 3 and 6 show it.
-    for publisher in ("robot1", "robot3", "robot6", "base_station"):
+    for publisher in ("robot1", "robot3", "robot6"):
         assert listener.holders("f2", publisher) == ["2", "6"], publisher
+    # The base station shows it too. It is a process started once the run's files
+    # exist: on a loaded machine its interpreter, rclpy and DDS discovery took past the
+    # crash (4 s), so it may have heard 6 only; what it shows must end with 6 and hold
+    # nothing else.
+    assert listener.holders("f2", "base_station") in (["2", "6"], ["6"])
     first_6 = min(t for t, name, _, _, v in listener.statuses
                   if name == "swarmd/paper/f2" and v["holder"] == "6")
     assert first_6 - result.t0 >= crash
