@@ -169,7 +169,7 @@ DRAWN: collections.Counter[str] = collections.Counter()
 """Fault kinds drawn by `chaos` in this process (one-way partitions as `oneway`)."""
 
 
-def chaos(seeds: range, max_robots: int, verbose: bool, dense: bool = False,
+def chaos(seeds: Sequence[int], max_robots: int, verbose: bool, dense: bool = False,
           auth: str | None = None) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
