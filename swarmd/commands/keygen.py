@@ -18,50 +18,54 @@ def _fail(message: str) -> typer.Exit:
     return typer.Exit(1)
 
 
+# Each parameter's declaration (flag, range, help) as a type of its own, so the
+# signature of `keygen` fits in two lines.
+PathArg = Annotated[
+    Path, typer.Argument(help="Key file to create (its directory must exist); "
+                         "with --robot or --swarm, the keys directory.")
+]
+RobotOpt = Annotated[
+    int | None, typer.Option("--robot", min=1, max=0xFFFF,
+                             help="Make robot ID's key pair in PATH: robot-ID.key "
+                             "(private, 0600) and robot-ID.pub.")
+]
+SwarmOpt = Annotated[
+    Path | None, typer.Option("--swarm", help="Make a key pair in PATH for every "
+                              "robot of this swarm file (revoked ones skipped).")
+]
+ForceOpt = Annotated[
+    bool, typer.Option("--force", help="Replace existing key files (default: refuse).")
+]
+HexOpt = Annotated[
+    bool, typer.Option("--hex", help="Shared key: write 64 hex digits instead of "
+                       "32 raw bytes.")
+]
+
+
 def register(app: typer.Typer) -> None:
     """Add the `keygen` command to the CLI."""
+    app.command()(keygen)
 
-    @app.command()
-    def keygen(
-        path: Annotated[
-            Path, typer.Argument(help="Key file to create (its directory must exist); "
-                                 "with --robot or --swarm, the keys directory.")
-        ],
-        robot: Annotated[
-            int | None, typer.Option("--robot", min=1, max=0xFFFF,
-                                     help="Make robot ID's key pair in PATH: robot-ID.key "
-                                     "(private, 0600) and robot-ID.pub.")
-        ] = None,
-        swarm: Annotated[
-            Path | None, typer.Option("--swarm", help="Make a key pair in PATH for every "
-                                      "robot of this swarm file (revoked ones skipped).")
-        ] = None,
-        force: Annotated[
-            bool, typer.Option("--force", help="Replace existing key files (default: "
-                               "refuse).")
-        ] = False,
-        hex_format: Annotated[
-            bool, typer.Option("--hex", help="Shared key: write 64 hex digits instead of "
-                               "32 raw bytes.")
-        ] = False,
-    ) -> None:
-        """Generate keys: a shared swarm key, or per-robot Ed25519 key pairs.
 
-        Per-robot (the default for new swarms, `auth: {mode: per-robot}`): each robot's
-        robot-N.key goes to that robot only (identity_file in its robot file); every
-        robot-N.pub goes to the keys dir beside the swarm file on every robot
-        (docs/operations.md, "Keys").
+def keygen(path: PathArg, robot: RobotOpt = None, swarm: SwarmOpt = None,
+           force: ForceOpt = False, hex_format: HexOpt = False) -> None:
+    """Generate keys: a shared swarm key, or per-robot Ed25519 key pairs.
 
-        Shared (`auth: {mode: shared}`): one 32-byte key, the same on every robot.
+    Per-robot (the default for new swarms, `auth: {mode: per-robot}`): each robot's
+    robot-N.key goes to that robot only (identity_file in its robot file); every
+    robot-N.pub goes to the keys dir beside the swarm file on every robot
+    (docs/operations.md, "Keys").
 
-        A device node, FIFO or directory where a key would go is never replaced, even
-        with --force. Exit codes: 0 written, 1 refused (exists without --force, cannot
-        be written, bad swarm file).
+    Shared (`auth: {mode: shared}`): one 32-byte key, the same on every robot.
 
-        Example: swarmd keygen --swarm configs/paper.yaml configs/keys (also:
-        swarmd keygen --robot 3 configs/keys; swarmd keygen swarm.key)
-        """
-        _keygen(path, robot, swarm, force, hex_format)
+    A device node, FIFO or directory where a key would go is never replaced, even
+    with --force. Exit codes: 0 written, 1 refused (exists without --force, cannot
+    be written, bad swarm file).
+
+    Example: swarmd keygen --swarm configs/paper.yaml configs/keys (also:
+    swarmd keygen --robot 3 configs/keys; swarmd keygen swarm.key)
+    """
+    _keygen(path, robot, swarm, force, hex_format)
 
 
 def _keygen(path: Path, robot: int | None, swarm: Path | None, force: bool,

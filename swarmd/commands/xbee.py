@@ -93,6 +93,11 @@ def _protocol(dev: Any) -> str:
     return PROTOCOL_NAMES.get(name, name.lower())
 
 
+# The options `info` and `configure` share, declared once.
+PortOpt = Annotated[str, typer.Option(help="Serial device of the radio, e.g. /dev/xbee.")]
+BaudOpt = Annotated[int, typer.Option(min=1, help="UART baud rate, bit/s (the radio's BD).")]
+
+
 def register(app: typer.Typer) -> None:
     """Add the `xbee` command group to the CLI."""
     xbee = typer.Typer(
@@ -102,109 +107,102 @@ def register(app: typer.Typer) -> None:
         "Example: swarmd xbee info --port /dev/xbee",
         no_args_is_help=True)
     app.add_typer(xbee, name="xbee")
+    xbee.command("info")(info)
+    xbee.command("configure")(configure)
+    xbee.command("emulate")(emulate)
 
-    @xbee.command("info")
-    def info(
-        port: Annotated[str, typer.Option(help="Serial device of the radio, e.g. "
-                                          "/dev/xbee.")],
-        baud: Annotated[int, typer.Option(min=1, help="UART baud rate, bit/s (the "
-                                          "radio's BD).")] = 9600,
-    ) -> None:
-        """Print what the radio is: protocol, firmware, address, network settings.
 
-        Exit codes: 0 printed, 1 no XBee in API mode answers on --port at --baud.
+def info(port: PortOpt, baud: BaudOpt = 9600) -> None:
+    """Print what the radio is: protocol, firmware, address, network settings.
 
-        Example: swarmd xbee info --port /dev/xbee
-        """
-        dev = _open(port, baud)
-        try:
-            typer.echo(f"port       {port}")
-            typer.echo(f"protocol   {_protocol(dev)}")
-            typer.echo(f"hardware   {dev.get_hardware_version().description}")
-            typer.echo(f"firmware   {bytes(dev.get_firmware_version()).hex().upper()}")
-            typer.echo(f"address    {dev.get_64bit_addr()}")
-            typer.echo(f"role       {dev.get_role().description}")
-            typer.echo(f"api mode   {dev.operating_mode.description}")
-            for name, value in _read(dev).items():
-                typer.echo(f"{name:<10} {value}")
-        finally:
-            dev.close()
+    Exit codes: 0 printed, 1 no XBee in API mode answers on --port at --baud.
 
-    @xbee.command("configure")
-    def configure(
-        port: Annotated[str, typer.Option(help="Serial device of the radio, e.g. "
-                                          "/dev/xbee.")],
-        role: Annotated[str, typer.Option(help="coordinator or router (paper: one "
-                                          "coordinator, the rest routers).")],
-        pan: Annotated[str, typer.Option(help="PAN id (ID), hex 0x607 or decimal; the "
-                                         "same on every robot.")] = "0x607",
-        channel: Annotated[str | None, typer.Option(
-            help="Channel, 0x0B-0x1A (11-26), e.g. 0x0C: CH on 802.15.4 and DigiMesh; "
-                 "on Zigbee the scan mask SC holding only that channel (CH is "
-                 "read-only there). Default: keep the radio's.")] = None,
-        protocol: Annotated[str | None, typer.Option(
-            help="Expected firmware: zigbee, 802.15.4 or digimesh (checked, not "
-                 "changed: that needs a firmware update in XCTU). Default: not "
-                 "checked.")] = None,
-        api_mode: Annotated[int | None, typer.Option(
-            min=1, max=2, help="Set AP to 1 or 2. Default: keep the radio's.")] = None,
-        baud: Annotated[int, typer.Option(min=1, help="UART baud rate, bit/s (the "
-                                          "radio's BD).")] = 9600,
-        write: Annotated[bool, typer.Option("--write", help="Save to flash (WR) so the "
-                                            "settings survive a power cycle. Default: "
-                                            "applied only.")] = False,
-    ) -> None:
-        """Apply the paper's radio settings and print them before and after.
+    Example: swarmd xbee info --port /dev/xbee
+    """
+    dev = _open(port, baud)
+    try:
+        typer.echo(f"port       {port}")
+        typer.echo(f"protocol   {_protocol(dev)}")
+        typer.echo(f"hardware   {dev.get_hardware_version().description}")
+        typer.echo(f"firmware   {bytes(dev.get_firmware_version()).hex().upper()}")
+        typer.echo(f"address    {dev.get_64bit_addr()}")
+        typer.echo(f"role       {dev.get_role().description}")
+        typer.echo(f"api mode   {dev.operating_mode.description}")
+        for name, value in _read(dev).items():
+            typer.echo(f"{name:<10} {value}")
+    finally:
+        dev.close()
 
-        PAN id; coordinator CE=1, DH/DL 0x0000/0xFFFF; routers CE=0 (SM=0 on Zigbee),
-        DH/DL 0x0000/0x0000; MY=0xFFFE on 802.15.4. Changed settings are starred.
 
-        Exit codes: 0 applied, 1 the radio cannot be opened, runs other firmware than
-        --protocol or refused a setting, 2 a bad option value.
+def configure(
+    port: PortOpt,
+    role: Annotated[str, typer.Option(help="coordinator or router (paper: one "
+                                      "coordinator, the rest routers).")],
+    pan: Annotated[str, typer.Option(help="PAN id (ID), hex 0x607 or decimal; the "
+                                     "same on every robot.")] = "0x607",
+    channel: Annotated[str | None, typer.Option(
+        help="Channel, 0x0B-0x1A (11-26), e.g. 0x0C: CH on 802.15.4 and DigiMesh; "
+             "on Zigbee the scan mask SC holding only that channel (CH is "
+             "read-only there). Default: keep the radio's.")] = None,
+    protocol: Annotated[str | None, typer.Option(
+        help="Expected firmware: zigbee, 802.15.4 or digimesh (checked, not "
+             "changed: that needs a firmware update in XCTU). Default: not "
+             "checked.")] = None,
+    api_mode: Annotated[int | None, typer.Option(
+        min=1, max=2, help="Set AP to 1 or 2. Default: keep the radio's.")] = None,
+    baud: BaudOpt = 9600,
+    write: Annotated[bool, typer.Option("--write", help="Save to flash (WR) so the "
+                                        "settings survive a power cycle. Default: "
+                                        "applied only.")] = False,
+) -> None:
+    """Apply the paper's radio settings and print them before and after.
 
-        Example: swarmd xbee configure --port /dev/xbee --role router --pan 0x607 --write
-        """
-        _configure(port, role=role, pan=pan, channel=channel, protocol=protocol,
-                   api_mode=api_mode, baud=baud, write=write)
+    PAN id; coordinator CE=1, DH/DL 0x0000/0xFFFF; routers CE=0 (SM=0 on Zigbee),
+    DH/DL 0x0000/0x0000; MY=0xFFFE on 802.15.4. Changed settings are starred.
 
-    @xbee.command("emulate")
-    def emulate(
-        count: Annotated[int, typer.Argument(min=1, help="Number of radios (robot1..robotN).")],
-        protocol: Annotated[str, typer.Option(help="Firmware emulated: zigbee, 802.15.4 "
-                                              "or digimesh.")]
-        = "802.15.4",
-        api_mode: Annotated[int, typer.Option(min=1, max=2,
-                                              help="API mode (AP), 1 or 2.")] = 1,
-        loss: Annotated[float, typer.Option(
-            callback=probability, help="Probability, 0 to below 1, that a "
-            "frame sent or received by a radio is lost.")] = 0.0,
-        delay: Annotated[float, typer.Option(
-            min=0.0, callback=finite,
-            help="Extra delivery delay of every radio's frames, seconds.")] = 0.0,
-        pan: Annotated[str, typer.Option(help="PAN id of every radio.")] = "0x607",
-        channel: Annotated[str, typer.Option(help="Channel of every radio.")] = "0x0C",
-        directory: Annotated[str, typer.Option("--dir", help="Directory of the device "
-                                               "symlinks robot1..robotN.")]
-        = "/tmp/swarmd-xbee",
-        seed: Annotated[int | None, typer.Option(
-            min=0, help="Seed of the loss draws, 0 or more. Default: random.")] = None,
-        transparent: Annotated[bool, typer.Option(
-            "--transparent", help="AP=0 radios (raw byte stream, for transport kind "
-            "serial) instead of API mode.")] = False,
-    ) -> None:
-        """Run N software XBee radios on pseudo-terminals until Ctrl-C.
+    Exit codes: 0 applied, 1 the radio cannot be opened, runs other firmware than
+    --protocol or refused a setting, 2 a bad option value.
 
-        Radios with one protocol, PAN id and channel hear each other; point a robot
-        file's port at DIR/robotN. Lines on stdin change them live: unplug N, replug N,
-        loss N P, delay N S.
+    Example: swarmd xbee configure --port /dev/xbee --role router --pan 0x607 --write
+    """
+    _configure(port, role=role, pan=pan, channel=channel, protocol=protocol,
+               api_mode=api_mode, baud=baud, write=write)
 
-        Exit codes: 0 stopped with Ctrl-C, 2 a bad option value.
 
-        Example: swarmd xbee emulate 6 --protocol 802.15.4 --loss 0.05
-        """
-        _emulate(count, protocol=protocol, api_mode=api_mode, directory=directory,
-                 pan=pan, channel=channel, loss=loss, delay=delay, seed=seed,
-                 transparent=transparent)
+def emulate(
+    count: Annotated[int, typer.Argument(min=1, help="Number of radios (robot1..robotN).")],
+    protocol: Annotated[str, typer.Option(help="Firmware emulated: zigbee, 802.15.4 "
+                                          "or digimesh.")] = "802.15.4",
+    api_mode: Annotated[int, typer.Option(min=1, max=2, help="API mode (AP), 1 or 2.")] = 1,
+    loss: Annotated[float, typer.Option(
+        callback=probability, help="Probability, 0 to below 1, that a "
+        "frame sent or received by a radio is lost.")] = 0.0,
+    delay: Annotated[float, typer.Option(
+        min=0.0, callback=finite,
+        help="Extra delivery delay of every radio's frames, seconds.")] = 0.0,
+    pan: Annotated[str, typer.Option(help="PAN id of every radio.")] = "0x607",
+    channel: Annotated[str, typer.Option(help="Channel of every radio.")] = "0x0C",
+    directory: Annotated[str, typer.Option("--dir", help="Directory of the device "
+                                           "symlinks robot1..robotN.")] = "/tmp/swarmd-xbee",
+    seed: Annotated[int | None, typer.Option(
+        min=0, help="Seed of the loss draws, 0 or more. Default: random.")] = None,
+    transparent: Annotated[bool, typer.Option(
+        "--transparent", help="AP=0 radios (raw byte stream, for transport kind "
+        "serial) instead of API mode.")] = False,
+) -> None:
+    """Run N software XBee radios on pseudo-terminals until Ctrl-C.
+
+    Radios with one protocol, PAN id and channel hear each other; point a robot
+    file's port at DIR/robotN. Lines on stdin change them live: unplug N, replug N,
+    loss N P, delay N S.
+
+    Exit codes: 0 stopped with Ctrl-C, 2 a bad option value.
+
+    Example: swarmd xbee emulate 6 --protocol 802.15.4 --loss 0.05
+    """
+    _emulate(count, protocol=protocol, api_mode=api_mode, directory=directory,
+             pan=pan, channel=channel, loss=loss, delay=delay, seed=seed,
+             transparent=transparent)
 
 
 def _emulate(count: int, *, protocol: str, api_mode: int, directory: str, pan: str,
