@@ -57,6 +57,18 @@ def test_help_exits_0_with_exit_codes_and_an_example(path: tuple[str, ...]) -> N
         assert "Exit codes: 0 " in text, text
 
 
+@pytest.mark.parametrize("path", sorted(COMMANDS), ids=lambda p: " ".join(p) or "swarmd")
+def test_help_shows_brackets_it_was_given(path: tuple[str, ...]) -> None:
+    """Help text is rich markup: an unescaped `[ros2]` vanishes from it. Every `[` a
+    help string holds (`swarmd[ros2]`, `[--write]`) must reach the screen."""
+    cmd = COMMANDS[path]
+    said = [p.help or "" for p in cmd.params if hasattr(p, "help")] + [cmd.help or ""]
+    wanted = {w for h in said for w in h.replace("\\[", "[").split() if "[" in w}
+    text = runner.invoke(app, [*path, "--help"], env={"COLUMNS": "400"}).output
+    for word in wanted:
+        assert word.strip(".,;()") in text, (word, path)
+
+
 @pytest.mark.parametrize("path", sorted(p for p, c in COMMANDS.items()
                                         if not isinstance(c, TyperGroup)),
                          ids=" ".join)

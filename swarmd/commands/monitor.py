@@ -53,7 +53,7 @@ Ros2Opt = Annotated[bool, typer.Option(
     "--ros2", help="Also publish the swarm on ROS 2 /diagnostics (one status per "
     "function, at every change and at least once a second) for rqt_robot_monitor; "
     "domain $ROS_DOMAIN_ID, this machine only unless "
-    "$ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise. Needs swarmd[ros2] "
+    "$ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise. Needs swarmd\\[ros2] "
     "(docs/ros2.md).")]
 
 

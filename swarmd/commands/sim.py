@@ -135,7 +135,7 @@ LinkOpt = Annotated[str, typer.Option(
     "link over loopback UDP to a simulated autopilot, one system id and UDP port per "
     "robot, that flies the craft; faults reach the daemon only as MAVLink health) "
     "or ros2 (the daemon's ROS 2 link and a small rclpy robot stack per robot, in "
-    "the run's own ROS domain; also with --no-physics; needs swarmd[ros2], "
+    "the run's own ROS domain; also with --no-physics; needs swarmd\\[ros2], "
     "docs/ros2.md). Default: direct.")]
 AutopilotOpt = Annotated[str | None, typer.Option(
     "--autopilot", metavar="NAME",
