@@ -243,3 +243,38 @@ def test_core_imports_form_no_cycle() -> None:
 def test_the_cycle_finder_finds_one() -> None:
     assert _core_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _core_cycle({"a": {"b"}, "b": set()}) == []
+
+
+SIZE_LIMITS = (40, 600)
+"""Lines of one function, and of one module, in swarmd/ and sim/ (DESIGN section 1: a
+module a newcomer reads in one sitting; a function that does one thing)."""
+
+
+def oversized(paths: list[Path]) -> list[str]:
+    """The functions and modules of `paths` over `SIZE_LIMITS`, as `path:name lines`."""
+    fn_max, mod_max = SIZE_LIMITS
+    out = []
+    for p in paths:
+        text = p.read_text()
+        name = p.relative_to(ROOT) if p.is_relative_to(ROOT) else p
+        if text.count("\n") > mod_max:
+            out.append(f"{name} {text.count(chr(10))}")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > fn_max:
+                    out.append(f"{name}:{node.name} {lines}")
+    return out
+
+
+def test_no_function_or_module_is_over_the_size_limits() -> None:
+    paths = sorted([*(ROOT / "swarmd").rglob("*.py"), *(ROOT / "sim").rglob("*.py")])
+    assert oversized(paths) == []
+
+
+def test_the_size_check_finds_a_long_function(tmp_path: Path) -> None:
+    long = tmp_path / "long.py"
+    long.write_text("def f() -> None:\n" + "    x = 1\n" * 40)
+    assert oversized([long]) != []
+    long.write_text("def f() -> None:\n" + "    x = 1\n" * 39)
+    assert oversized([long]) == []
