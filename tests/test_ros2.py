@@ -94,6 +94,29 @@ def test_ros2_options() -> None:
         SimOptions(swarm=PAPER, link="ros2", virtual=True)
 
 
+def test_domain_leases_are_exclusive_and_leave_nothing_behind() -> None:
+    """A leased id is nobody else's until released (another run, another test worker:
+    those may hold ids now, so this takes two, not all), and leasing writes no file."""
+    import socket
+    import tempfile
+
+    from sim.realtime.ros2_robot import DomainLease
+
+    tmp = Path(tempfile.gettempdir())
+    before = set(tmp.iterdir())
+    first, second = DomainLease(), DomainLease()
+    assert first.domain_id != second.domain_id
+    name = f"\0swarmd-ros2-domain-{first.domain_id}"
+    with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as rival, pytest.raises(OSError):
+        rival.bind(name)  # what a third lease would try
+    first.release()
+    first.release()  # idempotent
+    with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as rival:
+        rival.bind(name)  # free again
+    second.release()
+    assert {p for p in set(tmp.iterdir()) - before if "swarmd-ros2-domain" in p.name} == set()
+
+
 async def test_a_blocked_ros_thread_never_blocks_the_loop() -> None:
     pytest.importorskip("rclpy", reason="needs the ros2 extra: pip install 'swarmd[ros2]'")
     import threading

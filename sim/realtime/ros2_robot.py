@@ -190,29 +190,29 @@ class SimRos2Link:
 
 class DomainLease:
     """A ROS 2 domain id held for one run, so runs and tests never hear each other's
-    topics: an exclusive lock on `<tmp>/swarmd-ros2-domain-<id>.lock`, released by
-    `release()` or when the process ends. Ids 1..100 (0 is everyone's default; above 101
-    Fast DDS runs out of ports for several participants)."""
+    topics: a Unix socket bound to the abstract name `swarmd-ros2-domain-<id>` (Linux),
+    which the kernel hands to one socket at a time and frees by itself when the socket
+    closes, by `release()` or with the process, however it ends: nothing is left in
+    /tmp (a lock file per id was, for good). Ids 1..100 (0 is everyone's default; above
+    101 Fast DDS runs out of ports for several participants)."""
 
     FIRST, LAST = 1, 100
 
     def __init__(self) -> None:
-        import fcntl
         import random
-        import tempfile
+        import socket
 
         ids = list(range(self.FIRST, self.LAST + 1))
         random.shuffle(ids)
         for domain in ids:
-            path = Path(tempfile.gettempdir()) / f"swarmd-ros2-domain-{domain}.lock"
-            f = path.open("a")
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
             try:
-                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                f.close()
+                sock.bind(f"\0swarmd-ros2-domain-{domain}")
+            except OSError:  # EADDRINUSE: another run holds it
+                sock.close()
                 continue
             self.domain_id = domain
-            self._file: Any = f
+            self._sock: socket.socket | None = sock
             return
         raise RuntimeError(f"no free ROS 2 domain id in {self.FIRST}..{self.LAST}")
 
@@ -230,6 +230,7 @@ class DomainLease:
                 "health_timeout": SIM_HEALTH_TIMEOUT}
 
     def release(self) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        """Give the id back; idempotent."""
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
