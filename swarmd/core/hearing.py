@@ -43,7 +43,7 @@ class Hearing(NodeBase):
         self._ears.slot_beat(f, sender, hb.epoch, now)
         self._claims_seen.forget(f)
         # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
-        if f == self._function and self._role == Role.ACTIVE and sender != self._robot_id:
+        if self._holds(f) and sender != self._robot_id:
             self._fence(hb.epoch, now)
             return
         self._holder_heard(f, sender, hb.epoch, Holder(holder, epoch), now)
@@ -53,7 +53,7 @@ class Hearing(NodeBase):
         takeover, or lost a race at the same epoch; show it what it missed."""
         # A stale holder (e.g. back from a pause): if it is our slot, answer at once
         # so it hears the newer epoch and fences itself (rule 2) within a frame.
-        if f == self._function and self._role == Role.ACTIVE:
+        if self._holds(f):
             # A rival holding it at our epoch (the race won on each side of a
             # partition) lacks only our CLAIM, most likely (its own evidence backs
             # ours): every other heartbeat period rather than every T_max, so a
@@ -72,7 +72,7 @@ class Hearing(NodeBase):
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
         epoch or a holder by itself; only the certified new holder's does."""
         self._drops[DropReason.UNCERTIFIED] += 1
-        if f == self._function and self._role == Role.ACTIVE:
+        if self._holds(f):
             self._relay_cert(f, now)
         self._relay_refutes(f, now)  # it may act on a claim they void
         if self._rejoin is not None and self._rejoin.function == f:
@@ -93,7 +93,7 @@ class Hearing(NodeBase):
         f = self._plan.function_at(hb.function) if hb.function else None
         if f is None:
             return
-        if f == self._function and self._role == Role.ACTIVE:
+        if self._holds(f):
             self._relay_cert(f, now)
             if hb.epoch <= self._epoch:
                 self._heartbeat_now(now)
@@ -143,7 +143,7 @@ class Hearing(NodeBase):
         still judged by the certificate). It gets the slot back by heartbeating it
         again, and the rival fences itself on hearing it (rule 2). Never our own hold:
         we are alive."""
-        if f == self._function and self._role == Role.ACTIVE:
+        if self._holds(f):
             return False
         return not self._ears.heard_lately(f, holder, epoch, now, self._params.t_max)
 
@@ -211,8 +211,7 @@ class Hearing(NodeBase):
             self._warned_newer(f, sender, w, now)
             return
         self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
-        if f == self._function and self._role == Role.ACTIVE \
-                and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
+        if self._holds(f) and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
             self._relay_cert(f, now)  # a watcher that missed our takeover
         elif w.epoch < self._known[f].epoch:
             self._relay_view(f, now)  # one that missed a takeover we certified
@@ -227,9 +226,9 @@ class Hearing(NodeBase):
         still do what"); per robot, the certificate does it (`_relay_view`)."""
         known = self._known[f]
         if w.epoch <= known.epoch or w.suspect in (self._robot_id, sender) \
-                or sender not in witnesses(self._plan, self._known, f) \
-                or (self._claim is not None and self._claim.function == f) \
-                or (f == self._function and self._role == Role.ACTIVE):
+                or sender not in witnesses(self._plan, self._known, f):
+            return
+        if (self._claim is not None and self._claim.function == f) or self._holds(f):
             return  # our own claim or hold settles it (rule 2; `_older_alive`)
         if self._ears.heard_lately(f, known.robot, known.epoch, now, self._params.t_max):
             return  # the holder we know is alive: views come back to it (`_older_alive`)

@@ -125,6 +125,10 @@ class NodeBase:
         not take another one meanwhile."""
         return self._role == Role.STANDBY and self._health != Health.FAULTY
 
+    def _holds(self, f: str) -> bool:
+        """Do we execute slot f now (ACTIVE on it)?"""
+        return f == self._function and self._role == Role.ACTIVE
+
     def _heartbeating(self) -> bool:
         return not self._stopped and self._health != Health.FAULTY
 

@@ -138,7 +138,7 @@ class Signed(NodeBase):
         if c.epoch <= self._known[f].epoch or not self._ev.is_certified(f, claimant, c.epoch) \
                 or (self._claim is not None and self._claim.function == f):
             return
-        holding = f == self._function and self._role == Role.ACTIVE
+        holding = self._holds(f)
         self._learn_holder(f, Holder(claimant, c.epoch), now)
         if holding:
             self._fence(c.epoch, now)
