@@ -7,10 +7,16 @@ too.
 `role_spans` turns the log into per-robot spans of (role, function), from the one fold of
 the log (`sim.shared.holders`); `render` colours the crafts of the video with the same
 spans.
+
+Each picture says in words what its marks mean: the legends name roles and events as the
+log names them and sit below the axes, wrapped to the figure's width (`fitted_legend`),
+so that no swarm size pushes them off the picture; `timeline_figure` and
+`trajectory_figure` return the figure unsaved, for tests to read its words back.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,11 +24,13 @@ from typing import TYPE_CHECKING, Any
 
 from sim.shared.faults import FaultKind
 from sim.shared.holders import HolderFold
-from swarmd.core.events import Alert, Claim, Event, Fault, Suspect, Takeover, event_of
+from swarmd.core.events import Alert, Claim, Event, Fault, Suspect, Takeover, Warn, event_of
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+    from matplotlib.legend import Legend
 
     from sim.physics.robot import Trajectory
 
@@ -130,25 +138,42 @@ def role_at(spans: Sequence[Span], t: float) -> Span | None:
 
 
 def _save(fig: Figure, ax: Axes, title: str, path: Path) -> Path:
-    """Title, lay out, write the PNG (creating its folder) and free the figure."""
+    """Title, write the PNG (creating its folder) and free the figure."""
     import matplotlib.pyplot as plt
 
     ax.set_title(title)
-    fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
     return path
 
 
-_MARKERS: dict[type[Event], tuple[str, str, str]] = {
-    # event -> (marker, colour, which robot's lane: the event's robot or its subject)
-    Fault: ("X", "#d62728", "robot"),
-    Suspect: ("v", "#9467bd", "subject"),
-    Claim: ("o", "#ff7f0e", "robot"),
-    Takeover: ("*", "#1f77b4", "robot"),
-    Alert: ("!", "#d62728", "robot"),
+@dataclass(frozen=True, slots=True)
+class Mark:
+    """How the timeline marks one kind of event: `marker` and `colour`, on the lane of
+    the event's own robot (`lane="robot"`) or of the robot it is about (`"subject"`),
+    and what the legend says after the event's name (`note`)."""
+
+    marker: str
+    colour: str
+    lane: str
+    note: str = ""
+
+    def label(self, event: type[Event]) -> str:
+        """The legend entry: the event's name as the log spells it, then the note."""
+        return f"{event.name} ({self.note})" if self.note else event.name
+
+
+MARKS: dict[type[Event], Mark] = {
+    Fault: Mark("X", "#d62728", "robot", "injected; its kind beside it"),
+    Suspect: Mark("v", "#9467bd", "subject", "on the silent robot's lane"),
+    Warn: Mark(">", "#8c564b", "robot", "by the warner"),
+    Claim: Mark("o", "#ff7f0e", "robot"),
+    Takeover: Mark("*", "#1f77b4", "robot", "fN eK: took slot fN at epoch K"),
+    Alert: Mark("$!$", "#d62728", "robot", "nobody can take the slot"),
 }
+"""The events the timeline marks (paper Fig. 7-9: suspect, warn, claim, takeover;
+DESIGN rule 8: alert); roles, fenced included, are the bars' colours."""
 
 
 def timeline_png(
@@ -158,9 +183,21 @@ def timeline_png(
     end: float | None = None,
     title: str | None = None,
 ) -> Path:
+    """`timeline_figure` written to `path` as a PNG."""
+    fig = timeline_figure(events, end=end)
+    return _save(fig, fig.axes[0], title or TIMELINE_TITLE, path)
+
+
+TIMELINE_TITLE = "roles and functions over time"
+
+
+def timeline_figure(
+    events: Sequence[Mapping[str, Any]], *, end: float | None = None
+) -> Figure:
     """One lane per robot: bars coloured by role with the function written on them;
-    markers for faults (X, with the kind), suspicions (v, on the suspect's lane),
-    claims (o), takeovers (*, with `fN eK`) and alerts."""
+    the events of `MARKS` as markers (a fault's kind and a takeover's `fN eK` written
+    beside them); below, a legend of the roles and the markers, wrapped into as many
+    rows as the figure's width needs."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -173,7 +210,8 @@ def timeline_png(
     )
     t_end = end if end is not None else max((float(e.get("t", 0.0)) for e in events), default=1.0)
     lane = {rid: i for i, rid in enumerate(robots)}
-    fig, ax = plt.subplots(figsize=(12, 1.2 + 0.6 * max(1, len(robots))), dpi=100)
+    fig, ax = plt.subplots(figsize=(12, 1.4 + 0.6 * max(1, len(robots))), dpi=100,
+                           layout="constrained")
     for rid, ss in spans.items():
         for s in ss:
             row = lane[rid]
@@ -185,55 +223,72 @@ def timeline_png(
     for e in events:
         _draw_marker(ax, e, lane)
     _timeline_axes(ax, robots, t_end)
-    return _save(fig, ax, title or "roles and functions over time", path)
+    _timeline_legend(fig)
+    return fig
 
 
 def _draw_marker(ax: Axes, e: Mapping[str, Any], lane: Mapping[int, int]) -> None:
-    """The event's marker on its robot's lane (`_MARKERS`), if it has one."""
+    """The event's marker on its robot's lane (`MARKS`), if it has one."""
     event = event_of(e)
-    if event is None or type(event) not in _MARKERS:
+    mark = MARKS.get(type(event)) if event is not None else None
+    if mark is None:
         return
-    marker, colour, which = _MARKERS[type(event)]
-    who = e.get("subject") if which == "subject" else e.get("robot")
+    who = e.get("subject") if mark.lane == "subject" else e.get("robot")
     if not isinstance(who, int) or who not in lane:
         if isinstance(event, Fault):  # robot 0: a partition; draw it across the chart
-            ax.axvline(float(e.get("t", 0.0)), color=colour, linestyle=":", linewidth=1)
+            ax.axvline(float(e.get("t", 0.0)), color=mark.colour, linestyle=":", linewidth=1)
         return
     t = float(e.get("t", 0.0))
     y = lane[who] + 0.38  # just below the bar (the y axis is inverted)
-    if marker == "!":
-        ax.text(t, y, "!", color=colour, fontsize=12, fontweight="bold", ha="center")
-    else:
-        ax.plot([t], [y], marker=marker, color=colour, markersize=8 if marker == "*" else 6,
-                linestyle="none")
+    ax.plot([t], [y], marker=mark.marker, color=mark.colour,
+            markersize=8 if mark.marker in ("*", "$!$") else 6, linestyle="none")
     match event:
         case Fault(kind=kind):
-            ax.text(t, y + 0.15, str(kind), fontsize=7, color=colour, ha="left")
+            ax.text(t, y + 0.15, str(kind), fontsize=7, color=mark.colour, ha="left")
         case Takeover(function=function, epoch=epoch):
-            ax.text(t, y + 0.15, f"{function} e{epoch}", fontsize=7, color=colour,
+            ax.text(t, y + 0.15, f"{function} e{epoch}", fontsize=7, color=mark.colour,
                     ha="left")
 
 
 def _timeline_axes(ax: Axes, robots: Sequence[int], t_end: float) -> None:
-    """The timeline's lanes, time axis and legend of roles and markers."""
-    from matplotlib.artist import Artist
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
-
+    """The timeline's lanes and time axis."""
     ax.set_yticks(range(len(robots)), [f"robot {r}" for r in robots])
     ax.set_ylim(-0.6, len(robots) - 0.2)
     ax.invert_yaxis()
     ax.set_xlim(0, max(t_end, 1e-3))
     ax.set_xlabel("time since the run's start (s)")
     ax.grid(axis="x", alpha=0.3)
+
+
+def _timeline_legend(fig: Figure) -> None:
+    """The roles (bar colours) and `MARKS` (markers), named, below the lanes."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     handles: list[Artist] = [Patch(color=c, label=r) for r, c in ROLE_COLORS.items()]
     handles += [
-        Line2D([], [], marker=m, color=c, linestyle="none", label=n)
-        for n, (m, c, _w) in _MARKERS.items() if m != "!"
+        Line2D([], [], marker=m.marker, color=m.colour, linestyle="none", label=m.label(ev))
+        for ev, m in MARKS.items()
     ]
-    below = -0.18 - 0.3 / max(1, len(robots))
-    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, below),
-              ncol=len(handles), fontsize=8, frameon=False)
+    fitted_legend(fig, handles)
+
+
+def fitted_legend(fig: Figure, handles: Sequence[Artist]) -> Legend:
+    """A legend of `handles` below the axes (constrained layout makes room for it), in
+    the most columns that keep it inside the figure's width, so it wraps into rows
+    instead of being cut at the edges; the figure grows by the rows it takes."""
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    width = fig.bbox.width
+    for ncol in range(len(handles), 0, -1):
+        legend = fig.legend(handles=handles, loc="outside lower center", ncol=ncol,
+                            fontsize=8, frameon=False)
+        box = legend.get_window_extent(renderer)
+        if box.width <= 0.96 * width or ncol == 1:
+            break
+        legend.remove()
+    rows = math.ceil(len(handles) / ncol)
+    fig.set_figheight(fig.get_figheight() + rows * 0.2)
+    return legend
 
 
 def trajectory_png(
@@ -243,32 +298,96 @@ def trajectory_png(
     *,
     title: str | None = None,
 ) -> Path:
+    """`trajectory_figure` written to `path` as a PNG."""
+    fig = trajectory_figure(trajectories, functions)
+    return _save(fig, fig.axes[0], title or TRAJECTORY_TITLE, path)
+
+
+TRAJECTORY_TITLE = "top-down trajectories"
+
+TRAJECTORY_KEY: tuple[tuple[str, str, str], ...] = (
+    ("s", "none", "home (start)"),
+    ("o", "none", "end, labelled rN fK: robot N flying function fK"),
+    ("X", "black", "crashed"),
+)
+"""The trajectory plot's symbols (marker, fill, what the legend says)."""
+
+ROBOT_COLOURS = 10
+"""Robots the legend names by colour (tab10's colours); a bigger swarm repeats colours,
+so there only the labels at the paths' ends tell robots apart."""
+
+
+def trajectory_figure(
+    trajectories: Sequence[Trajectory],
+    functions: Mapping[str, Mapping[str, Any]] | None = None,
+) -> Figure:
     """Top-down (x, y) view: every robot's path from its home (square) to where it ended
-    (dot); slots as circles and patrol loops as dashed polygons, named."""
+    (dot, labelled with the robot and the function it flew last); slots as circles and
+    patrol loops as dashed polygons, named; a legend of the symbols below."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
-    fig, ax = plt.subplots(figsize=(8, 8), dpi=100)
+    fig, ax = plt.subplots(figsize=(8, 8), dpi=100, layout="constrained")
     cmap = plt.get_cmap("tab10")
     for name, spec in (functions or {}).items():
         _draw_function(ax, name, spec)
-    for i, tr in enumerate(sorted(trajectories, key=lambda tr: tr.robot)):
-        c = cmap(i % 10)
-        ax.plot(tr.pos[:, 0], tr.pos[:, 1], color=c, linewidth=1.2, label=f"robot {tr.robot}")
-        ax.plot([tr.home[0]], [tr.home[1]], marker="s", color=c, markersize=7)
-        ax.plot([tr.pos[-1, 0]], [tr.pos[-1, 1]], marker="o", color=c, markersize=6)
-        if tr.modes and tr.modes[-1] == "crashed":
-            ax.plot([tr.pos[-1, 0]], [tr.pos[-1, 1]], marker="X", color="black", markersize=9)
+    ordered = sorted(trajectories, key=lambda tr: tr.robot)
+    handles: list[Artist] = [
+        Line2D([], [], marker=m, color="#555555", markerfacecolor=fill if fill != "none" else
+               "#555555", linestyle="none", label=label) for m, fill, label in TRAJECTORY_KEY]
+    ends: list[tuple[float, float]] = []
+    for i, tr in enumerate(ordered):
+        (line,) = ax.plot(tr.pos[:, 0], tr.pos[:, 1], color=cmap(i % 10), linewidth=1.2,
+                          label=f"robot {tr.robot}")
+        _path_ends(ax, tr, line.get_color(), ends, 8 if len(ordered) <= DENSE else 6)
+        if len(ordered) <= ROBOT_COLOURS:
+            handles.append(line)
+    ax.margins(0.1)  # room for the labels of the outermost paths' ends
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(alpha=0.3)
-    if trajectories:
-        ax.legend(loc="best", fontsize=8)
-    return _save(fig, ax, title or "top-down trajectories (square: home, dot: end, X: crashed)",
-                 path)
+    fitted_legend(fig, handles)
+    return fig
+
+
+def end_label(tr: Trajectory) -> str:
+    """`rN fK` for robot N ending on function fK (`rN` alone without one, `rN crashed`)."""
+    if len(tr.pos) == 0:
+        return f"r{tr.robot}"
+    if tr.modes and tr.modes[-1] == "crashed":
+        return f"r{tr.robot} crashed"
+    function = tr.functions[-1] if tr.functions else None
+    return f"r{tr.robot} {function}" if function else f"r{tr.robot}"
+
+
+def _path_ends(ax: Axes, tr: Trajectory, colour: Any, ends: list[tuple[float, float]],
+               size: float) -> None:
+    """The robot's home (square), its end (dot, X if crashed) and its `end_label`,
+    written under the labels of the earlier robots in `ends` that ended at the same
+    place (a substitute on the slot its crashed predecessor fell from)."""
+    if len(tr.pos) == 0:
+        return
+    ax.plot([tr.home[0]], [tr.home[1]], marker="s", color=colour, markersize=7)
+    x, y = float(tr.pos[-1, 0]), float(tr.pos[-1, 1])
+    ax.plot([x], [y], marker="o", color=colour, markersize=6)
+    if tr.modes and tr.modes[-1] == "crashed":
+        ax.plot([x], [y], marker="X", color="black", markersize=9)
+    below = sum(1 for ex, ey in ends if math.hypot(ex - x, ey - y) < SAME_PLACE)
+    ends.append((x, y))
+    ax.annotate(end_label(tr), (x, y), xytext=(6, -12 - 12 * below),
+                textcoords="offset points", fontsize=size, color=colour, fontweight="bold",
+                bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
+
+
+SAME_PLACE = 0.5
+"""m within which two paths' ends share a place and their labels are stacked."""
+
+DENSE = 12
+"""Robots above which the end labels are written smaller (they sit closer together)."""
 
 
 def _draw_function(ax: Axes, name: str, spec: Mapping[str, Any]) -> None:
