@@ -6,7 +6,8 @@ spans as the timeline: active green, standby grey, claiming orange, fenced red, 
 black). A fixed camera sees the whole swarm; 640x480, shadows and reflections off and
 `offsamples=0` (about 20 ms a frame instead of 100-140 ms, docs/physics.md). Output:
 `swarm.mp4` (imageio-ffmpeg's bundled ffmpeg) or `swarm.gif` when that fails, and key
-frames `key-*.png` at the faults and takeovers.
+frames `key-*.png` at the faults and takeovers. Every frame names each craft's robot and
+function; a key frame rings the robots its event is about (sim/physics/labels.py).
 
 MuJoCo picks its GL backend when it is imported (`MUJOCO_GL`), and a robot or test
 process has usually imported it already without one; so rendering always runs in a
@@ -30,10 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from sim.physics.labels import KeyMoment, View, annotate, craft_labels, key_moments
 from sim.physics.plots import ROLE_COLORS, Span, role_at, role_spans
 from sim.physics.robot import Trajectory
 from sim.shared.faults import FaultKind
-from swarmd.core.events import Fault, Takeover, event_of
+from swarmd.core.events import Fault, event_of
 
 BACKENDS = ("egl", "osmesa")
 WIDTH, HEIGHT = 640, 480
@@ -88,18 +90,14 @@ class RenderResult:
     backend: str | None = None
     error: str | None = None
     """Why no video was made (no GL backend, the child failed), else None."""
+    labels: dict[Path, list[dict[str, Any]]] = field(default_factory=dict)
+    """Per key frame, the crafts' labels as drawn: robot, text, pixel box and the
+    craft's pixel `at` (sim.physics.labels.Placed)."""
 
 
 def key_times(events: Sequence[Mapping[str, Any]]) -> list[tuple[float, str]]:
     """(t, label) of the moments worth a still: faults and takeovers."""
-    out = []
-    for e in events:
-        match event_of(e):
-            case Fault(kind=kind):
-                out.append((float(e["t"]), f"fault-{kind}-r{e.get('robot', '')}"))
-            case Takeover(function=function):
-                out.append((float(e["t"]), f"takeover-{function}-r{e.get('robot', '')}"))
-    return sorted(out)
+    return [(m.t, m.name) for m in key_moments(events)]
 
 
 def render_swarm(
@@ -176,6 +174,7 @@ def _result_of(proc: subprocess.CompletedProcess[str], backend: str) -> RenderRe
         frames=int(done["frames"]),
         backend=backend,
         error=done.get("error"),
+        labels={Path(k): v for k, v in done.get("labels", {}).items()},
     )
 
 
@@ -333,6 +332,7 @@ class _Scene:
         self.camera = cam
 
     def frame(self, t: float, spans: Mapping[int, Sequence[Span]]) -> np.ndarray[Any, Any]:
+        """The crafts at run time `t`, coloured by role (no words: see `labelled`)."""
         for i, tr in enumerate(self.trajs):
             pos, quat = tr.at(t)
             self.data.mocap_pos[self.mocap[i]] = pos
@@ -348,15 +348,17 @@ class _Scene:
         img: np.ndarray[Any, Any] = self.renderer.render()
         return img
 
-
-def _annotate(img: np.ndarray[Any, Any], text: str) -> np.ndarray[Any, Any]:
-    from PIL import Image, ImageDraw
-
-    im = Image.fromarray(img)
-    draw = ImageDraw.Draw(im)
-    draw.rectangle((0, 0, 8 + 7 * len(text), 20), fill=(255, 255, 255))
-    draw.text((4, 4), text, fill=(0, 0, 0))
-    return np.asarray(im)
+    def labelled(self, t: float, spans: Mapping[int, Sequence[Span]], header: str,
+                 moment: KeyMoment | None = None) -> tuple[np.ndarray[Any, Any], list[Any]]:
+        """`frame` with each craft's robot id and function beside it, rings and a
+        caption when it is `moment`'s still (sim/physics/labels.py); and the labels'
+        boxes."""
+        img = self.frame(t, spans)
+        view = View.of(self.renderer.scene.camera[0], WIDTH, HEIGHT)
+        pixels = [view.pixel(tr.at(t)[0]) for tr in self.trajs]
+        labels = craft_labels([tr.robot for tr in self.trajs], spans, t, moment)
+        return annotate(img, header, labels, pixels,
+                        moment.caption if moment is not None else None)
 
 
 def _write_video(frames: list[np.ndarray[Any, Any]], out_dir: Path, fps: int, fmt: str) -> Path:
@@ -381,8 +383,6 @@ def _write_video(frames: list[np.ndarray[Any, Any]], out_dir: Path, fps: int, fm
 
 
 def _child(job_path: Path) -> dict[str, Any]:
-    from PIL import Image
-
     job = json.loads(job_path.read_text())
     arrays = np.load(job["traj"])
     trajs = [
@@ -399,21 +399,34 @@ def _child(job_path: Path) -> dict[str, Any]:
     frames = []
     for k in range(n):
         t = t_lo + k * speed / fps
-        frames.append(_annotate(scene.frame(t, spans), f"t = {t:5.1f} s"))
+        frames.append(scene.labelled(t, spans, f"t = {t:5.1f} s")[0])
     video = _write_video(frames, out_dir, fps, job["fmt"])
-    keys: list[str] = []
-    if job["keyframes"]:
-        moments = [(t_lo, "start"), *key_times(events), (t_hi, "end")]
-        for t, label in moments:
-            if not t_lo <= t <= t_hi:
-                continue
-            # A still a little after the event shows its effect (the substitute leaving).
-            shot = min(t_hi, t + (0.5 if label not in ("start", "end") else 0.0))
-            path = out_dir / f"key-{shot:07.2f}-{label}.png"
-            img = _annotate(scene.frame(shot, spans), f"t = {shot:5.1f} s  {label}")
-            Image.fromarray(img).save(path)
-            keys.append(str(path))
-    return {"video": str(video), "keyframes": keys, "frames": len(frames)}
+    labels = _keyframes(scene, spans, events, out_dir, t_lo, t_hi) if job["keyframes"] else {}
+    return {"video": str(video), "keyframes": list(labels), "frames": len(frames),
+            "labels": labels}
+
+
+def _keyframes(scene: _Scene, spans: Mapping[int, Sequence[Span]],
+               events: Sequence[Mapping[str, Any]], out_dir: Path, t_lo: float,
+               t_hi: float) -> dict[str, list[dict[str, Any]]]:
+    """The stills `key-<t>-<name>.png` at the start, each fault and takeover (its robots
+    ringed) and the end; per still, its labels (robot, text, box)."""
+    from PIL import Image
+
+    moments = [KeyMoment(t_lo, "start", ""), *key_moments(events),
+               KeyMoment(t_hi, "end", "")]
+    out: dict[str, list[dict[str, Any]]] = {}
+    for m in moments:
+        if not t_lo <= m.t <= t_hi:
+            continue
+        # A still a little after the event shows its effect (the substitute leaving).
+        shot = min(t_hi, m.t + (0.5 if m.name not in ("start", "end") else 0.0))
+        path = out_dir / f"key-{shot:07.2f}-{m.name}.png"
+        img, placed = scene.labelled(shot, spans, f"t = {shot:5.1f} s  {m.name}", m)
+        Image.fromarray(img).save(path)
+        out[str(path)] = [{"robot": p.robot, "text": p.text, "box": list(p.box),
+                           "at": list(p.at)} for p in placed]
+    return out
 
 
 if __name__ == "__main__":
