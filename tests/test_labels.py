@@ -115,3 +115,18 @@ def test_labels_of_crafts_close_together_do_not_cover_each_other() -> None:
             apart = (a.box[2] <= b.box[0] or b.box[2] <= a.box[0]
                      or a.box[3] <= b.box[1] or b.box[3] <= a.box[1])
             assert apart, (a, b)
+
+
+def test_a_label_does_not_cover_another_craft() -> None:
+    # Robot 1's craft sits just above robot 2's, where robot 2's label would go.
+    labels = [CraftLabel(1, "r1 f1", "active"), CraftLabel(2, "r2 standby", "standby")]
+    pixels: list[tuple[float, float] | None] = [(300.0, 180.0), (300.0, 230.0)]
+    _img, placed = annotate(_grey(), "t", labels, pixels)
+    crafts = {1: (300, 180), 2: (300, 230)}
+    for p in placed:
+        for robot, (col, row) in crafts.items():
+            if robot != p.robot:
+                x0, y0, x1, y1 = p.box
+                apart = x1 <= col - RING or col + RING <= x0 or y1 <= row - RING or \
+                    row + RING <= y0
+                assert apart, (p, robot)

@@ -176,7 +176,7 @@ def _rgb(hex_colour: str) -> tuple[int, int, int]:
 def annotate(img: np.ndarray[Any, Any], header: str, labels: Sequence[CraftLabel] = (),
              pixels: Sequence[tuple[float, float] | None] = (), caption: str | None = None
              ) -> tuple[np.ndarray[Any, Any], list[Placed]]:
-    """The frame with `header` (top left), each craft's label above its pixel (rings
+    """The frame with `header` (top left), each craft's label beside its pixel (rings
     first, so a label is never hidden under one), the role key (top right) and
     `caption` (bottom left); and where each label went."""
     from PIL import Image, ImageDraw
@@ -191,42 +191,59 @@ def annotate(img: np.ndarray[Any, Any], header: str, labels: Sequence[CraftLabel
             draw.ellipse((col - RING, row - RING, col + RING, row + RING), outline=lab.ring,
                          width=3)
     placed: list[Placed] = []
-    for lab, (col, row) in sorted(shown, key=lambda s: -s[1][1]):  # nearest first
-        placed.append(_place(draw, font, lab, col, row, placed, im.size))
+    crafts = [(c - RING, r - RING, c + RING, r + RING) for _lab, (c, r) in shown]
+    for i, (lab, (col, row)) in sorted(enumerate(shown), key=lambda s: -s[1][1][1]):
+        others = crafts[:i] + crafts[i + 1:]  # nearest craft first: it is the biggest
+        placed.append(_place(draw, font, lab, col, row,
+                             [*others, *(p.box for p in placed)], im.size))
     _role_key(draw, font, im.size)
     if caption:
         _boxed(draw, (4, im.size[1] - 24), caption, font, (255, 255, 255), (0, 0, 0))
     return np.asarray(im), placed
 
 
+Box = tuple[float, float, float, float]
+"""left, top, right, bottom in pixels."""
+
+
 def _place(draw: Any, font: Any, lab: CraftLabel, col: float, row: float,
-           placed: Sequence[Placed], size: tuple[int, int]) -> Placed:
-    """Draw `lab` just above its craft, moved up past the labels already `placed` so
-    that none covers another, and kept inside the image."""
+           taken: Sequence[Box], size: tuple[int, int]) -> Placed:
+    """Draw `lab` next to its craft where it covers nothing in `taken` (the labels
+    already drawn, the other crafts): just above the craft, else just below it, else
+    above and moved up past what is in the way; always inside the image, clear of the
+    header and the caption."""
     left, top, right, bottom = draw.textbbox((0, 0), lab.text, font=font)
     w, h = right - left + 8, bottom - top + 6
     x = int(min(max(col - w / 2, 0), size[0] - w))
-    y = int(row - RING - 4 - h)
-    for _ in range(len(placed) + 1):
-        hit = [p for p in placed if p.box[0] < x + w and x < p.box[2]
-               and p.box[1] < y + h and y < p.box[3]]
-        if not hit:
+    lo, hi = 28, size[1] - 28 - h
+
+    def hits(y: float) -> list[Box]:
+        return [b for b in taken if b[0] < x + w and x < b[2] and b[1] < y + h and y < b[3]]
+
+    above, below = row - RING - 4 - h, row + RING + 4
+    free = [y for y in (above, below) if lo <= y <= hi and not hits(y)]
+    y = free[0] if free else above
+    for _ in range(len(taken) if not free else 0):
+        if not (hit := hits(y)):
             break
-        y = min(p.box[1] for p in hit) - h - 1
-    y = int(min(max(y, 28), size[1] - 28 - h))  # clear of the header and the caption
+        y = min(b[1] for b in hit) - h - 1
+    y = min(max(y, lo), hi)
     fill = _rgb(ROLE_COLORS.get(lab.role, "#cccccc"))
     ink = (0, 0, 0) if lab.role in ("standby", "claiming") else (255, 255, 255)
-    box = _boxed(draw, (x, y), lab.text, font, fill, ink, outline=lab.ring)
+    # A dark edge keeps a grey standby label readable on the grey floor.
+    edge, width = (lab.ring, 2) if lab.ring is not None else ((60, 60, 60), 1)
+    box = _boxed(draw, (x, int(y)), lab.text, font, fill, ink, outline=edge, width=width)
     return Placed(lab.robot, lab.text, box, (round(col), round(row)))
 
 
 def _boxed(draw: Any, at: tuple[int, int], text: str, font: Any,
            fill: tuple[int, int, int], ink: tuple[int, int, int],
-           outline: tuple[int, int, int] | None = None) -> tuple[int, int, int, int]:
+           outline: tuple[int, int, int] | None = None, width: int = 0
+           ) -> tuple[int, int, int, int]:
     """`text` on a filled box whose top left is `at`; the box drawn."""
     left, top, right, bottom = draw.textbbox((0, 0), text, font=font)
     box = (at[0], at[1], at[0] + right - left + 8, at[1] + bottom - top + 6)
-    draw.rectangle(box, fill=fill, outline=outline, width=2 if outline else 0)
+    draw.rectangle(box, fill=fill, outline=outline, width=width)
     draw.text((at[0] + 4 - left, at[1] + 3 - top), text, fill=ink, font=font)
     return box
 
