@@ -104,26 +104,30 @@ def test_fades_under_loss_converge(paper: Paper, auth: str, seed: int) -> None:
     settled(n)
 
 
-def test_a_refuted_claim_is_certified_nowhere_after_the_refutes_arrive(paper: Paper) -> None:
+def test_a_takeover_the_refutes_void_is_outranked_not_undone(paper: Paper) -> None:
     """Per-robot mode: 6 took f2 over while robot 2, faded, refuted unheard; 6's claim
-    was certified at the watchers before 2's refutes reached them. Once they do, 6 steps
-    down and no robot takes a heartbeat in 6's name at the claimed epoch (one frame, no
-    key needed) as the new holder: the live holder is fenced nowhere."""
+    was certified at the watchers before 2's refutes reached them. Once they do, nothing
+    moves back (the slot table only moves forward, DESIGN "Convergence"): the refutes
+    make 2's reassertion, the entry (2, 2), which outranks 6's (6, 1) everywhere, so 6
+    is fenced (rule 2) and 2, alive all along, holds f2 on. A heartbeat in 2's name at
+    epoch 0 afterwards (one frame, swarm key only) pulls no view back."""
     plan, _ = paper
     n = net(paper, "per-robot", [fade(2, 5.0, 0.8), deaf(6, 2, 5.0, 1.8)])
     n.run_until(10.0)
     settled(n)
-    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
-    assert n.nodes[1].snapshot().known["f2"] == (2, 0)
-    assert [e["epoch"] for e in n.named("fenced", 6)] == [0]  # 6 stepped down
-    forged = wire.encode(wire.Frame(plan.swarm_id, 6, 10**12,
-                                    wire.Heartbeat(plan.slot("f2"), 1, 1, 0)), KEY)
+    assert [(e["robot"], e["epoch"], e["replaced"]) for e in n.named("takeover")] == [
+        (6, 1, 2), (2, 2, 6)]
+    assert n.nodes[1].snapshot().known["f2"] == (2, 2)
+    assert [e["epoch"] for e in n.named("fenced", 6)] == [2]  # 6 stepped down
+    assert n.named("fenced", 2) == []
+    forged = wire.encode(wire.Frame(plan.swarm_id, 2, 10**12,
+                                    wire.Heartbeat(plan.slot("f2"), 0, 1, 0)), KEY)
     for rid in sorted(n.alive):
-        if rid != 6:
+        if rid != 2:
             n.inject(rid, n.nodes[rid].receive(forged, n.now))
     n.run_until(12.0)
     settled(n)
-    assert n.nodes[1].snapshot().known["f2"] == (2, 0)
+    assert n.nodes[1].snapshot().known["f2"] == (2, 2)
     assert n.named("fenced", 2) == []
 
 
@@ -200,19 +204,20 @@ def two_standbys() -> SwarmPlan:
 
 
 @pytest.mark.parametrize("auth", MODES)
-@pytest.mark.parametrize(("lower", "holder"), [
-    ("unhealthy:5@4", 6),                       # 5 reports a fault; 1 hears its LEAVE
-    ("deaf:1:5@3.9+3 unhealthy:5@4", 6),        # ... and nobody hears it
-    ("deaf:1:5@3.9+1.5", 5),                    # 5 lives on, unheard by 1 for a while
+@pytest.mark.parametrize(("lower", "holder", "takeovers"), [
+    ("unhealthy:5@4", 6, [(5, 1), (6, 1), (6, 2)]),   # 5 reports a fault; 1 hears its LEAVE
+    ("deaf:1:5@3.9+3 unhealthy:5@4", 6, [(5, 1), (6, 1), (6, 2)]),  # ... nobody hears it
+    ("deaf:1:5@3.9+1.5", 5, [(5, 1), (6, 1)]),     # 5 lives on, unheard by 1 for a while
 ])
 def test_two_holders_of_one_epoch_end_with_the_one_that_executes(
-        paper: Paper, auth: str, lower: str, holder: int) -> None:
+        paper: Paper, auth: str, lower: str, holder: int,
+        takeovers: list[tuple[int, int]]) -> None:
     """Robots 2, 3, 4 and 6 do not hear 1 and 5 for 2 s (1 and 5 hear them). Robot 2
     leaves: standbys 5 and 6 both take f2 over at epoch 1, each on its side (6 never
-    hears 5's claim; 5 hears 6's but wins the race by its lower id). If 5 stops before
-    the heal, 6 never hears it and executes on: 1, which took 5 as the holder (rule 2's
-    lower id), must come to 6 too, not keep a holder it no longer hears. If 5 lives,
-    6 fences itself on hearing it, and every view names 5."""
+    hears 5's claim; 5 hears 6's but wins the race by its lower id). The entry (5, 1)
+    outranks (6, 1) (slots.py), and views only move forward: once it reaches 6, 6 fences
+    itself. If 5 stopped before the heal, the slot's watchers then suspect 5 and a
+    standby takes f2 over at epoch 2 (here 6 again); if 5 lives, every view names 5."""
     from sim.shared.faults import parse_fault
     from sim.virtual.simulator import run_virtual
 
@@ -221,7 +226,7 @@ def test_two_holders_of_one_epoch_end_with_the_one_that_executes(
     res = run_virtual(two_standbys(), params, duration=14.0, auth=auth,
                       faults=[parse_fault(s) for s in specs])
     assert sorted((e["robot"], e["epoch"]) for e in res.events
-                  if e["event"] == "takeover") == [(5, 1), (6, 1)]
+                  if e["event"] == "takeover") == takeovers
     assert [v.kind for v in res.violations] == []
     assert res.holders()["f2"] == [holder]
 
@@ -273,17 +278,20 @@ def test_a_new_holder_gone_before_a_cut_off_watcher_heard_it_is_replaced(
 
 
 @pytest.mark.parametrize("auth", MODES)
-def test_a_holder_cut_off_through_its_takeover_keeps_the_slot_when_the_new_holder_died(
+def test_a_holder_cut_off_through_its_takeover_takes_it_back_when_the_new_holder_died(
         paper: Paper, auth: str) -> None:
     """Robot 2 is cut off from 3 s to 5 s and executes on: 6 takes f2 over at epoch 1
-    on the others' side, and crashes at 4.5 s. After the heal every view comes back to
-    2, the robot that executes f2 (per robot: 2's signed REFUTEs void the warnings that
-    backed 6; with no signatures, 2's heartbeats while 6 stays silent, rule 4)."""
+    on the others' side, and crashes at 4.5 s. After the heal the entry (6, 1) reaches 2
+    (per robot: the certificate, relayed whole when 2 heartbeats epoch 0; with no
+    signatures: the witnesses' warnings about 6) and fences it: views never move back
+    (DESIGN "Convergence"). 6 is silent, so 2, which covers f2, counts the witnesses'
+    warnings about 6 like any standby and takes f2 back at epoch 2."""
     res = _run(paper, auth, ["partition:2|1,3,4,5,6@3+2", "crash:6@4.5"])
     assert [v.kind for v in res.violations] == []
-    assert [e["robot"] for e in res.events if e["event"] == "takeover"] == [6]
+    assert [(e["robot"], e["epoch"]) for e in res.events
+            if e["event"] == "takeover"] == [(6, 1), (2, 2)]
     assert res.holders()["f2"] == [2]
-    assert res.final[2] == ("active", "f2", 0)
+    assert res.final[2] == ("active", "f2", 2)
 
 
 @pytest.mark.parametrize("auth", MODES)

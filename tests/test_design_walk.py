@@ -36,3 +36,29 @@ def test_the_walked_failover_is_what_the_simulator_does() -> None:
                  "claim_hold"):
         cited = re.search(rf"{name}\s+([0-9.]+) s", walk)
         assert cited is not None and float(cited.group(1)) == getattr(p, name), name
+
+
+def test_every_step_of_the_walk_names_code_that_exists() -> None:
+    """The walk's "where" column names `file.py:Class.method` in swarmd/core (and bare
+    `_method`s of the class named before them): each must exist, so the walk cannot
+    drift from the code it points a reader to. The failover crosses at most six files."""
+    import ast
+
+    rows = [line for line in _walk().splitlines() if line.startswith("| ") and "`" in line]
+    files: set[str] = set()
+    for row in rows:
+        where = row.rstrip(" |").rsplit(" | ", 1)[-1]
+        if where.startswith("`sim/"):
+            continue
+        cls = ""
+        for file, name in re.findall(r"`(?:([a-z_]+\.py):)?([A-Za-z_.]+)`", where):
+            if file:
+                current = file
+                files.add(file)
+            if "." in name:
+                cls, name = name.split(".")
+            tree = ast.parse((ROOT / "swarmd" / "core" / current).read_text(encoding="utf-8"))
+            found = {f"{c.name}.{f.name}" for c in tree.body if isinstance(c, ast.ClassDef)
+                     for f in c.body if isinstance(f, ast.FunctionDef)}
+            assert f"{cls}.{name}" in found, (row, current, cls, name)
+    assert 3 <= len(files) <= 6, files

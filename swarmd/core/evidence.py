@@ -92,10 +92,8 @@ class EvidenceStore:
             # is kept: it may back a rival claim of that same takeover, which the lower
             # id wins (the paper's race, after a partition healed).
             return []
-        if witness != suspect and self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw):
-            # The suspect said, signed, that it was alive after this warning (rule 4): it
-            # backs no takeover, here or anywhere the REFUTE reaches.
-            return None
+        refuted = witness != suspect \
+            and self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw)
         episodes = self._evidence.setdefault(f, {})
         got = episodes.get((suspect, epoch))
         if got is None:
@@ -105,6 +103,12 @@ class EvidenceStore:
         old = got.get(witness)
         if old is None or seq_of(old) < seq_of(raw):
             got[witness] = raw  # the latest: the least likely to be refuted
+        if refuted:
+            # The suspect said, signed, that it was alive after this warning (rule 4): no
+            # new claim may rest on it. Kept all the same: a takeover it backed that was
+            # accepted somewhere stands (entries only move forward, `slots.py`), and
+            # every robot must be able to verify that takeover alike.
+            return None
         ready: list[tuple[int, wire.Claim, bytes]] = []
         pending = self._pending.get(f)
         if pending:
@@ -119,11 +123,13 @@ class EvidenceStore:
                         ready.append((claimant, claim, signed))
         return ready
 
-    def _backers(self, f: str, suspect: int, epoch: int, claimant: int) -> dict[int, int]:
+    def _backers(self, f: str, suspect: int, epoch: int, claimant: int,
+                 refutes: bool = False) -> dict[int, int]:
         """{witness: seq} of the signed evidence backing `claimant` taking f over from
-        `suspect` at `epoch`: the suspect's own LEAVE alone, or the unrefuted warnings of
-        distinct witnesses (the robots that may hold a slot watching f, rule 3, and the
-        claimant itself as rule 9's own ears, once), never the suspect's."""
+        `suspect` at `epoch`: the suspect's own LEAVE alone, or the warnings of distinct
+        witnesses (the robots that may hold a slot watching f, rule 3, and the claimant
+        itself as rule 9's own ears, once), never the suspect's. With `refutes`, only
+        the warnings the suspect has not refuted: what a claimant may still act on."""
         got = self._evidence.get(f, {}).get((suspect, epoch))
         if not got:
             return {}
@@ -134,7 +140,7 @@ class EvidenceStore:
         for w, raw in got.items():
             if w != suspect and (w == claimant or w in may):
                 seq = seq_of(raw)
-                if seq > self.refuted_up_to(f, suspect, epoch, w):
+                if not refutes or seq > self.refuted_up_to(f, suspect, epoch, w):
                     out[w] = seq
         return out
 
@@ -158,18 +164,23 @@ class EvidenceStore:
         return got
 
     # ------------------------------------------------------------------ certificates
-    def certify(self, f: str, claimant: int, c: wire.Claim, floor: int) -> bool:
-        """Does the evidence held back `claimant`'s CLAIM `c` of f, unrefuted? (`floor`:
-        the epoch of f as known; certified takeovers older than it are forgotten first.)"""
+    def certify(self, f: str, claimant: int, c: wire.Claim, floor: int, *,
+                refutes: bool = False) -> bool:
+        """Does the evidence held back `claimant`'s CLAIM `c` of f? (`floor`: the epoch
+        of f as known; certified takeovers older than it are forgotten first.) A claim
+        certified stays certified: signed frames alone decide it, so every robot that
+        holds them judges alike (DESIGN, "Convergence"). With `refutes`, the question a
+        claimant asks before it takes over: is it still backed once the suspect's
+        refutes are counted (rule 4)?"""
         if claimant not in self._plan.covered_by(f):
             return False
         certified = self._certified.setdefault(f, {})
-        backers = self._backers(f, c.failed, c.epoch - 1, claimant)
+        backers = self._backers(f, c.failed, c.epoch - 1, claimant, refutes)
         if not self._enough(c.failed, backers):
             old = certified.get((claimant, c.epoch))
-            # Evidence pushed out by a flood is judged by what it was, against the
-            # refutes known now.
-            return old is not None and old[0] == c.failed and self._still(f, c.epoch, old)
+            # Evidence pushed out by a flood is judged by what it was.
+            return old is not None and old[0] == c.failed \
+                and (not refutes or self._still(f, c.epoch, old))
         if (claimant, c.epoch) not in certified and len(certified) >= CLAIMS_REMEMBERED:
             for key in [k for k in certified if k[1] < floor] or [next(iter(certified))]:
                 del certified[key]
@@ -183,11 +194,37 @@ class EvidenceStore:
         return self._enough(failed, left)
 
     def is_certified(self, f: str, claimant: int, epoch: int) -> bool:
-        """Is (claimant, epoch) of f a takeover a certificate backs here, unrefuted?"""
+        """Is (claimant, epoch) of f an entry the signed frames held here prove: a takeover
+        a certificate backs, or a holder's reassertion over a takeover its refutes void
+        (`reasserted`)?"""
         entry = self._certified.get(f, {}).get((claimant, epoch))
-        if entry is None:
-            return False
-        return self.certify(f, claimant, wire.Claim(entry[0], self._plan.slot(f), epoch), 0)
+        if entry is not None and self.certify(
+                f, claimant, wire.Claim(entry[0], self._plan.slot(f), epoch), 0):
+            return True
+        return self.reasserted(f, claimant, epoch) is not None
+
+    def voided_by(self, f: str, claimant: int, epoch: int) -> int | None:
+        """The holder whose signed REFUTEs void the certified takeover (claimant, epoch) of
+        f — the robot it replaced, alive after the warnings that backed it (rule 4) —
+        or None. A takeover backed by the holder's own LEAVE is never void."""
+        entry = self._certified.get(f, {}).get((claimant, epoch))
+        if entry is None or entry[1].get(entry[0]) == _LEAVE_BACKED:
+            return None
+        claim = wire.Claim(entry[0], self._plan.slot(f), epoch)
+        if self.certify(f, claimant, claim, 0, refutes=True):
+            return None
+        return entry[0]
+
+    def reasserted(self, f: str, holder: int, epoch: int) -> int | None:
+        """Is (holder, epoch) of f the reassertion of `holder`'s hold at `epoch - 2` over a
+        takeover at `epoch - 1` that its refutes void? The claimant of that takeover if
+        so. The entry the refutes produce is the next epoch, never the old one: the
+        slot table only moves forward (`slots.py`; DESIGN, "Convergence")."""
+        for (claimant, e), (failed, _) in self._certified.get(f, {}).items():
+            if e == epoch - 1 and failed == holder \
+                    and self.voided_by(f, claimant, e) == holder:
+                return claimant
+        return None
 
     def replaced(self, f: str, claimant: int, epoch: int) -> int | None:
         """The robot a certified (claimant, epoch) of f replaced, if known here."""
@@ -215,8 +252,7 @@ class EvidenceStore:
     def cert_frames(self, f: str, suspect: int, epoch: int,
                     claimant: int | None = None) -> tuple[bytes, ...]:
         """The certificate this robot (or `claimant`, whose takeover it certified) can
-        show for taking f over from `suspect`: every unrefuted backer, not just a
-        quorum."""
+        show for taking f over from `suspect`: every backer, not just a quorum."""
         got = self._evidence.get(f, {}).get((suspect, epoch), {})
         who = self._robot_id if claimant is None else claimant
         return tuple(got[w] for w in self._backers(f, suspect, epoch, who))
@@ -229,11 +265,25 @@ class EvidenceStore:
         refutes and any other robot certifies the takeover and moves its view (DESIGN,
         "Convergence"); at most once per T_max (empty otherwise, or when this robot
         certified no such takeover)."""
-        failed = self.replaced(f, holder, epoch)
-        if failed is None or epoch == 0 \
-                or now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
+        voided = self.reasserted(f, holder, epoch)
+        if voided is not None:
+            # A reassertion: the takeover it outranks, then the refutes that void it.
+            got = self._refutes.get(f, {}).get((holder, epoch - 2), {})
+            refutes = tuple(raw for _, raw in got.values())
+            frames = self._takeover_frames(f, voided, epoch - 1) + refutes
+        else:
+            frames = self._takeover_frames(f, holder, epoch)
+        if not frames or now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
             return ()
         self._evidence_relayed_at[f] = now
+        return frames
+
+    def _takeover_frames(self, f: str, holder: int, epoch: int) -> tuple[bytes, ...]:
+        """The evidence against the robot `holder` replaced at `epoch`, then `holder`'s
+        signed CLAIM (empty when no such takeover is certified here)."""
+        failed = self.replaced(f, holder, epoch)
+        if failed is None or epoch == 0:
+            return ()
         frames = self.cert_frames(f, failed, epoch - 1, holder)
         claim = self._claims.get(f, {}).get((holder, epoch))
         return (*frames, claim) if claim is not None and frames else frames

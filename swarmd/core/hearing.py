@@ -14,6 +14,7 @@ from swarmd.core.drops import DropReason
 from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder
 from swarmd.core.roles import Health, Role, Trigger
+from swarmd.core.slots import greater
 from swarmd.core.witness import witnesses
 
 
@@ -27,26 +28,30 @@ class Hearing(NodeBase):
         f = self._slot(hb.function)
         if f is None:
             return
-        holder, epoch = self._known[f]
-        newer = hb.epoch > epoch or (hb.epoch == epoch and (sender == holder or sender < holder))
-        newer = newer or (hb.epoch == epoch and self._holder_silent(f, holder, epoch, now))
-        if not newer and hb.epoch < epoch and self._identity is None:
-            newer = self._older_alive(f, sender, hb, Holder(holder, epoch), now)
-        if newer and self._identity is not None and (sender, hb.epoch) != (holder, epoch) \
+        known, entry = self._known[f], Holder(sender, hb.epoch)
+        if greater(known, entry):
+            self._older_beat(f, hb, known, now)
+            return
+        if entry != known and self._identity is not None \
                 and not self._ev.is_certified(f, sender, hb.epoch):
             self._uncertified_beat(f, hb, now)
             return
-        if not newer:
-            self._older_beat(f, hb, Holder(holder, epoch), now)
+        ahead = self._forward(f, entry)
+        if ahead != entry:
+            # Per robot: a takeover that the robot it replaced refuted. Its holder is
+            # outranked by that robot's reassertion; show it why.
+            self._learn_holder(f, ahead, now)
+            self._relay_view(f, now)
             return
-        self._known[f] = Holder(sender, hb.epoch)
+        self._known.merge(f, entry)
         self._ears.slot_beat(f, sender, hb.epoch, now)
         self._claims_seen.forget(f)
-        # Rule 2: our own slot held at a higher epoch, or at ours by a lower id.
+        # Rule 2: a greater entry for the slot we execute (a higher epoch, or ours by a
+        # lower id) ends our hold.
         if self._holds(f) and sender != self._robot_id:
             self._fence(hb.epoch, now)
             return
-        self._holder_heard(f, sender, hb.epoch, Holder(holder, epoch), now)
+        self._holder_heard(f, sender, hb.epoch, known, now)
 
     def _older_beat(self, f: str, hb: wire.Heartbeat, known: Holder, now: float) -> None:
         """A heartbeat for f older than our view of it (`known`): its sender missed a
@@ -62,7 +67,7 @@ class Hearing(NodeBase):
             self._relay_cert(f, now, 2 * self._params.heartbeat_interval if rival
                              else None)
             self._heartbeat_now(now)
-        elif self._identity is not None and hb.epoch < known.epoch:
+        elif self._identity is not None:
             # Per-robot mode, a takeover it missed whose new holder may be gone:
             # whoever certified it shows the stale holder the evidence against it
             # (it fences itself, or refutes and keeps its slot everywhere).
@@ -130,40 +135,6 @@ class Hearing(NodeBase):
         if self._rejoin is not None and self._rejoin.function == f and sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
 
-    def _holder_silent(self, f: str, holder: int, epoch: int, now: float) -> bool:
-        """Does f's holder at `epoch` as we know it yield to another robot heartbeating
-        f at that same epoch? Rule 2 orders two holders of one epoch (two claimants
-        each won the race on its side of a partition) by the lower id, because the
-        higher one hears the lower and fences itself. A lower one that stopped before
-        the higher one heard it (it left, became faulty, or was cut off) fences nobody,
-        and the higher one executes on; views that keep the lower one would never meet
-        the others' (DESIGN, "Convergence"). So a holder whose heartbeat for f we have
-        not heard for T_max — Fig. 7's measure of a silent robot — yields to a rival
-        that heartbeats f at its epoch (per robot, only to a certified one: `newer` is
-        still judged by the certificate). It gets the slot back by heartbeating it
-        again, and the rival fences itself on hearing it (rule 2). Never our own hold:
-        we are alive."""
-        if self._holds(f):
-            return False
-        return not self._ears.heard_lately(f, holder, epoch, now, self._params.t_max)
-
-    def _older_alive(self, f: str, sender: int, hb: wire.Heartbeat, known: Holder,
-                     now: float) -> bool:
-        """Unsigned or shared-key mode: does f's holder as we know it (`known`) yield to
-        `sender`, heartbeating f at an older epoch? Yes when `known` has been silent for
-        T_max (`_holder_silent`) while `sender` has heartbeated on for a heartbeat
-        interval: the takeover of its hold happened while it was cut off from its
-        watchers, and the new holder is gone. Per robot, its signed REFUTEs undo that
-        takeover everywhere (`_rejudge`); with no signatures its heartbeats are its
-        refutation (rule 4), so views come back to the robot that executes the slot
-        (DESIGN, "Convergence"). One heartbeat is not enough: a stale holder answering
-        warnings out of its buffer after a stall fences itself a moment later when it
-        reads the newer epoch there (rule 2). If the newer holder is alive after all,
-        its next heartbeat moves the view up again and fences the older one."""
-        sustained = self._ears.older_beat(f, sender, hb.epoch, now)
-        return sustained >= self._params.heartbeat_interval \
-            and self._holder_silent(f, known.robot, known.epoch, now)
-
     # ------------------------------------------------------------------ WARN
     def _on_warn(self, sender: int, w: wire.Warn, now: float, raw: bytes = b"",
                  seq: int = 0) -> None:
@@ -178,7 +149,7 @@ class Hearing(NodeBase):
             self._rejoin_superseded(f, w.epoch)
         if f not in self._covers or not self._standing_by():
             return
-        if w.epoch < epoch or (w.epoch == epoch and w.suspect != holder):
+        if greater(Holder(holder, epoch), Holder(w.suspect, w.epoch)):
             return  # about an older holder: stale
         # A warning at a newer epoch than we know means we missed a takeover (we were
         # partitioned, or lost its heartbeats) and the new holder may be dead already:
@@ -213,33 +184,41 @@ class Hearing(NodeBase):
         self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
         if self._holds(f) and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
             self._relay_cert(f, now)  # a watcher that missed our takeover
-        elif w.epoch < self._known[f].epoch:
+        elif greater(self._known[f], Holder(w.suspect, w.epoch)):
             self._relay_view(f, now)  # one that missed a takeover we certified
 
     def _warned_newer(self, f: str, sender: int, w: wire.Warn, now: float) -> None:
-        """Unsigned or shared-key mode: a witness of f (rule 3) warns about a holder at
-        a newer epoch than our view: it heard that holder's heartbeat, which we missed
-        (a partition, a fade), and the holder may be dead since. Our view rises to it
-        (DESIGN, "Convergence"), or our warnings would name an older holder than the
-        other witnesses' and the slot's standby would never count a quorum. In these
-        modes any heartbeat moves a view as far (DESIGN section 2, "Who can
-        still do what"); per robot, the certificate does it (`_relay_view`)."""
-        known = self._known[f]
-        if w.epoch <= known.epoch or w.suspect in (self._robot_id, sender) \
+        """Unsigned or shared-key mode: a witness of f (rule 3) warns about a holder whose
+        entry is greater than our view: it heard that holder's heartbeat, which we missed
+        (a partition, a fade), and the holder may be dead since. Our view moves forward
+        to it (DESIGN, "Convergence"), or our warnings would name an older holder than
+        the other witnesses' and the slot's standby would never count a quorum; a hold
+        of ours it outranks ends (rule 2). In these modes any heartbeat moves a view as
+        far (DESIGN section 2, "Who can still do what"); per robot, only a certificate
+        does (`_relay_view`)."""
+        new = Holder(w.suspect, w.epoch)
+        if w.suspect == sender or not greater(new, self._known[f]) \
                 or sender not in witnesses(self._plan, self._known, f):
             return
-        if (self._claim is not None and self._claim.function == f) or self._holds(f):
-            return  # our own claim or hold settles it (rule 2; `_older_alive`)
-        if self._ears.heard_lately(f, known.robot, known.epoch, now, self._params.t_max):
-            return  # the holder we know is alive: views come back to it (`_older_alive`)
-        self._learn_holder(f, Holder(w.suspect, w.epoch), now)
+        self._learn_holder(f, new, now)
 
     def _learn_holder(self, f: str, new: Holder, now: float) -> None:
-        """Our view of f rises to `new`, a takeover we learn of without hearing its
-        holder (`_warned_newer`, `_relay_view`'s receivers). Not a sign of life: the
+        """Our view of f moves forward to `new`, a takeover we learn of without hearing
+        its holder (`_warned_newer`, `_relay_view`'s receivers). Not a sign of life: the
         watch treats it as a CLAIM heard (the new holder gets `claim_hold + t_max` to
-        heartbeat; rule 10, once an episode), then suspects it."""
-        self._known[f] = new
+        heartbeat; rule 10, once an episode), then suspects it. A hold of ours it
+        outranks ends (rule 2); a claim of ours it supersedes backs off."""
+        if not self._known.merge(f, new):
+            return
+        if self._holds(f) and new.robot == self._robot_id:
+            self._reassert(f, new.epoch, now)
+        elif self._holds(f):
+            self._fence(new.epoch, now)
+        claim = self._claim
+        if claim is not None and claim.function == f and new.epoch >= claim.epoch:
+            self._emit(ev.Backoff(subject=claim.failed, function=f, winner=new.robot))
+            self._claim = None
+            self._to(Trigger.SUPERSEDED)
         watch = self._watches.get(f)
         if watch is not None:
             watch.claim_heard(now)

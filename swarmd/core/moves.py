@@ -14,6 +14,7 @@ from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder
 from swarmd.core.roles import Role, Trigger
+from swarmd.core.slots import greater
 from swarmd.core.watchdog import SlotWatch
 
 
@@ -67,12 +68,20 @@ class Moves(NodeBase):
         if self._identity is not None and not self._ev.certify(
                 c.function, self._robot_id,
                 wire.Claim(c.failed, self._plan.slot(c.function), c.epoch),
-                self._known[c.function].epoch):
+                self._known[c.function].epoch, refutes=True):
             # Its certificate was refuted during the hold (or never complete): a takeover
             # no other robot would believe is none (DESIGN, "Convergence").
             self._emit(ev.Refute(subject=c.failed, function=c.function))
             self._claim = None
             self._to(Trigger.REFUTED)
+            return
+        if greater(self._known[c.function], Holder(self._robot_id, c.epoch)):
+            # The slot moved past our claim during the hold: a greater entry is never
+            # lowered (`slots.py`), so ours would be fenced at once.
+            self._emit(ev.Backoff(subject=c.failed, function=c.function,
+                                  winner=self._known[c.function].robot))
+            self._claim = None
+            self._to(Trigger.SUPERSEDED)
             return
         self._claim = None
         self._to(Trigger.CLAIM_HELD)
@@ -84,7 +93,7 @@ class Moves(NodeBase):
     def _become_holder(self, f: str, epoch: int, now: float) -> None:
         """Execute f at `epoch` from now: tell the robot, watch f's neighbours, heartbeat."""
         self._function, self._epoch = f, epoch
-        self._known[f] = Holder(self._robot_id, epoch)
+        self._known.merge(f, Holder(self._robot_id, epoch))
         self._pending.append(Assign(f, epoch))
         self._watch_neighbours(now)
         self._restart_heartbeats(now)

@@ -27,6 +27,7 @@ from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
+from swarmd.core.slots import SlotTable
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import Ears
@@ -47,8 +48,9 @@ class NodeBase:
     _drops: Counter[str]
     _frames_in: int
     _frames_out: int
-    _known: dict[str, Holder]
-    """function -> (holder, epoch): whoever executes each slot, as far as we know."""
+    _known: SlotTable
+    """function -> (holder, epoch): whoever executes each slot, as far as we know; it
+    only moves forward (`slots.py`)."""
     _covers: frozenset[str]
     _relevant: Relevant
     _role: Role
@@ -173,6 +175,12 @@ class NodeBase:
         raise NotImplementedError
 
     def _sign_only(self, msg: wire.Message) -> bytes:
+        raise NotImplementedError
+
+    def _forward(self, f: str, new: Holder) -> Holder:
+        raise NotImplementedError
+
+    def _reassert(self, f: str, epoch: int, now: float) -> None:
         raise NotImplementedError
 
     def _verified_hold(self, f: str, epoch: int,

@@ -12,21 +12,23 @@ from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
 from swarmd.core.roles import Role
+from swarmd.core.slots import SlotTable
 
 
 class Restart(NodeBase):
-    def _views(self, restored: Restored | None) -> dict[str, Holder]:
+    def _views(self, restored: Restored | None) -> SlotTable:
         """Who holds each slot at start: the plan's holders at epoch 0, or newer ones a
         restarted robot persisted (its own memory: what it had verified before it went
         down; its own hold is verified again, `_restore`)."""
-        known = {}
-        for f in self._plan.functions:
-            holder = self._plan.initial_holder(f)
-            known[f] = Holder(holder if holder is not None else 0, 0)
+        known = SlotTable((f, self._initial(f)) for f in self._plan.functions)
         for f, (holder, epoch) in (restored.known.items() if restored is not None else ()):
-            if f in known and epoch >= known[f].epoch:
-                known[f] = Holder(holder, epoch)
+            if f in known:
+                known.merge(f, Holder(holder, epoch))
         return known
+
+    def _initial(self, f: str) -> Holder:
+        holder = self._plan.initial_holder(f)
+        return Holder(holder if holder is not None else 0, 0)
 
     def _restore(self, restored: Restored, now: float) -> None:
         """A restarted robot: peers' seqs (a refused absurd value counts as `seq_jump`),
@@ -43,9 +45,11 @@ class Restart(NodeBase):
             f = held[0]
             held = self._verified_hold(f, held[1], restored)
             if held is None and self._known[f].robot == self._robot_id:
-                # Our own hold, unproven: the file's view of the slot is no better.
-                holder = self._plan.initial_holder(f)
-                self._known[f] = Holder(holder if holder is not None else 0, 0)
+                # Our own hold, unproven: the file's view of the slot is no better. The
+                # table is being built (nothing has read it yet), so it starts again
+                # from the plan's entry for f rather than lowering one.
+                self._known = SlotTable((g, self._initial(g) if g == f else e)
+                                        for g, e in self._known.items())
         if held is not None:
             self._rejoin = Rejoin(self._robot_id, *held, now + self._params.rejoin_hold)
             self._role = Role.REJOINING

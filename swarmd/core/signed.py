@@ -9,11 +9,14 @@ from __future__ import annotations
 
 from swarmd.core import events as ev
 from swarmd.core import wire
+from swarmd.core.actions import Assign
 from swarmd.core.drops import DropReason
 from swarmd.core.evidence import cert_says, seq_of
+from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder, Restored
 from swarmd.core.roles import Role, Trigger
+from swarmd.core.slots import greater
 
 _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
@@ -35,7 +38,7 @@ class Signed(NodeBase):
         if epoch == 0:
             return (f, 0) if self._plan.initial_holder(f) == self._robot_id else None
         if self._ev.restore(f, epoch, tuple(restored.certificate), self._verifier):
-            self._known[f] = Holder(self._robot_id, epoch)
+            self._known.merge(f, Holder(self._robot_id, epoch))
             return (f, epoch)
         return None
 
@@ -66,10 +69,36 @@ class Signed(NodeBase):
             assert now is not None  # `record` readies a claim only with a `now`
             self._on_claim(claimant, claim, now, signed)
 
+    def _forward(self, f: str, new: Holder) -> Holder:
+        """The entry the signed frames held here make of `new`: itself, or, per robot,
+        when the robot it replaced refuted the warnings that backed it (rule 4), that
+        robot's reassertion at the next epoch (`EvidenceStore.reasserted`): a voided
+        takeover is outranked, never undone (`slots.py`; DESIGN, "Convergence")."""
+        if self._identity is None or new.epoch >= EPOCH_MAX:
+            return new
+        failed = self._ev.voided_by(f, new.robot, new.epoch)
+        return new if failed is None else Holder(failed, new.epoch + 1)
+
+    def _reassert(self, f: str, epoch: int, now: float) -> None:
+        """We hold f, and a takeover of our hold that our refutes void reached us: we
+        hold f on at the reassertion's epoch (`_forward`), tell the robot, and heartbeat
+        it at once (an anchor: the epoch changed) so the others move forward too. The log
+        calls it a takeover of f from the claimant it outranks, which it is."""
+        outranked = self._ev.reasserted(f, self._robot_id, epoch)
+        self._epoch = epoch
+        self._emit(ev.Takeover(function=f, epoch=epoch,
+                               replaced=outranked if outranked is not None else 0))
+        self._pending.append(Assign(f, epoch))
+        self._heartbeat_now(now)
+
     def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
         """Someone still believes an older holder of our slot: relay the certificate of
         our hold and re-announce the claim it backs, at most once per T_max (`every`)."""
         if f is None:
+            return
+        if self._identity is not None \
+                and self._ev.reasserted(f, self._robot_id, self._epoch) is not None:
+            self._relay_view(f, now)  # our hold is a reassertion: its proof is the view's
             return
         mine = self._ev.relay(f, now, every)
         if mine is None:
@@ -135,13 +164,9 @@ class Signed(NodeBase):
         if claimant == self._robot_id:
             return
         self._on_claim(claimant, c, now, raw)
-        if c.epoch <= self._known[f].epoch or not self._ev.is_certified(f, claimant, c.epoch) \
-                or (self._claim is not None and self._claim.function == f):
-            return
-        holding = self._holds(f)
-        self._learn_holder(f, Holder(claimant, c.epoch), now)
-        if holding:
-            self._fence(c.epoch, now)
+        new = Holder(claimant, c.epoch)
+        if greater(new, self._known[f]) and self._ev.is_certified(f, claimant, c.epoch):
+            self._learn_holder(f, self._forward(f, new), now)
 
     # ------------------------------------------------------------------ refutes
     # A holder's signed word that it was alive after a warning voids that warning
@@ -172,43 +197,21 @@ class Signed(NodeBase):
             self._rejudge(f, now, Holder(holder, r.epoch))
 
     def _rejudge(self, f: str, now: float, refuter: Holder) -> None:
-        """New refutes of f came from `refuter` (holder, epoch): a takeover of f they
-        void is undone here as everywhere they reach — our own hold or claim ends, and
-        the view of f goes back to the robot that refuted (DESIGN, "Convergence"). A
-        view one epoch above the refuter's that no certificate here backs (read from
-        our state file after a restart) yields to the refuter's signed word."""
-        known = self._known[f]
-        if known.epoch == refuter.epoch + 1 and known.robot != refuter.robot \
-                and self._ev.replaced(f, known.robot, known.epoch) is None \
-                and known.robot != self._robot_id:
-            self._known[f] = refuter
-            self._suspicion_moot(f, now)
-        me = self._robot_id
+        """New refutes of f came from `refuter` (holder, epoch): a claim of ours that they
+        void ends in its wait state (rule 4: the suspect is alive); a takeover in our view
+        that they void is outranked by the refuter's reassertion at the next epoch
+        (`_forward`): views only move forward (`slots.py`; DESIGN, "Convergence")."""
         c = self._claim
         if c is not None and c.function == f and not self._ev.certify(
-                f, me, wire.Claim(c.failed, self._plan.slot(f), c.epoch), 0):
+                f, self._robot_id, wire.Claim(c.failed, self._plan.slot(f), c.epoch), 0,
+                refutes=True):
             self._emit(ev.Refute(subject=c.failed, function=f))
             self._claim = None
             self._to(Trigger.REFUTED)
-        for _ in range(len(self._plan.robots)):  # each step lowers the epoch
-            holder, epoch = self._known[f]
-            failed = self._ev.replaced(f, holder, epoch)
-            if failed is None or epoch == 0 or self._ev.is_certified(f, holder, epoch):
-                return
-            self._known[f] = Holder(failed, epoch - 1)
-            self._suspicion_moot(f, now)
-            if holder == me and self._function == f and self._role == Role.ACTIVE:
-                self._fence(epoch - 1, now)
-
-    def _suspicion_moot(self, f: str, now: float) -> None:
-        """Our view of f went back to a holder that just said, signed, it is alive: a
-        suspicion of the takeover's holder we watched is moot. It ends as a refuted one
-        (rule 4), and the watch runs on for the holder (it fires again after T_max if
-        that one is silent)."""
-        watch = self._watches.get(f)
-        if watch is not None and watch.suspecting:
-            watch.heard(now)
-            self._emit(ev.Refute(subject=self._known[f].robot, function=f))
+        known = self._known[f]
+        ahead = self._forward(f, known)
+        if ahead != known:
+            self._learn_holder(f, ahead, now)
 
     def _relay_refutes(self, f: str, now: float) -> None:
         """Someone acts on a takeover of f that refutes we hold void (an uncertified

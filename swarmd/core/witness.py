@@ -28,7 +28,7 @@ def witnesses(plan: SwarmPlan, known: Mapping[str, Holder], f: str) -> set[int]:
 
 
 class Ears:
-    __slots__ = ("_older", "_params", "_plan", "_robot_id", "_slot_heard", "_standby_at",
+    __slots__ = ("_params", "_plan", "_robot_id", "_slot_heard", "_standby_at",
                  "_start")
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, start: float) -> None:
@@ -38,26 +38,10 @@ class Ears:
         self._start = start
         self._slot_heard: dict[str, SlotBeat] = {}
         self._standby_at: dict[int, float] = {}
-        self._older: dict[str, tuple[SlotBeat, float]] = {}
-        """f -> (the last heartbeat heard for f at an older epoch than our view, since
-        when that robot has been heard so without a gap of T_max)."""
 
     def slot_beat(self, f: str, holder: int, epoch: int, now: float) -> None:
         """A heartbeat of f's holder at `epoch` was accepted at `now`."""
         self._slot_heard[f] = SlotBeat(holder, epoch, now)
-
-    def older_beat(self, f: str, holder: int, epoch: int, now: float) -> float:
-        """A heartbeat of f at an older epoch than our view was heard from `holder` at
-        `epoch`: for how long it has been heard so, without a silence of T_max. One
-        heartbeat is 0: a holder that answers out of its buffer after a stall and
-        then reads the newer epoch in it and fences sends one or two at once."""
-        last = self._older.get(f)
-        since = now
-        if last is not None and (last[0].holder, last[0].epoch) == (holder, epoch) \
-                and now - last[0].at < self._params.t_max:
-            since = last[1]
-        self._older[f] = (SlotBeat(holder, epoch, now), since)
-        return now - since
 
     def standby_beat(self, robot: int, now: float) -> None:
         """A healthy standby (or claimant) heartbeat of `robot` was heard at `now`."""
