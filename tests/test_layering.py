@@ -321,6 +321,15 @@ counts: docstrings, comments and blank lines explain the code and never count ag
 it, so nobody cuts an explanation or packs assignments to fit."""
 
 SIZE_EXEMPT: dict[str, str] = {
+    "sim/realtime/orchestrator.py:Orchestrator.__init__":
+        "the run's fields in one table: what the constructor checks and keeps, what "
+        "supervision fills, what `prepare` sets; split, the table reads in three places",
+    "sim/xbee_emu/medium.py:Medium.__init__":
+        "the medium's fields in one table: the radios, the air's bookkeeping, the "
+        "thread's selector and wake pipe, the figures; no logic beyond one argument check",
+    "swarmd/metrics.py:Metrics.__init__":
+        "the daemon's metric declarations in one table, each with the help text a "
+        "Prometheus user reads; split, a metric's name is hunted in helper methods",
 }
 """Functions allowed over the limit, each with the reason it reads best whole (a table,
 a command's option block). Reviewed: an entry is a decision, not a way out."""

@@ -98,10 +98,8 @@ class QuadLink:
         self._forced = Health.OK
         self._reported: Health | None = None
         self._last_report = float("-inf")
-        self._init_stats()
 
-    def _init_stats(self) -> None:
-        """The link's error count and its wake-up lateness figures."""
+        # The link's error count and its wake-up lateness figures.
         self.errors = 0
         """Bad assignments and physics exceptions: counted and logged, never raised."""
         self.lateness: collections.deque[float] = collections.deque(maxlen=20000)
