@@ -203,7 +203,8 @@ class QuadLink:
         r = self.robot
         if r.mode in (Mode.TAKEOFF, Mode.FLYING):
             r.release()
-        end, errors = r.t + LAND_HORIZON, self.errors
+        end = r.t + LAND_HORIZON
+        errors = self.errors
         while r.mode is Mode.LANDING and r.t < end and self.errors == errors:
             self._step(min(end, r.t + 1.0))
 
