@@ -48,9 +48,12 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
+
+if TYPE_CHECKING:
+    from swarmd.core.params import Params
 
 SWIM_VERSION = "0.6.3"
 MEMBERS = 5
@@ -241,16 +244,23 @@ def swim_false(python: str, scale: float, window: float, seed: int) -> dict[str,
 
 # -- swarmd --------------------------------------------------------------------------------
 
-def swarm_file(directory: Path, slow_down: float) -> Path:
-    """5 robots: 1-4 active in a ring (two watchers each, quorum 2), 5 standby for all."""
+SLOWED = ("heartbeat_interval", "standby_heartbeat_interval", "t_max", "warn_interval",
+          "vote_window", "claim_hold", "standby_timeout", "alert_after", "rejoin_hold")
+"""The udp preset's timings the bench slows down; the start-up grace stays as it is."""
+
+
+def slowed_params(slow_down: float) -> Params:
+    """The udp preset with every `SLOWED` timing `slow_down` times longer."""
     from swarmd.core.params import udp
 
     base = udp()
-    timing: dict[str, Any] = {"preset": "udp"}
-    for name in ("heartbeat_interval", "standby_heartbeat_interval", "t_max",
-                 "warn_interval", "vote_window", "claim_hold", "standby_timeout",
-                 "alert_after", "rejoin_hold"):
-        timing[name] = round(getattr(base, name) * slow_down, 4)
+    return base.with_overrides(**{n: round(getattr(base, n) * slow_down, 4) for n in SLOWED})
+
+
+def swarm_file(directory: Path, slow_down: float) -> Path:
+    """5 robots: 1-4 active in a ring (two watchers each, quorum 2), 5 standby for all."""
+    params = slowed_params(slow_down)
+    timing: dict[str, Any] = {"preset": "udp", **{n: getattr(params, n) for n in SLOWED}}
     doc = {
         "swarm": {"id": 4242, "name": "peers-bench"},
         "timing": timing,
@@ -304,9 +314,10 @@ def _rate(heard: list[tuple[float, int]], start: float, end: float) -> tuple[flo
 
 
 def swarmd_crash(path: Path, slow_down: float, seed: int) -> dict[str, Any]:
-    heartbeat = 0.1 * slow_down
-    crash_at = 3.0 + 10 * heartbeat  # after the start-up grace (2 s) and two t_max of calm
-    settle = 2.0 + 15 * heartbeat  # takeover takes about t_max + warn + claim_hold = 8 beats
+    params = slowed_params(slow_down)
+    # After the processes' start (a second), the start-up grace and two t_max of calm.
+    crash_at = 1.0 + params.startup_grace + 2 * params.t_max
+    settle = 2.0 + params.takeover_bound()  # the takeover, with two seconds to spare
     doc, heard, t0 = asyncio.run(_swarmd_run(path, duration=crash_at + settle,
                                              crash_at=crash_at, loss=0.0, seed=seed))
     fault = doc["faults"][0] if doc["faults"] else {}
@@ -380,7 +391,7 @@ def main() -> None:
                 f"{swim_loss['offline']} OFFLINE ({swim_loss['suspect']} SUSPECT)",
             ))
             rows.append((
-                f"swarmd (heartbeat {0.1 * slow_down:g} s)", label,
+                f"swarmd (heartbeat {slowed_params(slow_down).heartbeat_interval:g} s)", label,
                 mean(ours, "dgrams", 1), mean(ours, "bytes", 0),
                 fmt(vals(ours, "takeover")) + (f" ({missed_ours} missed)" if missed_ours else ""),
                 fmt(vals(ours, "detect")),

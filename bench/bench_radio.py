@@ -51,7 +51,7 @@ async def one_run(protocol: str, api_mode: int, victim: int,
             function = f"f{victim}"
             ev = await swarm.wait_for(
                 lambda e: e["event"] == "takeover" and e["function"] == function,
-                params.t_max + params.vote_window + params.claim_hold + 10)
+                params.takeover_bound() + 10)
             latency = None if ev is None else ev["t"] - t_crash
             wrong = sum(1 for e in swarm.events if e["event"] == "takeover"
                         and e["function"] != function)

@@ -299,7 +299,8 @@ def check(options: SimOptions) -> _Checked:
         cfg = load_swarm(options.swarm)
     except ConfigError as exc:
         raise SimError(*[str(p) for p in exc.problems]) from None
-    plan, params = cfg.to_plan(), cfg.params()
+    plan = cfg.to_plan()
+    params = cfg.params()
     problems = check_faults(list(options.parsed_faults), set(plan.robots),
                             physics=options.flies, duration=options.duration)
     if problems:

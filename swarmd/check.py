@@ -29,7 +29,12 @@ from swarmd.core.params import Params, ParamsError
 if TYPE_CHECKING:
     from swarmd.budget import Budget  # budget_section imports it only when it runs
 
-EXIT_OK, EXIT_ERRORS, EXIT_UNREADABLE = 0, 1, 2
+EXIT_OK = 0
+"""Usable: no errors, warnings allowed (docs/config.md, `swarmd check`)."""
+EXIT_ERRORS = 1
+"""Errors: every one is printed."""
+EXIT_UNREADABLE = 2
+"""The file cannot be read."""
 
 
 @dataclass(frozen=True)
@@ -310,7 +315,8 @@ def run_check(path: str | Path) -> CheckReport:
         except ConfigError as exc:
             report.problems = list(exc.problems)
             return report
-        cfg, report.problems = robot.swarm, list(robot.warnings)
+        cfg = robot.swarm
+        report.problems = list(robot.warnings)
     else:
         cfg, report.problems = inspect_swarm(source)
     if cfg is not None:

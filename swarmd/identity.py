@@ -114,7 +114,8 @@ class Ed25519Signer:
     def replace(self, private_key: bytes) -> None:
         """Sign with a new key from now on (the robot's own key rotated, SIGHUP)."""
         key = _private(private_key)
-        self._key, self.public_key = key, _public_bytes(key.public_key())
+        self._key = key
+        self.public_key = _public_bytes(key.public_key())
 
     def sign(self, data: bytes) -> bytes:
         return self._key.sign(data)
@@ -149,7 +150,8 @@ class Keyring:
                                      f"{PUBLIC_KEY_LEN} bytes, got {len(k)}")
                 parsed.append(Ed25519PublicKey.from_public_bytes(bytes(k)))
             keys[robot] = tuple(parsed)
-        self._keys, self._revoked = keys, frozenset(revoked)
+        self._keys = keys
+        self._revoked = frozenset(revoked)
 
     @property
     def robots(self) -> frozenset[int]:
@@ -287,7 +289,8 @@ def write_identity(directory: Path | str, robot: int, *, force: bool = False,
     a non-regular file in the way (FIFO, device, directory) is refused even with it."""
     check_writable(directory, robot, force=force)
     directory = Path(directory)
-    key_path, pub_path = private_key_path(directory, robot), public_key_path(directory, robot)
+    key_path = private_key_path(directory, robot)
+    pub_path = public_key_path(directory, robot)
     try:
         directory.mkdir(mode=0o755, parents=True, exist_ok=True)
     except FileExistsError:

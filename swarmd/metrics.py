@@ -125,19 +125,8 @@ class Metrics:
         )
         for name in EVENT_NAMES:
             self._events.labels(name)
-        self._init_role(reg)
-        self._lateness = Histogram(
-            "swarmd_heartbeat_lateness_seconds",
-            "How late a due heartbeat tick ran (event-loop lag).",
-            buckets=LATENESS_BUCKETS, registry=reg,
-        )
-        if robot_id is not None:
-            Info("swarmd_robot", "Robot and swarm ids.", registry=reg).info(
-                {"robot": str(robot_id), "swarm": "" if swarm_id is None else str(swarm_id)}
-            )
 
-    def _init_role(self, reg: CollectorRegistry) -> None:
-        """The role, function, epoch and votes of the node, as it reports them."""
+        # The role, function, epoch and votes of the node, as it reports them.
         self._role = Enum(
             "swarmd_role", "Current role (paper Fig. 5 with the wait state).",
             states=[r.name for r in Role], registry=reg,
@@ -150,6 +139,16 @@ class Metrics:
             ["function"], registry=reg,
         )
         self._vote_labels: set[str] = set()
+
+        self._lateness = Histogram(
+            "swarmd_heartbeat_lateness_seconds",
+            "How late a due heartbeat tick ran (event-loop lag).",
+            buckets=LATENESS_BUCKETS, registry=reg,
+        )
+        if robot_id is not None:
+            Info("swarmd_robot", "Robot and swarm ids.", registry=reg).info(
+                {"robot": str(robot_id), "swarm": "" if swarm_id is None else str(swarm_id)}
+            )
 
     # -- what the runtime calls --------------------------------------------------------
     def frame_sent(self, n: int = 1) -> None:

@@ -14,6 +14,8 @@ one inside a function (a lazy import is still a dependency of the module).
 from __future__ import annotations
 
 import ast
+import io
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -46,9 +48,14 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "sim.xbee_emu": ("sim.xbee_emu",),
     "sim.realtime": ("sim.realtime",),
     "sim.run": ("sim.run",),
-    "commands": ("swarmd.commands", "swarmd.cli", "swarmd.__main__"),
+    "commands": ("swarmd.commands", "swarmd.cli"),
+    "tools": ("bench", "fuzz", "scripts"),
 }
 """Every project module belongs to exactly one group (longest prefix wins)."""
+
+TOPS = ("swarmd", "sim", "bench", "fuzz", "scripts")
+"""The folders whose modules the layering and the import circles cover (tests/ is not
+one: a test may import anything, and nothing imports it)."""
 
 _EDGE = {"core", "base", "transport", "link", "config", "services"}
 _BELOW_SIM = _EDGE | {"daemon"}
@@ -68,7 +75,8 @@ MAY_IMPORT: dict[str, set[str]] = {
                                   "sim.realtime"},
     "sim.run": _BELOW_SIM | {"sim.shared", "sim.virtual", "sim.physics", "sim.xbee_emu",
                              "sim.realtime", "sim.run"},
-    "commands": set(GROUPS),
+    "commands": set(GROUPS) - {"tools"},
+    "tools": set(GROUPS),
 }
 """Which groups a group may import: its own and those below it, never one above or
 beside it (a transport knows no link, a link no transport)."""
@@ -83,36 +91,48 @@ def module_name(path: Path) -> str:
 
 
 def imported_modules(path: Path, module: str | None = None) -> list[str]:
-    """Absolute names of every module a file imports (relative imports resolved)."""
+    """Absolute names of every module a file imports: relative imports resolved,
+    `from package import module` naming the module, and a script folder's bare
+    `import sibling` (bench/ runs with itself on sys.path) naming the sibling."""
     module = module or module_name(path)
     package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
     tree = ast.parse(path.read_text(), filename=str(path))
     out: list[str] = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            out.extend(alias.name for alias in node.names)
+            out.extend(_sibling(path, package, alias.name) for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                base = package[: len(package) - (node.level - 1)]
-                if node.module:
-                    out.append(".".join([*base, node.module]))
-                else:
-                    out.extend(".".join([*base, a.name]) for a in node.names)
+                base = ".".join(package[: len(package) - (node.level - 1)])
+                source = f"{base}.{node.module}" if node.module else base
             elif node.module:
-                if node.module in {"swarmd", "sim"}:
-                    # `from swarmd import daemon` imports a module, `from swarmd import
-                    # __version__` the package root.
-                    out.extend(f"{node.module}.{a.name}"
-                               if _is_module(f"{node.module}.{a.name}") else node.module
-                               for a in node.names)
-                else:
-                    out.append(node.module)
+                source = _sibling(path, package, node.module)
+            else:
+                continue
+            # `from swarmd import daemon` imports a module, `from swarmd import
+            # __version__` the package itself.
+            named = [f"{source}.{a.name}" for a in node.names]
+            modules = [n for n in named if _is_module(n)]
+            out.extend(modules if len(modules) == len(named) else [*modules, source])
     return out
 
 
+def _sibling(path: Path, package: list[str], name: str) -> str:
+    """`name` as imported by a script of a folder that is no package: a sibling file is
+    found first (the script's folder leads sys.path)."""
+    first = name.split(".")[0]
+    folder = path.parent
+    if (package and not (folder / "__init__.py").exists()
+            and ((folder / f"{first}.py").exists() or (folder / first).is_dir())):
+        return ".".join([*package, name])
+    return name
+
+
 def _is_module(name: str) -> bool:
+    if name.split(".")[0] not in TOPS:
+        return False
     path = ROOT.joinpath(*name.split("."))
-    return path.is_dir() or path.with_suffix(".py").exists()
+    return (path / "__init__.py").exists() or path.with_suffix(".py").exists()
 
 
 def group_of(module: str) -> str | None:
@@ -137,7 +157,7 @@ def wrong_way(module: str, imports: list[str]) -> list[str]:
         if top in ONLY_IN and ONLY_IN[top] != source:
             bad.append(f"{name} (only {ONLY_IN[top]})")
             continue
-        if top not in {"swarmd", "sim"} or name in {"swarmd", "sim"}:
+        if top not in TOPS or name in {"swarmd", "sim"}:
             continue
         target = group_of(name)
         if target is None or target not in MAY_IMPORT[source]:
@@ -145,7 +165,7 @@ def wrong_way(module: str, imports: list[str]) -> list[str]:
     return bad
 
 
-PROJECT_FILES = sorted(p for d in ("swarmd", "sim") for p in (ROOT / d).rglob("*.py"))
+PROJECT_FILES = sorted(p for d in TOPS for p in (ROOT / d).rglob("*.py"))
 CORE_FILES = sorted(CORE.glob("*.py"))
 
 
@@ -164,7 +184,7 @@ def test_core_module_is_sans_io(path: Path) -> None:
 def test_imports_point_one_way(path: Path) -> None:
     module = module_name(path)
     if module in {"swarmd", "sim"}:
-        assert not [m for m in imported_modules(path) if m.split(".")[0] in {"swarmd", "sim"}]
+        assert not [m for m in imported_modules(path) if m.split(".")[0] in TOPS]
         return
     bad = wrong_way(module, imported_modules(path))
     assert not bad, f"{module} ({group_of(module)}) imports {bad}: DESIGN section 1 layering"
@@ -172,9 +192,10 @@ def test_imports_point_one_way(path: Path) -> None:
 
 def test_checker_catches_a_banned_import(tmp_path: Path) -> None:
     sample = tmp_path / "x.py"
-    sample.write_text("import time\nfrom swarmd import daemon\nfrom ..transport import udp\n")
+    sample.write_text("import time\nfrom swarmd import daemon\nfrom ..transport import udp\n"
+                      "from swarmd import __version__\n")
     assert imported_modules(sample, "swarmd.core.x") == [
-        "time", "swarmd.daemon", "swarmd.transport"]
+        "time", "swarmd.daemon", "swarmd.transport.udp", "swarmd"]
 
 
 def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
@@ -199,6 +220,16 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
         "swarmd.runtime (services)"]
     assert wrong_way("swarmd.monitor", ["pydantic"]) == ["pydantic (only config)"]
     assert wrong_way("swarmd.config.robot", ["pydantic", "swarmd.transport.media"]) == []
+    # Benches, fuzzers and scripts sit on top: they import anything, nothing them.
+    assert wrong_way("swarmd.cli", ["bench.grids"]) == ["bench.grids (tools)"]
+    assert wrong_way("sim.shared.faults", ["scripts.fault_table"]) == [
+        "scripts.fault_table (tools)"]
+    assert wrong_way("bench.bench_scale", ["bench.grids", "sim.run", "swarmd.cli"]) == []
+
+
+def test_a_bench_script_imports_its_sibling() -> None:
+    # bench/ runs with itself on sys.path: `from grids import ...` is bench/grids.py.
+    assert "bench.grids" in imported_modules(ROOT / "bench" / "bench_scale.py")
 
 
 def test_core_bans_clocks_randomness_and_pydantic(tmp_path: Path) -> None:
@@ -208,73 +239,193 @@ def test_core_bans_clocks_randomness_and_pydantic(tmp_path: Path) -> None:
             if n.split(".")[0] in BANNED] == ["secrets", "datetime", "pydantic"]
 
 
-def _core_cycle(graph: dict[str, set[str]]) -> list[str]:
-    """One import cycle among the modules of `graph` (name -> names it imports), or []."""
-    state: dict[str, int] = {}
-    stack: list[str] = []
+def import_graph(paths: list[Path]) -> dict[str, set[str]]:
+    """Module name -> the project modules it imports (lazy and type-only ones too: a
+    type-only import still ties the two files into one concept)."""
+    names = {module_name(p) for p in paths}
+    graph: dict[str, set[str]] = {}
+    for p in paths:
+        m = module_name(p)
+        graph[m] = {n for n in imported_modules(p) if n in names and n != m}
+    return graph
 
-    def visit(m: str) -> list[str]:
-        state[m] = 1
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Every import circle of `graph`: its strongly connected components of more than one
+    module, each sorted, in order (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(m: str) -> None:
+        index[m] = low[m] = len(index)
         stack.append(m)
+        on_stack.add(m)
         for n in sorted(graph.get(m, ())):
-            if state.get(n) == 1:
-                return [*stack[stack.index(n):], n]
-            if n not in state and (found := visit(n)):
-                return found
-        stack.pop()
-        state[m] = 2
-        return []
+            if n not in index:
+                visit(n)
+                low[m] = min(low[m], low[n])
+            elif n in on_stack:
+                low[m] = min(low[m], index[n])
+        if low[m] == index[m]:
+            component = []
+            while True:
+                n = stack.pop()
+                on_stack.discard(n)
+                component.append(n)
+                if n == m:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
 
     for m in sorted(graph):
-        if m not in state and (found := visit(m)):
-            return found
-    return []
+        if m not in index:
+            visit(m)
+    return sorted(found)
 
 
-def test_core_imports_form_no_cycle() -> None:
-    """Inside swarmd.core every import points one way, lazy ones included: a module that
-    needs another's name imports it, never the other way round at run time."""
-    graph = {module_name(p): {n for n in imported_modules(p)
-                              if n.startswith("swarmd.core.") and n != module_name(p)}
-             for p in CORE_FILES if p.name != "__init__.py"}
-    assert _core_cycle(graph) == []
+def test_no_import_circle_anywhere() -> None:
+    """Across swarmd/, sim/, bench/, fuzz/ and scripts/ every import points one way,
+    lazy and type-only ones included: two modules that need each other are one concept
+    cut in two (put the shared type where it belongs, or merge them)."""
+    graph = import_graph(PROJECT_FILES)
+    assert len(graph) > 100, "the graph lost the tree"
+    found = circles(graph)
+    assert not found, "import circles: " + "; ".join(" <-> ".join(c) for c in found)
 
 
-def test_the_cycle_finder_finds_one() -> None:
-    assert _core_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
-    assert _core_cycle({"a": {"b"}, "b": set()}) == []
+def test_the_circle_finder_finds_them() -> None:
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert circles({"a": {"b"}, "b": {"a"}, "c": {"d"}, "d": {"c"}}) == [["a", "b"],
+                                                                       ["c", "d"]]
+    assert circles({"a": {"b"}, "b": set()}) == []
+
+
+def test_a_type_only_import_makes_a_circle(tmp_path: Path) -> None:
+    pkg = tmp_path / "swarmd"
+    pkg.mkdir()
+    (pkg / "a.py").write_text("from swarmd.b import B\n")
+    (pkg / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                              "    from swarmd.a import A\n")
+    graph = {f"swarmd.{n}": {m for m in imported_modules(pkg / f"{n}.py", f"swarmd.{n}")
+                             if m in {"swarmd.a", "swarmd.b"}} for n in "ab"}
+    assert circles(graph) == [["swarmd.a", "swarmd.b"]]
 
 
 SIZE_LIMITS = (40, 600)
-"""Lines of one function, and of one module, in swarmd/ and sim/ (DESIGN section 1: a
-module a newcomer reads in one sitting; a function that does one thing)."""
+"""Code lines of one function, and of one module, in swarmd/ and sim/ (DESIGN section 1:
+a module a newcomer reads in one sitting; a function that does one thing). Only code
+counts: docstrings, comments and blank lines explain the code and never count against
+it, so nobody cuts an explanation or packs assignments to fit."""
+
+SIZE_EXEMPT: dict[str, str] = {
+    "sim/realtime/orchestrator.py:Orchestrator.__init__":
+        "the run's fields in one table: what the constructor checks and keeps, what "
+        "supervision fills, what `prepare` sets; split, the table reads in three places",
+    "sim/xbee_emu/medium.py:Medium.__init__":
+        "the medium's fields in one table: the radios, the air's bookkeeping, the "
+        "thread's selector and wake pipe, the figures; no logic beyond one argument check",
+    "swarmd/metrics.py:Metrics.__init__":
+        "the daemon's metric declarations in one table, each with the help text a "
+        "Prometheus user reads; split, a metric's name is hunted in helper methods",
+}
+"""Functions allowed over the limit, each with the reason it reads best whole (a table,
+a command's option block). Reviewed: an entry is a decision, not a way out."""
+
+_NOT_CODE = {tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT,
+             tokenize.DEDENT, tokenize.ENCODING, tokenize.ENDMARKER}
 
 
-def oversized(paths: list[Path]) -> list[str]:
-    """The functions and modules of `paths` over `SIZE_LIMITS`, as `path:name lines`."""
+def code_lines(text: str) -> set[int]:
+    """The numbers of the lines of `text` that carry code: not blank, not only a
+    comment, not part of a docstring (a bare string statement: a module's, class's or
+    function's docstring, or the one documenting an attribute)."""
+    docs: set[int] = set()
+    for node in ast.walk(ast.parse(text)):
+        if (isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+                and isinstance(node.value.value, str)):
+            docs.update(range(node.lineno, (node.end_lineno or node.lineno) + 1))
+    lines: set[int] = set()
+    for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+        if tok.type not in _NOT_CODE:
+            lines.update(range(tok.start[0], tok.end[0] + 1))
+    return lines - docs
+
+
+def _functions(tree: ast.AST, prefix: str = "") -> list[tuple[str, ast.AST]]:
+    """Every function of `tree` with its qualified name (`Class.method`, `outer.inner`)."""
+    out: list[tuple[str, ast.AST]] = []
+    for node in ast.iter_child_nodes(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            name = f"{prefix}{node.name}"
+            if not isinstance(node, ast.ClassDef):
+                out.append((name, node))
+            out += _functions(node, name + ".")
+        else:
+            out += _functions(node, prefix)
+    return out
+
+
+def oversized(paths: list[Path], exempt: dict[str, str] | None = None) -> list[str]:
+    """The functions and modules of `paths` over `SIZE_LIMITS` in code lines, as
+    `path:name lines`, leaving out the `exempt` functions (`path:qualified.name`)."""
     fn_max, mod_max = SIZE_LIMITS
     out = []
     for p in paths:
         text = p.read_text()
         name = p.relative_to(ROOT) if p.is_relative_to(ROOT) else p
-        if text.count("\n") > mod_max:
-            out.append(f"{name} {text.count(chr(10))}")
-        for node in ast.walk(ast.parse(text)):
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                lines = (node.end_lineno or node.lineno) - node.lineno + 1
-                if lines > fn_max:
-                    out.append(f"{name}:{node.name} {lines}")
+        code = code_lines(text)
+        if len(code) > mod_max:
+            out.append(f"{name} {len(code)}")
+        for qualname, node in _functions(ast.parse(text)):
+            first, last = node.lineno, node.end_lineno or node.lineno  # type: ignore[attr-defined]
+            lines = len(code & set(range(first, last + 1)))
+            if lines > fn_max and f"{name}:{qualname}" not in (exempt or {}):
+                out.append(f"{name}:{qualname} {lines}")
     return out
 
 
+SIZED = sorted([*(ROOT / "swarmd").rglob("*.py"), *(ROOT / "sim").rglob("*.py")])
+
+
 def test_no_function_or_module_is_over_the_size_limits() -> None:
-    paths = sorted([*(ROOT / "swarmd").rglob("*.py"), *(ROOT / "sim").rglob("*.py")])
-    assert oversized(paths) == []
+    assert oversized(SIZED, SIZE_EXEMPT) == []
+
+
+def test_every_size_exemption_is_needed_and_explained() -> None:
+    # An exemption that no longer applies is dropped, so the list stays reviewed.
+    over = {line.rsplit(" ", 1)[0] for line in oversized(SIZED)}
+    for entry, reason in SIZE_EXEMPT.items():
+        assert entry in over, f"{entry} is within the limits: drop its exemption"
+        assert len(reason) > 40, f"{entry}: say why it reads best whole"
 
 
 def test_the_size_check_finds_a_long_function(tmp_path: Path) -> None:
     long = tmp_path / "long.py"
     long.write_text("def f() -> None:\n" + "    x = 1\n" * 40)
-    assert oversized([long]) != []
+    assert oversized([long]) == [f"{long}:f 41"]
     long.write_text("def f() -> None:\n" + "    x = 1\n" * 39)
     assert oversized([long]) == []
+    assert oversized([long], {}) == []
+
+
+def test_the_size_check_counts_code_only(tmp_path: Path) -> None:
+    # Thirty code lines with a docstring, comments and blank lines between them: within
+    # the limit however long the explanation; ten more code lines put it over.
+    body = '    """What f does.\n\n    Why, at length.\n    """\n' + \
+        "    # why the next line\n    x = 1\n\n" * 30
+    short = tmp_path / "short.py"
+    short.write_text("def f() -> None:\n" + body)
+    assert len(code_lines(short.read_text())) == 31
+    assert oversized([short]) == []
+    short.write_text("def f() -> None:\n" + body + "    y = 2\n" * 10)
+    assert oversized([short]) == [f"{short}:f 41"]
+
+
+def test_the_size_check_knows_methods_and_exemptions(tmp_path: Path) -> None:
+    long = tmp_path / "long.py"
+    long.write_text("class C:\n    def m(self) -> None:\n" + "        x = 1\n" * 41)
+    assert oversized([long]) == [f"{long}:C.m 42"]
+    assert oversized([long], {f"{long}:C.m": "a table that reads best whole"}) == []

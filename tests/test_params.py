@@ -59,6 +59,17 @@ def test_as_dict_round_trips() -> None:
     assert Params(**fields) == p
 
 
+@pytest.mark.parametrize(("preset", "horizon"), [(udp, 0.7), (radio, 2.8)])
+def test_a_claim_is_believed_for_the_claim_hold_and_one_t_max(
+        preset: Callable[[], Params], horizon: float) -> None:
+    # DESIGN rule 10: long enough for the claimant's hold and its first heartbeat at the
+    # new epoch to be missed only if it is dead; then the watchers warn again.
+    p = preset()
+    assert p.claim_horizon == pytest.approx(horizon)
+    assert p.claim_horizon > p.claim_hold and p.claim_horizon > p.t_max
+    assert "claim_horizon" not in p.as_dict()  # derived, never a swarm file's field
+
+
 @pytest.mark.parametrize("preset", [udp, radio])
 def test_one_takeover_bound_for_check_and_the_checker(preset: Callable[[], Params]) -> None:
     # `swarmd check` prints Params.takeover_bound; the invariant checker must hold runs

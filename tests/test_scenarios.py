@@ -53,7 +53,7 @@ def test_crash_is_taken_over_by_the_right_standby(paper: tuple[SwarmPlan, Params
     assert takeovers(res) == [(standby, f, 1, robot)]
     assert res.holders()[f] == [standby]
     took = named(res, "takeover")[0]["t"]
-    assert 3.0 < took < 3.0 + params.t_max + params.vote_window + params.claim_hold
+    assert 3.0 < took < 3.0 + params.takeover_bound()
     # the two watchers of the slot warned, nobody else
     assert {e["robot"] for e in named(res, "warn")} == {
         plan.initial_holder(g) for g in plan.watched_by(f)}

@@ -70,7 +70,7 @@ def test_claim_heard_hands_over_then_suspects_again() -> None:
     w.fire(0.5)
     w.claim_heard(0.6)
     assert state(w) is WatchState.HANDOVER and w.suspecting
-    assert w.deadline == pytest.approx(0.6 + P.claim_hold + P.t_max)
+    assert w.deadline == pytest.approx(0.6 + P.claim_horizon)  # DESIGN rule 10
     fired = w.fire(w.deadline)
     assert state(w) is WatchState.SUSPECT
     assert fired.first  # a handover that brought nobody is logged as a new suspicion

@@ -128,7 +128,8 @@ def key_moments(events: Sequence[Mapping[str, Any]]) -> list[KeyMoment]:
     robot it replaced red), in time order."""
     out = []
     for e in events:
-        robot, t = e.get("robot"), float(e.get("t", 0.0))
+        robot = e.get("robot")
+        t = float(e.get("t", 0.0))
         rid = robot if isinstance(robot, int) and robot > 0 else None
         match event_of(e):
             case Fault(kind=kind):

@@ -98,10 +98,8 @@ class QuadLink:
         self._forced = Health.OK
         self._reported: Health | None = None
         self._last_report = float("-inf")
-        self._init_stats()
 
-    def _init_stats(self) -> None:
-        """The link's error count and its wake-up lateness figures."""
+        # The link's error count and its wake-up lateness figures.
         self.errors = 0
         """Bad assignments and physics exceptions: counted and logged, never raised."""
         self.lateness: collections.deque[float] = collections.deque(maxlen=20000)
@@ -205,7 +203,8 @@ class QuadLink:
         r = self.robot
         if r.mode in (Mode.TAKEOFF, Mode.FLYING):
             r.release()
-        end, errors = r.t + LAND_HORIZON, self.errors
+        end = r.t + LAND_HORIZON
+        errors = self.errors
         while r.mode is Mode.LANDING and r.t < end and self.errors == errors:
             self._step(min(end, r.t + 1.0))
 

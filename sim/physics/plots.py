@@ -80,7 +80,8 @@ def role_spans(
     fold = HolderFold(down=DOWN_FAULTS)
     lanes = _Lanes()
     for e in evs:
-        rid, t = int(e["robot"]), float(e.get("t", 0.0))
+        rid = int(e["robot"])
+        t = float(e.get("t", 0.0))
         prev = lanes.state.get(rid)
         if prev is not None and prev[1] == "fenced" and t > prev[0] + FENCE_SHOW:
             lanes.enter(rid, prev[0] + FENCE_SHOW, "standby", None)

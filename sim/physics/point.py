@@ -68,7 +68,8 @@ class PointRobot:
         """As `QuadRobot.fly`: follow `flight`, taking off first from the ground."""
         if self.mode is Mode.CRASHED or self.failed_motors:
             return False
-        self.function, self.flight = function, flight
+        self.function = function
+        self.flight = flight
         low = self._pos[2] < self.home[2] + TAKEOFF_HEIGHT
         self.mode = Mode.TAKEOFF if self.mode in (Mode.PARKED, Mode.LANDING) and low else (
             Mode.FLYING)
@@ -78,7 +79,8 @@ class PointRobot:
         """As `QuadRobot.release`: land at home, or where the craft is (`here`)."""
         if function is not None and function != self.function:
             return
-        self.function, self.flight = None, None
+        self.function = None
+        self.flight = None
         if self.mode in (Mode.TAKEOFF, Mode.FLYING):
             self.mode = Mode.LANDING
             self._land_xy = (self._pos[0], self._pos[1]) if here else None
@@ -92,7 +94,9 @@ class PointRobot:
             self.t += STEP
 
     def _step(self) -> None:
-        p, v, ground = self._pos, self._vel, self.home[2]
+        p = self._pos
+        v = self._vel
+        ground = self.home[2]
         if self.mode in (Mode.PARKED, Mode.CRASHED):
             v[:] = [0.0, 0.0, 0.0]
             return

@@ -393,7 +393,8 @@ def _child(job_path: Path) -> dict[str, Any]:
     events = job["events"]
     spans = role_spans(events, end=job["end"])
     scene = _Scene(trajs, job["preset"])
-    fps, speed = int(job["fps"]), float(job["speed"])
+    fps = int(job["fps"])
+    speed = float(job["speed"])
     t_lo, t_hi = float(job["start"]), float(job["end"])
     n = max(1, math.floor((t_hi - t_lo) * fps / speed) + 1)
     frames = []

@@ -213,7 +213,8 @@ class QuadRobot:
         d.qpos[0:3] = pos
         d.qpos[3:7] = quat
         d.qvel[:] = 0.0
-        self.function, self.flight = None, None
+        self.function = None
+        self.flight = None
         if mode == Mode.CRASHED.value:
             self.mode = Mode.CRASHED
             self.crashed_at = self.t
@@ -418,7 +419,10 @@ def last_state(
             continue
         try:
             row = json.loads(line)
-            w, p, q, mode = float(row["w"]), row["p"], row["q"], str(row["mode"])
+            w = float(row["w"])
+            p = row["p"]
+            q = row["q"]
+            mode = str(row["mode"])
             pos = (float(p[0]), float(p[1]), float(p[2]))
             quat = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         except (ValueError, KeyError, TypeError, IndexError):
@@ -434,7 +438,9 @@ def load_trajectory(path: Path, t0: float | None = None) -> Trajectory:
     seconds, from each sample's Unix time `w` or its header's `wall0`; otherwise they
     stay on the robot's clock. Lines that do not parse are skipped (a SIGKILL can cut
     the last one)."""
-    rid, home, wall0 = 0, (0.0, 0.0, 0.0), None
+    rid = 0
+    home = (0.0, 0.0, 0.0)
+    wall0 = None
     rows: list[dict[str, Any]] = []
     with path.open() as f:
         for line in f:

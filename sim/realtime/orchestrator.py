@@ -152,11 +152,8 @@ class Orchestrator:
         if transport not in ("udp", "xbee", "serial"):
             raise ValueError(f"unknown transport {transport!r}: udp, xbee or serial")
         self.physics = physics
-        self._init_supervision()
-        self._init_prepared()
 
-    def _init_supervision(self) -> None:
-        """What the run keeps of its processes and what they report (no process yet)."""
+        # What the run keeps of its processes and what they report (no process yet).
         self.procs: dict[int, RobotProcess] = {}
         self.retired: list[RobotProcess] = []
         self.events: list[dict[str, Any]] = []
@@ -169,9 +166,8 @@ class Orchestrator:
         self._stop = asyncio.Event()
         self.interrupted: str | None = None
 
-    def _init_prepared(self) -> None:
-        """Set by `prepare` (the start step: files, keys, radios), never by the
-        constructor: until then, empty."""
+        # Set by `prepare` (the start step: files, keys, radios), never by the
+        # constructor: until then, empty.
         self.port = 0
         self.port_lease: PortLease | None = None
         self.robots: tuple[int, ...] = ()

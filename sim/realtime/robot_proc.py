@@ -335,7 +335,9 @@ class LatenessProbe(_Periodic):
                 samples.append((round(self.clock(), 3), late_ms))
             if now - reported >= PROBE_REPORT:
                 self.emit(Late(wakes, samples))
-                samples, wakes, reported = [], 0, now
+                samples = []
+                wakes = 0
+                reported = now
 
 
 # -- process set-up -------------------------------------------------------------------------

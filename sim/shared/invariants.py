@@ -274,7 +274,9 @@ class Checker:
         carries the same facts; this hook exists for cross-checks in tests."""
 
     def event(self, rec: dict[str, Any]) -> None:
-        t, r, name = float(rec["t"]), int(rec["robot"]), name_of(rec)
+        t = float(rec["t"])
+        r = int(rec["robot"])
+        name = name_of(rec)
         self.holding.feed(rec)
         if name == "fenced":
             self._fenced(t, r, rec)
@@ -301,7 +303,8 @@ class Checker:
         that a takeover did produce answers the warnings about the fenced robot on that
         slot: its watchers learn the newer holder (rule 2), whose takeover may have come
         before the warning (the suspect resumed the slot after a restart, say)."""
-        f, epoch = rec["function"], int(rec["epoch"])
+        f = rec["function"]
+        epoch = int(rec["epoch"])
         for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
             del self.episodes[key]
         if epoch and (f, epoch) not in self.epochs:
@@ -479,7 +482,8 @@ class Checker:
             moved = False
             for x in mates:
                 if e.t < x.start <= deadline < x.start + bound:
-                    deadline, moved = x.start + bound, True
+                    deadline = x.start + bound
+                    moved = True
         # A covering standby that (re)started shortly before the failure still waits out
         # its start-up grace (DESIGN rule 5) before it may count silence: give it that.
         grace = self.params.startup_grace

@@ -244,7 +244,9 @@ def _outcome(fault: Fault, spec: str, events: list[dict[str, Any]],
         if taken is None and isinstance(event, Takeover) and event.replaced == r \
                 and (f is None or event.function == f) and i not in credited:
             credited.add(i)
-            taken, by, epoch = t - fault.at, robot, event.epoch
+            taken = t - fault.at
+            by = robot
+            epoch = event.epoch
     return FaultOutcome(spec, fault.kind, r, fault.at, f, detected, taken, by, epoch)
 
 

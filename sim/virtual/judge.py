@@ -1,19 +1,74 @@
 """The invariants a virtual run judges from its nodes at the end (`sim.shared.invariants`
 7 and 8): what no event log shows, since a muted robot and a disagreeing view log
-nothing. `VirtualSwarm.run` calls them after the checker has read the log."""
+nothing. `VirtualSwarm.run` calls them after the checker has read the log.
+
+The judge reads a finished run through `FinishedRun`, the part of the simulator's state
+it needs: the simulator imports the judge, never the other way round."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Mapping, Sequence
+from typing import Protocol
 
-from sim.shared.invariants import Violation
+from sim.shared.channel import LinkCut
+from sim.shared.faults import Fault
+from sim.shared.invariants import Checker, Violation
+from swarmd.core.node import Node
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
 
-if TYPE_CHECKING:
-    from sim.virtual.simulator import VirtualSwarm
+
+class RobotAtEnd(Protocol):
+    """One robot of the run: its node, unless it is down (crashed or paused)."""
+
+    @property
+    def node(self) -> Node | None: ...
+    @property
+    def alive(self) -> bool: ...
+    @property
+    def paused(self) -> bool: ...
 
 
-def muted(swarm: VirtualSwarm) -> list[Violation]:
+class ChannelOfRun(Protocol):
+    """The run's medium, as far as the loss it made excuses silence."""
+
+    @property
+    def loss(self) -> float: ...
+    @property
+    def loss_model(self) -> str: ...
+    @property
+    def burst_len(self) -> float: ...
+
+
+class FinishedRun(Protocol):
+    """What the judge reads of a virtual run at its end (`VirtualSwarm` is one)."""
+
+    @property
+    def plan(self) -> SwarmPlan: ...
+    @property
+    def params(self) -> Params: ...
+    @property
+    def duration(self) -> float: ...
+    @property
+    def faults(self) -> Sequence[Fault]: ...
+    @property
+    def channel(self) -> ChannelOfRun: ...
+    @property
+    def robots(self) -> Mapping[int, RobotAtEnd]: ...
+    @property
+    def partition(self) -> Mapping[int, int] | None: ...
+    @property
+    def cuts_seen(self) -> Sequence[LinkCut]: ...
+    @property
+    def checker(self) -> Checker: ...
+
+    def audience(self, sender: int, slot: int) -> tuple[int, ...]: ...
+
+    def checker_last_change(self, rid: int) -> float: ...
+
+
+def muted(swarm: FinishedRun) -> list[Violation]:
     """Invariant 7 (`sim.shared.invariants`): a live, healthy, heartbeating robot
     whose current heartbeats some robot that should hear them (same partition side,
     the frame relevant to it) has not accepted for ten heartbeat periods, although
@@ -52,7 +107,7 @@ def muted(swarm: VirtualSwarm) -> list[Violation]:
     return out
 
 
-def views(swarm: VirtualSwarm) -> list[Violation]:
+def views(swarm: FinishedRun) -> list[Violation]:
     """Invariant 8 (`sim.shared.invariants`): at the end of a run that has been quiet
     for `Bounds.settle`, every live robot that hears a slot holds one view of it
     (`views_disagree`), and a live, healthy holder they all name executes it
@@ -93,4 +148,4 @@ def views(swarm: VirtualSwarm) -> list[Violation]:
     return out
 
 
-__all__ = ["muted", "views"]
+__all__ = ["FinishedRun", "muted", "views"]

@@ -81,7 +81,8 @@ class FrameParser:
             if b == START and (self.api_mode == 2 or not self._in_frame or quiet):
                 if self._in_frame and self._buf:
                     self.drops["timeout" if self.api_mode == 1 else "truncated"] += 1
-                self._in_frame, self._escaped = True, False
+                self._in_frame = True
+                self._escaped = False
                 self._buf.clear()
                 quiet = False
                 continue

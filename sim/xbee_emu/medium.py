@@ -106,15 +106,9 @@ class Medium:
         self._ports: dict[int, _Port] = {}
         self._busy_until: dict[tuple[str, bytes, bytes], float] = {}
         self._lock = threading.RLock()
-        self._init_loop()
-        self._made_dir = False
-        self.delivered = 0
-        self.lost = 0
-        self.uart_overflows = 0
 
-    def _init_loop(self) -> None:
-        """The medium's thread, not yet started: its timers, and the selector it waits
-        on with the pipe that wakes it."""
+        # The medium's thread, not yet started: its timers, and the selector it waits
+        # on with the pipe that wakes it.
         self._timers: list[_Timer] = []
         self._order = itertools.count()
         self._thread: threading.Thread | None = None
@@ -124,6 +118,12 @@ class Medium:
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
         self._selector.register(self._wake_r, selectors.EVENT_READ, 0)
+
+        # Set once running: whether `start` made the directory, what the air carried.
+        self._made_dir = False
+        self.delivered = 0
+        self.lost = 0
+        self.uart_overflows = 0
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self) -> Medium:

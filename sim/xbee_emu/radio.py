@@ -22,7 +22,10 @@ HV_XBEE3 = b"\x42\x40"
 BROADCAST64 = 0x000000000000FFFF
 
 # AT status codes in a 0x88 response.
-AT_OK, AT_ERROR, AT_INVALID_COMMAND, AT_INVALID_PARAMETER = 0, 1, 2, 3
+AT_OK = 0
+AT_ERROR = 1
+AT_INVALID_COMMAND = 2
+AT_INVALID_PARAMETER = 3
 # Delivery status in 0x8B / 0x89 (Digi API reference).
 TX_OK = 0x00
 TX_NO_ACK = 0x01  # 802.15.4 "No ACK received"; DigiMesh/Zigbee "MAC ACK failure"
@@ -32,14 +35,19 @@ TX_ADDRESS_NOT_FOUND = 0x24
 TX_ROUTE_NOT_FOUND = 0x25
 TX_PAYLOAD_TOO_LARGE = 0x74
 # Discovery status in a 0x8B.
-NO_DISCOVERY, ADDRESS_DISCOVERY, ROUTE_DISCOVERY = 0x00, 0x01, 0x02
+NO_DISCOVERY = 0x00
+ADDRESS_DISCOVERY = 0x01
+ROUTE_DISCOVERY = 0x02
 # The 0x8B's 16-bit field when a Zigbee unicast was not delivered ("destination address
 # unknown"); DigiMesh and 802.15.4 keep it reserved at 0xFFFE.
 UNKNOWN16 = 0xFFFD
 UNKNOWN64 = 0xFFFFFFFFFFFFFFFF  # a 0x10 addressed by its 16-bit field only
 # DigiMesh delivery method: bits 6-7 of the transmit options (0 there: the TO
 # parameter's) and of the receive options of a 0x90.
-METHOD_MASK, POINT_MULTIPOINT, DIRECTED_BROADCAST, DIGIMESH = 0xC0, 0x40, 0x80, 0xC0
+METHOD_MASK = 0xC0
+POINT_MULTIPOINT = 0x40
+DIRECTED_BROADCAST = 0x80
+DIGIMESH = 0xC0
 # 2.4 GHz channels (CH on 802.15.4 and DigiMesh); bit i of Zigbee's SC is channel 11 + i.
 CHANNELS = range(0x0B, 0x1B)
 # Zigbee payloads (XBee 3 Zigbee guide, "Maximum RF payload size"): one packet carries

@@ -1,78 +1,23 @@
-"""The swarm file's `auth:` section: how frames are signed (docs/config.md, "auth").
+"""What a swarm file's `auth:` section means on disk (docs/config.md, "auth").
 
-    auth: none                                        # unsigned, said explicitly
-    auth: {mode: shared, key_file: swarm.key}         # one HMAC key for the whole swarm
-    auth: {mode: per-robot, keys_dir: keys, revoked: [3]}   # Ed25519, one key per robot
-
-A top-level `key_file:` (no `auth:`) is the shared mode. A swarm file with neither is
-unsigned without saying so: `swarmd check` warns, `swarmd start` refuses it.
-
-Per-robot mode: `keys_dir` (relative to the swarm file) holds `robot-<id>.pub` for every
-robot of the swarm not in `revoked`; each robot file's `identity_file` names that robot's
-private key (`swarmd.identity` has the file formats).
+The section's shape (`auth: none`, `{mode: shared, key_file: ...}`, `{mode: per-robot,
+keys_dir: ..., revoked: [...]}`) is part of the swarm file's schema in `swarm.py`; here
+are the checks that reach past it: the key file loads, the keys dir holds a public key
+for every robot not revoked, the revoked robots are in the swarm. `swarmd check` reports
+them (`swarm_rules.cross_check`), `swarmd start` refuses a robot whose swarm fails them
+(`robot.py`, with `deploying`), and `public_keys` reads the keys for the keyring.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Literal
-
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictInt
+from typing import Literal
 
 from swarmd.config.errors import Loc
+from swarmd.config.swarm import NoAuth, PerRobotAuth, SwarmConfig
 from swarmd.identity import IdentityFileError, public_key_path, read_public_keys
 from swarmd.keys import KeyFileError, load_key
-
-if TYPE_CHECKING:
-    from swarmd.config.swarm import SwarmConfig
-
-AuthMode = Literal["none", "shared", "per-robot"]
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class NoAuth(_Model):
-    """Unsigned frames: anyone who can send on the channel speaks for any robot."""
-
-    mode: Literal["none"]
-
-
-class SharedAuth(_Model):
-    """One 32-byte HMAC key for the whole swarm: the weaker choice for tiny radios
-    (every robot holding it can sign as any other; docs/DESIGN.md section 2)."""
-
-    mode: Literal["shared"]
-    key_file: str = Field(min_length=1)
-
-
-class PerRobotAuth(_Model):
-    """Each robot signs with its own Ed25519 key; the keys dir holds the public keys."""
-
-    mode: Literal["per-robot"]
-    keys_dir: str = Field(default="keys", min_length=1)
-    revoked: list[StrictInt] = Field(default_factory=list)
-    """Robots whose signatures nobody accepts any more (a lost or compromised robot)."""
-    key_file: str | None = None
-    """Optionally also a swarm key, given to the core with the identities."""
-
-
-def _shorthand(value: Any) -> Any:
-    # `auth: none` is the one-word form of `auth: {mode: none}`.
-    if value == "none":
-        return {"mode": "none"}
-    if isinstance(value, str):
-        raise ValueError(f"must be `none` or a mapping with `mode: shared` or "
-                         f"`mode: per-robot`, got {value!r}")
-    return value
-
-
-AuthSpec = Annotated[
-    Annotated[NoAuth | SharedAuth | PerRobotAuth, Field(discriminator="mode")],
-    BeforeValidator(_shorthand),
-]
 
 
 @dataclass(frozen=True, slots=True)

@@ -34,7 +34,6 @@ from pydantic import (
     field_validator,
 )
 
-from swarmd.config.auth import AuthMode, AuthSpec, NoAuth, PerRobotAuth, SharedAuth
 from swarmd.config.errors import ConfigError, Problem
 from swarmd.core.params import PRESETS, Params
 from swarmd.core.plan import PlanError, RobotPlan, SwarmPlan
@@ -100,6 +99,63 @@ class Timing(_Model):
 
 
 Vec3 = tuple[float, float, float]
+
+
+# -- auth: how frames are signed (docs/config.md, "auth") ------------------------------
+#
+#     auth: none                                        # unsigned, said explicitly
+#     auth: {mode: shared, key_file: swarm.key}         # one HMAC key for the whole swarm
+#     auth: {mode: per-robot, keys_dir: keys, revoked: [3]}   # Ed25519, one key per robot
+#
+# A top-level `key_file:` (no `auth:`) is the shared mode. A swarm file with neither is
+# unsigned without saying so: `swarmd check` warns, `swarmd start` refuses it. Per-robot
+# mode: `keys_dir` (relative to the swarm file) holds `robot-<id>.pub` for every robot of
+# the swarm not in `revoked`; each robot file's `identity_file` names that robot's
+# private key (`swarmd.identity` has the file formats). What the section's values mean
+# on disk (keys that exist, robots that are in the swarm) is checked in `auth.py`.
+
+AuthMode = Literal["none", "shared", "per-robot"]
+
+
+class NoAuth(_Model):
+    """Unsigned frames: anyone who can send on the channel speaks for any robot."""
+
+    mode: Literal["none"]
+
+
+class SharedAuth(_Model):
+    """One 32-byte HMAC key for the whole swarm: the weaker choice for tiny radios
+    (every robot holding it can sign as any other; docs/DESIGN.md section 2)."""
+
+    mode: Literal["shared"]
+    key_file: str = Field(min_length=1)
+
+
+class PerRobotAuth(_Model):
+    """Each robot signs with its own Ed25519 key; the keys dir holds the public keys."""
+
+    mode: Literal["per-robot"]
+    keys_dir: str = Field(default="keys", min_length=1)
+    revoked: list[StrictInt] = Field(default_factory=list)
+    """Robots whose signatures nobody accepts any more (a lost or compromised robot)."""
+    key_file: str | None = None
+    """Optionally also a swarm key, given to the core with the identities."""
+
+
+def _shorthand(value: Any) -> Any:
+    # `auth: none` is the one-word form of `auth: {mode: none}`.
+    if value == "none":
+        return {"mode": "none"}
+    if isinstance(value, str):
+        raise ValueError(f"must be `none` or a mapping with `mode: shared` or "
+                         f"`mode: per-robot`, got {value!r}")
+    return value
+
+
+AuthSpec = Annotated[
+    Annotated[NoAuth | SharedAuth | PerRobotAuth, Field(discriminator="mode")],
+    BeforeValidator(_shorthand),
+]
 
 
 class SlotFunction(_Model):
@@ -206,7 +262,7 @@ class SwarmConfig(_Model):
     @property
     def auth_mode(self) -> AuthMode:
         """How frames are signed: `none` (also a file that says nothing), `shared` (one
-        swarm key) or `per-robot` (Ed25519, config/auth.py)."""
+        swarm key) or `per-robot` (Ed25519, the auth section above)."""
         if isinstance(self.auth, PerRobotAuth):
             return "per-robot"
         if isinstance(self.auth, SharedAuth) or (self.auth is None and self.key_file):

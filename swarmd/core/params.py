@@ -100,6 +100,13 @@ class Params:
         bound = self.t_max + self.vote_window + self.claim_hold
         return bound + 2 * self.vote_window if lossy else bound
 
+    @property
+    def claim_horizon(self) -> float:
+        """s a CLAIM silences the slot's watchers, from the first time it is heard (DESIGN
+        rule 10): the claim hold, then one `t_max` for the new holder's first heartbeat.
+        A claimant not heard heartbeating by then is suspected again."""
+        return self.claim_hold + self.t_max
+
     def as_dict(self) -> dict[str, float | int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
