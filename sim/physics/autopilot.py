@@ -67,7 +67,9 @@ log = logging.getLogger("swarmd.sim.autopilot")
 PEER_TIMEOUT = 10.0
 """s: a peer not heard from for this long gets no more telemetry."""
 TICK = 0.05
-"""s between two telemetry passes (10 Hz position)."""
+"""s at most between two passes of the mode logic and telemetry."""
+MIN_TICK = 0.005
+"""s at least between two passes (the fastest stream: 200 Hz)."""
 
 
 class _Udp(asyncio.DatagramProtocol):
@@ -176,11 +178,13 @@ class MavlinkAutopilot:
 
     async def _run(self) -> None:
         while True:
-            await asyncio.sleep(TICK)
+            # Until the next message is due (a client may ask for 50 Hz), at most TICK.
+            wait = self.core.streams.next_due() - self.quad.robot.t
+            await asyncio.sleep(min(TICK, max(MIN_TICK, wait)))
             self.quad.catch_up()
             t = self.quad.robot.t
             self.core.control(t)
-            self._flush(self.core.telemetry(t))
+            self._flush(self.core.mission.tick(t) + self.core.telemetry(t))
 
 
 async def start_autopilot(quad: QuadLink | PointLink, flavour: Flavour, port: int,
