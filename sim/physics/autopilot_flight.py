@@ -134,6 +134,7 @@ class AutopilotFlight(AutopilotState):
             self._start(self.runner.legs(Where(r.position, r.home, self.geo_origin,
                                                self.flavour, self.param,
                                                r.mode is Mode.PARKED)))
+            self._report_progress()  # each item current in turn, even one passed at once
         if not self.legs:
             return
         leg = self.legs[0]
@@ -153,6 +154,7 @@ class AutopilotFlight(AutopilotState):
             self._leg_started = False
             if self.mode in ("mission", "auto"):
                 self.runner.done(leg)
+                self._report_progress()
 
     def _report_progress(self) -> None:
         """MISSION_ITEM_REACHED for each item done, MISSION_CURRENT when it changed."""
