@@ -133,7 +133,11 @@ def download(st: Station) -> list[tuple[Any, ...]]:
     got = []
     for seq in range(count):
         st.mav.mission_request_int_send(1, 1, seq, 0)
-        m = st.wait(["MISSION_ITEM_INT"], check=lambda m, s=seq: m.seq == s)
+
+        def this_one(m: Any, s: int = seq) -> bool:
+            return bool(m.seq == s)
+
+        m = st.wait(["MISSION_ITEM_INT"], check=this_one)
         got.append((m.frame, m.command, m.param1, m.param2, m.param3, m.param4, m.x, m.y,
                     m.z))
     st.mav.mission_ack_send(1, 1, 0, 0)
