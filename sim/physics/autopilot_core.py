@@ -225,6 +225,7 @@ class AutopilotCore(AutopilotFlight):
         r, alt = self.robot, c.params[6]
         if r.failed_motors or r.mode is Mode.CRASHED:
             return self._refused()
+        self.legs = []  # a take-off replaces what the craft was flying
         if self.flavour == "px4":
             # Commander: a mode change to AUTO.TAKEOFF (disarmed, it waits for arming);
             # Navigator: the altitude as `_px4_takeoff_z`.
@@ -335,6 +336,7 @@ class AutopilotCore(AutopilotFlight):
             return
         position, velocity = self._setpoint_world(msg)
         if position is not None:
+            self.legs = []  # a setpoint replaces a goto's leg
             self.target.hold(position, self.target.velocity)
         self.target.velocity = velocity
         r = self.robot
