@@ -1,6 +1,7 @@
 """A ground station flies a mission on `swarmd sim vehicle`, as QGroundControl does it,
-over pymavlink (MAVProxy, the Python ground station on PyPI, pulls in OpenCV and VTK as
-hard requirements: too heavy for the dev extra; docs/mavlink.md).
+over pymavlink (MAVProxy, the Python ground station on PyPI, requires OpenCV and VTK:
+too heavy for the dev extra; tests/test_mavproxy_vehicle.py runs it where it is
+installed without them; docs/mavlink.md).
 
 What QGroundControl sends on connect (its own HEARTBEAT at 1 Hz, the protocol version
 request, AUTOPILOT_VERSION, the whole parameter list, the mission download), then a plan
