@@ -373,8 +373,10 @@ def test_message_rates_set_read_back_and_off(flavour: str) -> None:
     assert g.command(511, 33, 0) == ACCEPTED  # back to the default
     assert count("GLOBAL_POSITION_INT") == pytest.approx(
         5.0 if flavour == "px4" else 10.0, rel=0.1)  # ArduPilot: SR0_POSITION
-    # A message it cannot stream: each firmware's refusal.
+    # A message it cannot stream: each firmware's refusal; "not available" when asked.
     assert g.command(511, 9999, 100000) == (FAILED if flavour == "px4" else DENIED)
+    assert g.command(510, 9999) == (ACCEPTED if flavour == "px4" else FAILED)
+    assert g.kinds("MESSAGE_INTERVAL")[-1].interval_us == 0
 
 
 def test_ardupilot_stream_groups() -> None:

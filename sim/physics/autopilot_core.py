@@ -153,7 +153,10 @@ class AutopilotCore(AutopilotFlight):
         version."""
         p = c.params
         if c.command == 511:  # MAV_CMD_SET_MESSAGE_INTERVAL
-            return self.streams.set_interval(command_int(p[0]), p[1]), []
+            result = self.streams.set_interval(command_int(p[0]), p[1])
+            if result == DENIED:  # ArduPilot says why (`GCS_Common.cpp`)
+                self.say(f"No ap_message for mavlink id ({command_int(p[0])})", 6)
+            return result, []
         if c.command == 510:  # MAV_CMD_GET_MESSAGE_INTERVAL
             result, interval = self.streams.get_interval(command_int(p[0]))
             return result, ([] if interval is None else [
@@ -210,15 +213,23 @@ class AutopilotCore(AutopilotFlight):
         return self._enter(name, t)
 
     def _px4_takeoff_z(self, alt: float) -> float:
-        """PX4 Navigator's take-off altitude: param7 (m AMSL), or when NaN MIS_TAKEOFF_ALT
-        above where the craft is; never below MIS_TAKEOFF_ALT above home (it says so)
-        nor below where it is (`navigator/takeoff.cpp` set_takeoff_position)."""
-        here, least = self.robot.position[2], self.robot.home[2] + self.param("MIS_TAKEOFF_ALT")
-        z = alt - self.geo_origin[2] if math.isfinite(alt) else (
-            here + self.param("MIS_TAKEOFF_ALT"))
-        if z < least:
-            self.say(f"Using minimum takeoff altitude: {least - self.robot.home[2]:.2f} m")
+        """PX4 Navigator's take-off altitude (`navigator/takeoff.cpp`
+        set_takeoff_position): param7 (m AMSL) but never below MIS_TAKEOFF_ALT above home,
+        MIS_TAKEOFF_ALT above home when NaN, never below where the craft is; each case
+        said in a STATUSTEXT as PX4 says it."""
+        here = self.robot.position[2]
+        least = self.robot.home[2] + self.param("MIS_TAKEOFF_ALT")
+        said = f"Using minimum takeoff altitude: {self.param('MIS_TAKEOFF_ALT'):.2f} m"
+        if not math.isfinite(alt):
             z = least
+            self.say(said, 6)  # info: the usual case, not a complaint
+        else:
+            z = alt - self.geo_origin[2]
+            if z < least - 0.1:  # PX4 does not complain under 10 cm
+                self.say(said, 2)
+            z = max(z, least)
+        if z < here:
+            self.say("Already higher than takeoff altitude", 2)
         return max(z, here)
 
     def _takeoff(self, c: Command, t: float) -> int:

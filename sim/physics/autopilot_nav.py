@@ -124,6 +124,8 @@ def _px4_return_height(across: float, height: float, p: Param) -> float:
     """m above home PX4 returns at from `across` m away and `height` m up."""
     accept = p("NAV_ACC_RAD")
     ret = p("RTL_RETURN_ALT")
+    if p("RTL_CONE_ANG") <= 0:  # no cone: RTL_RETURN_ALT from anywhere
+        return max(ret, height)
     if across <= accept:
         ret = 2.0 * across
     else:

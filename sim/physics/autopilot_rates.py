@@ -4,9 +4,11 @@ has the whole picture): which message is due when, and what a client changes.
 - MAV_CMD_SET_MESSAGE_INTERVAL (both firmwares): param2 > 0 an interval in µs, 0 the
   default rate, -1 off. A message the autopilot cannot stream is refused as the
   firmware refuses it (PX4 `mavlink_receiver.cpp` set_message_interval: FAILED;
-  ArduPilot `GCS_Common.cpp` set_message_interval: DENIED, no ap_message for it).
-- MAV_CMD_GET_MESSAGE_INTERVAL: MESSAGE_INTERVAL with the interval, -1 when off (PX4
-  answers 0, "not available", for a message it cannot stream; ArduPilot FAILED).
+  ArduPilot `GCS_Common.cpp` set_message_interval: DENIED and a STATUSTEXT "No
+  ap_message for mavlink id (N)").
+- MAV_CMD_GET_MESSAGE_INTERVAL: MESSAGE_INTERVAL with the interval, -1 when off, 0 ("not
+  available") for a message it cannot stream, which ArduPilot also answers FAILED
+  (`GCS_Common.cpp` handle_command_get_message_interval).
 - REQUEST_DATA_STREAM (ArduPilot only; PX4 ignores the deprecated message): sets a
   stream group's rate in Hz, or every group's (MAV_DATA_STREAM_ALL), 0 or stop turns it
   off; the group's SR0_ parameter follows (`GCS_Common.cpp` handle_request_data_stream),
@@ -133,8 +135,8 @@ class Streams:
         """MAV_CMD_GET_MESSAGE_INTERVAL: the MAV_RESULT and the MESSAGE_INTERVAL's
         interval_us (None: no MESSAGE_INTERVAL is sent)."""
         name = self.streamable(message_id)
-        if name is None:
-            return (ACCEPTED, 0) if self.flavour == "px4" else (FAILED, None)
+        if name is None:  # "not available": PX4 accepts the question, ArduPilot fails it
+            return (ACCEPTED, 0) if self.flavour == "px4" else (FAILED, 0)
         every = self.interval(name)
         return ACCEPTED, -1 if every is None else round(every * 1e6)
 
