@@ -237,7 +237,7 @@ def test_mission_mode_needs_a_mission_and_arducopter_a_takeoff_first() -> None:
     px4 = Ground("px4")
     assert px4.mode("mission") == TEMPORARILY_REJECTED
     apm = Ground("ardupilot")
-    assert apm.command(300, 0, 0) == FAILED
+    assert apm.command(300, 0, 0) == FAILED  # disarmed, and no mission
     home = apm.plan()[0]
     assert apm.upload([home, apm.item(1, 16, alt=3.0, east=2.0)]).type == 0
     assert apm.mode("guided") == ACCEPTED and apm.command(400, 1) == ACCEPTED

@@ -294,11 +294,13 @@ class AutopilotCore(AutopilotFlight):
 
     def _mission_start(self, first: float, last: float, t: float) -> int:
         """MAV_CMD_MISSION_START: the mission mode (PX4 from item param1 if given;
-        ArduPilot refuses first and last items, `GCS_Mavlink.cpp`
+        ArduPilot armed only, and refuses first and last items, `GCS_Mavlink.cpp`
         handle_command_mission_start)."""
         if self.flavour == "ardupilot":
             if first != 0 or last != 0:
                 return DENIED
+            if not self.armed:
+                return FAILED  # ArduCopter starts a mission armed only
             return ACCEPTED if self._enter("auto", t) == ACCEPTED else FAILED
         if math.isfinite(first) and first >= 0:
             self.mission.set_current(int(first))
