@@ -32,6 +32,8 @@ Param = Callable[[str], float]
 APM_MIN_CLIMB = 2.5
 """m: ArduCopter's RTL climbs at least this much when the cone lowers RTL_ALT
 (RTL_ABS_MIN_CLIMB, 250 cm, `mode_rtl.cpp`)."""
+APM_RTL_ALT_MIN = 2.0
+"""m: the lowest RTL_ALT ArduCopter uses (RTL_ALT_MIN, 200 cm, `mode_rtl.cpp`)."""
 APM_ALT_RADIUS = 0.3
 """m: when the simulated ArduCopter counts a height as reached (its position controller
 has no parameter for it)."""
@@ -137,12 +139,15 @@ def _px4_return_height(across: float, height: float, p: Param) -> float:
 
 
 def _apm_return_height(across: float, height: float, p: Param) -> float:
-    """m above home ArduCopter returns at (RTL_ALT, the cone, RTL_CLIMB_MIN)."""
-    ret = max(p("RTL_ALT"), 0.0) / 100
+    """m above home ArduCopter returns at: RTL_ALT (at least 2 m) or RTL_CLIMB_MIN
+    above where it is, lowered near home to RTL_CONE_SLOPE x the distance but at
+    least 2.5 m up, never down (`mode_rtl.cpp` compute_return_target)."""
+    ret = max(0.0, height + max(p("RTL_CLIMB_MIN"), 0.0) / 100,
+              max(p("RTL_ALT") / 100, APM_RTL_ALT_MIN))
     slope = p("RTL_CONE_SLOPE")
-    if slope >= 0.5:
-        ret = min(ret, max(across * slope, height + APM_MIN_CLIMB))
-    return max(ret, height + max(p("RTL_CLIMB_MIN"), 0.0) / 100, height)
+    if slope >= 0.5:  # RTL_MIN_CONE_SLOPE: no shallower cone
+        ret = max(height, min(ret, max(across * slope, height + APM_MIN_CLIMB)))
+    return ret
 
 
 def rtl_legs(flavour: Flavour, here: Vec3, home: Vec3, p: Param) -> list[Leg]:
