@@ -376,6 +376,7 @@ def test_message_rates_set_read_back_and_off(flavour: str) -> None:
     # A message it cannot stream: each firmware's refusal; "not available" when asked.
     assert g.command(511, 9999, 100000) == (FAILED if flavour == "px4" else DENIED)
     assert g.command(510, 9999) == (ACCEPTED if flavour == "px4" else FAILED)
+    assert g.command(511, 0, 500000) == (FAILED if flavour == "px4" else ACCEPTED)  # HEARTBEAT
     assert g.kinds("MESSAGE_INTERVAL")[-1].interval_us == 0
 
 

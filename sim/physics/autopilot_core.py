@@ -153,7 +153,7 @@ class AutopilotCore(AutopilotFlight):
         version."""
         p = c.params
         if c.command == 511:  # MAV_CMD_SET_MESSAGE_INTERVAL
-            result = self.streams.set_interval(command_int(p[0]), p[1])
+            result = self.streams.set_interval(command_int(p[0]), p[1], (p[2], p[3], p[6]))
             if result == DENIED:  # ArduPilot says why (`GCS_Common.cpp`)
                 self.say(f"No ap_message for mavlink id ({command_int(p[0])})", 6)
             return result, []

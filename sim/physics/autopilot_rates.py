@@ -3,7 +3,8 @@ has the whole picture): which message is due when, and what a client changes.
 
 - MAV_CMD_SET_MESSAGE_INTERVAL (both firmwares): param2 > 0 an interval in µs, 0 the
   default rate, -1 off. A message the autopilot cannot stream is refused as the
-  firmware refuses it (PX4 `mavlink_receiver.cpp` set_message_interval: FAILED;
+  firmware refuses it (PX4 `mavlink_receiver.cpp` set_message_interval: FAILED, also
+  for HEARTBEAT, which PX4 keeps at 1 Hz;
   ArduPilot `GCS_Common.cpp` set_message_interval: DENIED and a STATUSTEXT "No
   ap_message for mavlink id (N)").
 - MAV_CMD_GET_MESSAGE_INTERVAL: MESSAGE_INTERVAL with the interval, -1 when off, 0 ("not
@@ -19,6 +20,8 @@ group's rate is set again. HEARTBEAT is in no group (1 Hz on both firmwares).
 """
 
 from __future__ import annotations
+
+import math
 
 from sim.physics.autopilot_params import SR0_GROUPS
 from swarmd.link.mavlink_modes import Flavour
@@ -119,10 +122,15 @@ class Streams:
         return min(times, default=float("inf"))
 
     # -- what clients change ----------------------------------------------------------
-    def set_interval(self, message_id: int, interval_us: float) -> int:
-        """MAV_CMD_SET_MESSAGE_INTERVAL; the MAV_RESULT."""
+    def set_interval(self, message_id: int, interval_us: float,
+                     others: tuple[float, ...] = ()) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL (`others`: params 3, 4 and 7); the MAV_RESULT.
+        PX4 keeps its HEARTBEAT at 1 Hz and takes no response target or other
+        parameter (`mavlink_receiver.cpp` set_message_interval: FAILED)."""
         name = self.streamable(message_id)
-        if name is None or interval_us != interval_us or interval_us < -1:
+        px4_refuses = self.flavour == "px4" and (name == "HEARTBEAT" or any(
+            math.isfinite(p) and round(p) != 0 for p in others))
+        if name is None or interval_us != interval_us or interval_us < -1 or px4_refuses:
             return FAILED if self.flavour == "px4" else DENIED
         if interval_us == 0:
             self.own.pop(name, None)
