@@ -231,6 +231,13 @@ def test_set_current_and_jump(flavour: str) -> None:
     g.run_until(lambda: g.core.runner.state == 5, 40.0)
     reached = [m.seq for m in g.kinds("MISSION_ITEM_REACHED")]
     assert reached.count(first + 2) == 2  # the waypoint twice: DO_JUMP repeated it once
+    # Done, still in the mission mode: a new current item is flown from there.
+    g.send(g.gcs.mission_set_current_encode(1, 1, first + 2))
+    g.run_until(lambda: g.core.runner.state == 5, 40.0)
+    reached = [m.seq for m in g.kinds("MISSION_ITEM_REACHED")]
+    # Once more: the DO_JUMP's repeat is spent (both firmwares reset it only when the
+    # mission restarts from its start or is replaced).
+    assert reached.count(first + 2) == 3
 
 
 def test_mission_mode_needs_a_mission_and_arducopter_a_takeoff_first() -> None:

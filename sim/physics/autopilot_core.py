@@ -15,6 +15,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sim.physics.autopilot_flight import AutopilotFlight
+from sim.physics.autopilot_mission import ACTIVE, COMPLETE, NOT_STARTED
 from sim.physics.autopilot_nav import Leg
 from sim.physics.mavlink_defs import (
     ACCEPTED,
@@ -110,9 +111,10 @@ class AutopilotCore(AutopilotFlight):
         """MISSION_SET_CURRENT (and DO_SET_MISSION_CURRENT): MISSION_CURRENT either way;
         PX4 also says when the item does not exist (`mavlink_mission.cpp`)."""
         if self.mission.set_current(seq):
-            self.runner.state = 2 if self.runner.state == 5 else self.runner.state
             if self.mode in ("mission", "auto"):
-                self.legs = []
+                self.legs, self.runner.state = [], ACTIVE  # flown from that item now
+            elif self.runner.state == COMPLETE:
+                self.runner.state = NOT_STARTED  # entered later, it starts there
         elif self.flavour == "px4":
             self.say("WPM: WP CURR CMD: Not in range")
         self._reported_current = self.mission.current

@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import math
 
-from sim.physics.autopilot_mission import Where
+from sim.physics.autopilot_mission import ACTIVE, Where
 from sim.physics.autopilot_nav import Leg, Speeds, rtl_legs
 from sim.physics.autopilot_state import AutopilotState
 from sim.physics.mavlink_defs import ACCEPTED, TEMPORARILY_REJECTED
@@ -130,7 +130,7 @@ class AutopilotFlight(AutopilotState):
 
     def _fly_legs(self, t: float) -> None:
         r = self.robot
-        if not self.legs and self.mode in ("mission", "auto") and self.runner.state == 3:
+        if not self.legs and self.mode in ("mission", "auto") and self.runner.state == ACTIVE:
             self._start(self.runner.legs(Where(r.position, r.home, self.geo_origin,
                                                self.flavour, self.param,
                                                r.mode is Mode.PARKED)))
