@@ -40,6 +40,8 @@ class Ground:
         self.parser = mavlink2.MAVLink(None)
         self.t = 0.0
         self.heard: list[Any] = []
+        self.timed: list[tuple[float, Any]] = []
+        """(virtual time, message) of what `run` heard."""
 
     def send(self, msg: Any) -> list[Any]:
         [decoded] = self.parser.parse_buffer(msg.pack(self.gcs))
@@ -63,7 +65,9 @@ class Ground:
             self.t += 0.05
             self.core.robot.step_until(self.t)
             self.core.control(self.t)
-            self.heard += self.core.mission.tick(self.t) + self.core.telemetry(self.t)
+            sent = self.core.mission.tick(self.t) + self.core.telemetry(self.t)
+            self.heard += sent
+            self.timed += [(self.t, m) for m in sent]
 
     def run_until(self, done: Any, limit: float) -> float:
         start = self.t
@@ -208,6 +212,15 @@ def test_the_mission_is_flown_with_progress_to_touch_down(flavour: str) -> None:
     # 4 m at 1.5 m/s (the DO_CHANGE_SPEED) and a 1 s hold are in it: no cutting short.
     assert seconds > 3 * 4.0 / 1.5 + 1.0
     assert g.core.mission_current().mission_state == 5  # MISSION_STATE_COMPLETE
+    # The waypoint held 1 s: ArduCopter says it is reached on arrival, a second before
+    # the next item is current; PX4 once the hold is over, the next item current at once.
+    held = first + 3
+    reached_at = next(t for t, m in g.timed if m.get_type() == "MISSION_ITEM_REACHED"
+                      and m.seq == held)
+    next_at = next(t for t, m in g.timed if m.get_type() == "MISSION_CURRENT"
+                   and m.seq == held + 1)
+    assert next_at - reached_at == pytest.approx(1.0 if flavour == "ardupilot" else 0.0,
+                                                 abs=0.11)
 
 
 @both

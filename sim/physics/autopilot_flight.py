@@ -147,13 +147,19 @@ class AutopilotFlight(AutopilotState):
                 self.took_off = True
                 r.fly(self.label, self.target)
         arrived = r.mode is Mode.PARKED if leg.goal is None else leg.reached(r.position)
+        in_mission = self.mode in ("mission", "auto")
+        # ArduCopter reports an item reached on arrival, before its hold time; PX4 once
+        # the hold is over (`mode_auto.cpp` verify_nav_wp; `navigator/mission.cpp`).
+        early = self.flavour == "ardupilot" and in_mission and leg.hold > 0
         if arrived and self._leg_reached is None:
             self._leg_reached = t
+            if early and leg.seq is not None:
+                self.runner.reached.append(leg.seq)
         if self._leg_reached is not None and t - self._leg_reached >= leg.hold:
             self.legs.pop(0)
             self._leg_started = False
-            if self.mode in ("mission", "auto"):
-                self.runner.done(leg)
+            if in_mission:
+                self.runner.done(leg, report=not early)
                 self._report_progress()
 
     def _report_progress(self) -> None:

@@ -300,10 +300,12 @@ class MissionRunner:
     def flyable(self) -> bool:
         return any(it.command in NAV for it in self.store.listed()[self.store.first:])
 
-    def done(self, leg: Leg) -> None:
-        """`leg` ended: its item is reached, the next one is current."""
+    def done(self, leg: Leg, report: bool = True) -> None:
+        """`leg` ended: its item is reached (`report`: not said yet), the next one is
+        current."""
         if leg.seq is not None:
-            self.reached.append(leg.seq)
+            if report:
+                self.reached.append(leg.seq)
             self.store.current = leg.seq + 1
             if self.store.current >= len(self.store.listed()):
                 self.state = COMPLETE  # the last item (a landing may disarm at once)
