@@ -480,3 +480,26 @@ def test_ardupilot_offset_and_global_setpoints_and_bad_reposition() -> None:
     g.run(5.0)
     assert math.dist(g.core.robot.position, (HOME[0] + 3.0, HOME[1], 4.0)) < 0.2
     assert g.command(192, -1, 1, 0, NAN, 0.0, 0.0, 10.0) == DENIED  # 0, 0 is no place
+
+
+@both
+def test_the_mujoco_quadrotor_flies_the_mission_too(flavour: str) -> None:
+    """The same mission over the MuJoCo quadrotor: its controller follows the legs (at
+    the 1.5 m/s of the DO_CHANGE_SPEED, below its own cruise) to touch-down."""
+    from sim.physics.robot import QuadRobot
+
+    g = Ground(flavour)
+    g.core = AutopilotCore(QuadRobot(1, HOME), flavour, 1)  # type: ignore[arg-type]
+    items = g.plan()
+    assert g.upload(items).type == 0
+    first = 1 if flavour == "ardupilot" else 0
+    if flavour == "px4":
+        assert g.mode("mission") == ACCEPTED and g.command(400, 1) == ACCEPTED
+    else:
+        assert g.mode("guided") == ACCEPTED and g.command(400, 1) == ACCEPTED
+        assert g.command(300, 0, 0) == ACCEPTED
+    g.run_until(lambda: not g.core.armed, 60.0)
+    assert [m.seq for m in g.kinds("MISSION_ITEM_REACHED")] == list(range(first, len(items)))
+    x, y, z = g.core.robot.position
+    assert math.hypot(x - HOME[0] - 4.0, y - HOME[1]) < 0.6 and z - HOME[2] < 0.1
+    assert g.core.robot.mode is Mode.PARKED
