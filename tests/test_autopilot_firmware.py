@@ -202,7 +202,7 @@ def test_refusals_carry_the_firmwares_mav_result(flavour: str) -> None:
         assert v.mode("guided") == TEMPORARILY_REJECTED  # OFFBOARD without setpoints
         assert v.command(176, 1, 3, 0) == TEMPORARILY_REJECTED  # POSCTL: not flown here
     else:
-        assert v.command(176, 1, 0, 0) == FAILED  # STABILIZE: not flown here
+        assert v.command(176, 1, 1, 0) == FAILED  # ACRO: not flown here (no RC)
     assert v.command(176, 0, 4, 0) == UNSUPPORTED  # no custom-mode flag
     v.take_off()
     assert v.command(400, 0) == refused  # disarm in the air
@@ -306,7 +306,8 @@ def test_sys_status_pre_arm_bit(flavour: str) -> None:
     v = Vehicle(flavour)
 
     def status() -> Any:
-        return next(m for m in v.core.telemetry(v.t + 100.0) if m.get_type() == "SYS_STATUS")
+        v.t += 100.0  # SYS_STATUS is due again
+        return next(m for m in v.core.telemetry(v.t) if m.get_type() == "SYS_STATUS")
 
     s = status()
     assert s.onboard_control_sensors_present & PREARM and s.onboard_control_sensors_enabled & (

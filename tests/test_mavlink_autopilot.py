@@ -69,8 +69,9 @@ def ground_station(port: int, arm: bool) -> dict[str, Any]:
         conn.close()
 
 
+# Each firmware's boot mode without RC: PX4 Hold (AUTO.LOITER), ArduCopter STABILIZE.
 @pytest.mark.parametrize(("flavour", "mode", "refused"), [("px4", "LOITER", 1),
-                                                           ("ardupilot", "LOITER", 4)])
+                                                           ("ardupilot", "STABILIZE", 4)])
 async def test_a_ground_station_sees_the_vehicle_its_position_and_mode(
         flavour: str, mode: str, refused: int) -> None:
     quad = QuadLink(3, (2.0, -1.0, 0.0))

@@ -1,6 +1,7 @@
 """An independent client flies `swarmd sim vehicle`: MAVSDK (the C++ MAVSDK core the
 `mavsdk` wheel ships) connects, reads parameters and the version, arms, takes off,
-goes to a global position, holds, flies offboard and lands, on both flavours.
+goes to a global position, holds, flies offboard and lands, on both flavours; and
+uploads a mission, reads it back and flies it to touch-down with its progress.
 
 MAVSDK decides by itself what to send (which mode before which command, which
 parameter, which encoding) from the HEARTBEAT's autopilot field, so each step passing
@@ -29,6 +30,7 @@ mavsdk = pytest.importorskip("mavsdk", reason="the mavsdk wheel (the dev extra) 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk, System  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
 from mavsdk.asyncio.plugins.info import InfoAsync  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionItem, MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.offboard import OffboardAsync, PositionNedYaw  # noqa: E402
 from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import (  # noqa: E402
@@ -158,6 +160,17 @@ async def _both(command: Awaitable[Any], wait: Awaitable[None]) -> None:
 
 @pytest.mark.parametrize("flavour", ["px4", "ardupilot"])
 async def test_mavsdk_flies_the_simulated_vehicle(flavour: str) -> None:
+    await with_vehicle(flavour, fly)
+
+
+@pytest.mark.parametrize("flavour", ["px4", "ardupilot"])
+async def test_mavsdk_flies_a_mission(flavour: str) -> None:
+    await with_vehicle(flavour, fly_mission)
+
+
+async def with_vehicle(flavour: str,
+                       flight: Callable[[System, str, Steps], Awaitable[None]]) -> None:
+    """Start a vehicle process, connect MAVSDK, run `flight`, stop the vehicle."""
     port = free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", flavour,
@@ -170,7 +183,7 @@ async def test_mavsdk_flies_the_simulated_vehicle(flavour: str) -> None:
             await sdk.add_any_connection(f"udpout://127.0.0.1:{port}")
             system = await steps.run("connect", sdk.first_autopilot(timeout_s=15.0), 20.0)
             assert system is not None, "no autopilot heard"
-            await fly(system, flavour, steps)
+            await flight(system, flavour, steps)
     finally:
         print("\n" + steps.table())
         proc.send_signal(signal.SIGTERM)
@@ -182,3 +195,68 @@ async def test_mavsdk_flies_the_simulated_vehicle(flavour: str) -> None:
             raise
     assert proc.returncode == 0, err[-2000:]
     assert f"udpout://127.0.0.1:{port}" in out and "vehicle: stopped" in out
+
+
+def mission_items(home: Any, flavour: str) -> list[Any]:
+    """Take-off to 2 m, speed 2 m/s, three waypoints 4 m apart (0.5 m acceptance), land
+    (ArduPilot's mission starts with home, item 0)."""
+
+    def at(east: float, north: float) -> tuple[int, int]:
+        lat = home.latitude_deg + math.degrees(north / EARTH_RADIUS)
+        lon = home.longitude_deg + math.degrees(
+            east / (EARTH_RADIUS * math.cos(math.radians(home.latitude_deg))))
+        return round(lat * 1e7), round(lon * 1e7)
+
+    body: list[tuple[int, int, float, float, float | None, float, float]] = [
+            (6, 22, 0.0, 0.0, 0, 0, 2.0), (2, 178, 1.0, 2.0, None, 0, 0.0),
+            (6, 16, 0.0, 0.5, 0, 4, 2.0), (6, 16, 0.0, 0.5, 4, 4, 2.0),
+            (6, 16, 0.0, 0.5, 4, 0, 2.0), (6, 21, 0.0, 0.0, 4, 0, 0.0)]
+    items = []
+    if flavour == "ardupilot":
+        x, y = at(0, 0)
+        items.append(MissionItem(0, 0, 16, 1, 1, 0.0, 0.0, 0.0, 0.0, x, y,
+                                 home.absolute_altitude_m, 0))
+    for frame, command, p1, p2, east, north, z in body:
+        x, y = at(east, north) if east is not None else (0, 0)
+        current = int(not items)  # MAVSDK wants the first one marked current
+        items.append(MissionItem(len(items), frame, command, current, 1, p1, p2, 0.0, 0.0,
+                                 x, y, z, 0))
+    return items
+
+
+async def fly_mission(system: System, flavour: str, steps: Steps) -> None:
+    tel, action, mission = TelemetryAsync(system), ActionAsync(system), MissionRawAsync(system)
+
+    async def ready() -> bool:
+        h = await tel.health()
+        return bool(h.is_armable and h.is_global_position_ok and h.is_home_position_ok)
+
+    await steps.run("health", until(ready, 10.0, "armable, global position and home"))
+    # The parameters MAVSDK's action plugin reads and sets (PX4: RTL_RETURN_ALT; ArduPilot:
+    # RTL_ALT, in cm).
+    rtl = await action.get_return_to_launch_altitude()
+    assert rtl == pytest.approx(60.0 if flavour == "px4" else 15.0)
+    if flavour == "px4":  # MAVSDK 4.1 sets ArduPilot 4.7's RTL_ALT_M, not 4.5's RTL_ALT
+        await action.set_return_to_launch_altitude(30.0)
+        assert await action.get_return_to_launch_altitude() == pytest.approx(30.0)
+    home = await tel.home()
+    items = mission_items(home, flavour)
+    await steps.run("upload", mission.upload_mission(items))
+    back = await steps.run("download", mission.download_mission())
+
+    def row(it: Any) -> tuple[Any, ...]:
+        return (it.seq, it.frame, it.command, it.autocontinue, it.param1, it.param2,
+                it.x, it.y, it.z)
+
+    assert [row(it) for it in back] == [row(it) for it in items]
+    first = 1 if flavour == "ardupilot" else 0
+    seen: set[int] = set()
+
+    async def finished() -> bool:
+        seen.add((await mission.mission_progress()).current)
+        return bool(await mission.is_mission_finished() and not await tel.armed())
+
+    await steps.run("arm", action.arm())
+    await steps.run("mission", _both(mission.start_mission(),
+                                     until(finished, 40.0, "the mission's end")), 45.0)
+    assert set(range(first + 2, len(items) - 1)) <= seen  # the waypoints, each current

@@ -9,22 +9,30 @@ once. `flavour` is `px4` or `ardupilot`: the autopilot answers as that firmware 
 (its HEARTBEAT fields, mode encodings, MAV_RESULT codes, parameters, take-off rules).
 docs/mavlink.md tabulates each answer with the firmware source it follows.
 
-Sent: HEARTBEAT 1 Hz, SYS_STATUS 2 Hz, BATTERY_STATUS 1 Hz, LOCAL_POSITION_NED and
-ATTITUDE 10 Hz, GLOBAL_POSITION_INT 5 Hz, GPS_RAW_INT 2 Hz, EXTENDED_SYS_STATE 1 Hz,
-HOME_POSITION 0.5 Hz, EKF_STATUS_REPORT (ArduPilot) or ESTIMATOR_STATUS (PX4) 1 Hz. A
-change of system_status or sensor health sends HEARTBEAT and SYS_STATUS at once.
-Latitude, longitude and altitude are the swarm frame's position around `geo_origin`
-(default: each firmware's SITL home), flat earth.
+Sent (`autopilot_rates`, at each firmware's start-up rates until a client changes them
+with SET_MESSAGE_INTERVAL or, on ArduPilot, REQUEST_DATA_STREAM): HEARTBEAT 1 Hz,
+SYS_STATUS 2 Hz, BATTERY_STATUS 1 Hz, LOCAL_POSITION_NED and ATTITUDE 10 Hz,
+GLOBAL_POSITION_INT 5 Hz (ArduPilot 10), GPS_RAW_INT 2 Hz, EXTENDED_SYS_STATE 1 Hz,
+HOME_POSITION 0.5 Hz, MISSION_CURRENT 1 Hz (ArduPilot 2), VFR_HUD 4 Hz,
+EKF_STATUS_REPORT (ArduPilot) or ESTIMATOR_STATUS (PX4) 1 Hz; STATUSTEXT, MISSION_CURRENT
+and MISSION_ITEM_REACHED as things happen. A change of system_status or sensor health
+sends HEARTBEAT and SYS_STATUS at once. Latitude, longitude and altitude are the swarm
+frame's position around `geo_origin` (default: each firmware's SITL home), flat earth.
 
 Answered: COMMAND_LONG and COMMAND_INT (arm / disarm, DO_SET_MODE, NAV_TAKEOFF, NAV_LAND,
-RETURN_TO_LAUNCH, DO_REPOSITION, SET_MESSAGE_INTERVAL, REQUEST_MESSAGE,
-REQUEST_AUTOPILOT_CAPABILITIES), SET_MODE, the parameter protocol, the mission list
-(empty), PING (PX4) and TIMESYNC, and SET_POSITION_TARGET_LOCAL_NED in GUIDED / OFFBOARD.
-Modes: `guided` follows the setpoints (PX4 OFFBOARD needs a setpoint stream to enter and
-falls back to HOLD when it stops for COM_OF_LOSS_T; ArduCopter needs NAV_TAKEOFF before
-it leaves the ground), `hold` (and ArduPilot's `brake`) stops where it is, `land` lands
-where it is, `rtl` flies home and lands, PX4's `takeoff` climbs. On the ground it
-disarms by itself as each firmware does.
+RETURN_TO_LAUNCH, DO_REPOSITION, MISSION_START, DO_SET_MISSION_CURRENT, DO_CHANGE_SPEED,
+DO_PAUSE_CONTINUE, SET / GET_MESSAGE_INTERVAL, REQUEST_MESSAGE,
+REQUEST_AUTOPILOT_CAPABILITIES, REQUEST_PROTOCOL_VERSION), SET_MODE, the parameter
+protocol (`autopilot_params`), the mission protocol (`autopilot_mission`), PING (PX4) and
+TIMESYNC, REQUEST_DATA_STREAM (ArduPilot), SET_POSITION_TARGET_LOCAL_NED and
+_GLOBAL_INT in GUIDED / OFFBOARD. Modes: `guided` follows the setpoints (PX4 OFFBOARD
+needs a setpoint stream to enter and falls back to HOLD when it stops for COM_OF_LOSS_T;
+ArduCopter needs NAV_TAKEOFF before it leaves the ground), `hold` (and ArduPilot's
+`brake`) stops where it is, `land` lands where it is, `rtl` returns as each firmware does
+(`autopilot_nav`), `mission` / `auto` flies the mission, PX4's `takeoff` climbs,
+ArduCopter boots in `stabilize`. On the ground it disarms by itself as each firmware
+does. A ground station's lost data link triggers the firmware's failsafe when its
+parameter asks for one.
 
 Faults: a failed motor (`fail_motor`, the simulator's `motor` fault) clears the motor
 outputs' health bit in SYS_STATUS and the HEARTBEAT says EMERGENCY while the craft falls
@@ -35,10 +43,13 @@ The local NED frame's origin is the robot's home (where the craft powered up); t
 simulator's world frame is the swarm frame (x east, y north, z up).
 
 Modules, each importing only those before it: `sim.physics.mavlink_defs` (the MAVLink
-numbers, rates, firmware identities and default parameters), `autopilot_state` (the
-state and what it says: status, telemetry, parameters), `autopilot_core` (what it does
-when told and with time: `AutopilotCore`, sans-I/O), and this one (the UDP endpoint
-`MavlinkAutopilot` and the daemon's `SimMavlinkLink` to it).
+numbers, firmware identities), `autopilot_params` (each firmware's parameters),
+`autopilot_rates` (the streams and their rates), `autopilot_nav` (legs, speeds, each
+firmware's Return), `autopilot_mission` (the mission protocol and the items flown),
+`autopilot_state` (the state and what it says), `autopilot_flight` (modes and what
+happens with time), `autopilot_core` (what it does when told: `AutopilotCore`,
+sans-I/O), and this one (the UDP endpoint `MavlinkAutopilot` and the daemon's
+`SimMavlinkLink` to it).
 """
 
 from __future__ import annotations
@@ -67,7 +78,9 @@ log = logging.getLogger("swarmd.sim.autopilot")
 PEER_TIMEOUT = 10.0
 """s: a peer not heard from for this long gets no more telemetry."""
 TICK = 0.05
-"""s between two telemetry passes (10 Hz position)."""
+"""s at most between two passes of the mode logic and telemetry."""
+MIN_TICK = 0.005
+"""s at least between two passes (the fastest stream: 200 Hz)."""
 
 
 class _Udp(asyncio.DatagramProtocol):
@@ -176,11 +189,13 @@ class MavlinkAutopilot:
 
     async def _run(self) -> None:
         while True:
-            await asyncio.sleep(TICK)
+            # Until the next message is due (a client may ask for 50 Hz), at most TICK.
+            wait = self.core.streams.next_due() - self.quad.robot.t
+            await asyncio.sleep(min(TICK, max(MIN_TICK, wait)))
             self.quad.catch_up()
             t = self.quad.robot.t
             self.core.control(t)
-            self._flush(self.core.telemetry(t))
+            self._flush(self.core.mission.tick(t) + self.core.telemetry(t))
 
 
 async def start_autopilot(quad: QuadLink | PointLink, flavour: Flavour, port: int,

@@ -1,7 +1,7 @@
-"""The simulated autopilot's logic (`sim.physics.autopilot` has the whole picture): what
+"""The simulated autopilot's answers (`sim.physics.autopilot` has the whole picture): what
 it does with each message a peer sends (commands, mode changes, setpoints, the parameter
-and mission protocols) and what happens with time (PX4's offboard loss, the end of a
-take-off, auto-disarm on the ground). Sans-I/O: `sim.physics.autopilot.MavlinkAutopilot`
+and mission protocols, message rates). What it does with time is
+`sim.physics.autopilot_flight`'s. Sans-I/O: `sim.physics.autopilot.MavlinkAutopilot`
 moves the bytes.
 """
 
@@ -9,9 +9,14 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 from typing import Any
 
-from sim.physics.autopilot_state import AutopilotState
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sim.physics.autopilot_flight import AutopilotFlight
+from sim.physics.autopilot_mission import ACTIVE, COMPLETE, NOT_STARTED
+from sim.physics.autopilot_nav import Leg
 from sim.physics.mavlink_defs import (
     ACCEPTED,
     CUSTOM,
@@ -20,7 +25,6 @@ from sim.physics.mavlink_defs import (
     FRAME_GLOBAL_RELATIVE_ALT,
     FRAME_GLOBAL_RELATIVE_ALT_INT,
     MESSAGE_IDS,
-    TEMPORARILY_REJECTED,
     UNSUPPORTED,
     Command,
     command_int,
@@ -34,8 +38,16 @@ from swarmd.link.mavlink_pilot import geodetic_offset
 log = logging.getLogger("swarmd.sim.autopilot")
 
 
-class AutopilotCore(AutopilotState):
-    """The autopilot's logic over one craft (`QuadRobot`, or `PointRobot` without
+_MODES = {"px4": ("guided", "hold", "land", "rtl", "takeoff", "mission"),
+          "ardupilot": ("guided", "hold", "land", "rtl", "brake", "auto", "stabilize")}
+"""The modes each flavour flies; others (manual and RC modes) are refused as a mode the
+firmware cannot enter now (no RC: PX4's position modes; ArduCopter's ACRO, ALT_HOLD...)."""
+_APM_NOT_ARMABLE = ("auto", "rtl", "land", "brake")
+"""ArduCopter modes that refuse arming (`mode.h` allows_arming)."""
+
+
+class AutopilotCore(AutopilotFlight):
+    """The autopilot's answers over one craft (`QuadRobot`, or `PointRobot` without
     physics): messages in, messages out, on the craft's clock. Sans-I/O (the server in
     `sim.physics.autopilot` moves the bytes). docs/mavlink.md tabulates every answer and
     the firmware behaviour it follows."""
@@ -60,15 +72,18 @@ class AutopilotCore(AutopilotState):
             # ArduPilot acks the message itself (id 11); PX4 turns it into DO_SET_MODE.
             acked = 11 if self.flavour == "ardupilot" else 176
             return [self.mav.command_ack_encode(acked, result, 0, 0, src, comp)]
-        if kind == "SET_POSITION_TARGET_LOCAL_NED" and msg.coordinate_frame == 1:
+        if kind.startswith("SET_POSITION_TARGET_"):
             self._setpoint(msg, t)
         elif kind.startswith("PARAM_"):
             return self._param_message(msg)
-        elif kind == "MISSION_REQUEST_LIST":
-            return [self.mav.mission_count_encode(src, comp, self._mission_count(
-                msg.mission_type), msg.mission_type)]
-        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            return self._mission_item(msg, src, comp)
+        elif kind.startswith("MISSION_"):
+            return self._mission_message(msg, t)
+        elif kind == "HEARTBEAT":
+            self._heard(msg, src, t)
+        elif kind == "REQUEST_DATA_STREAM" and self.flavour == "ardupilot":
+            # PX4 ignores the deprecated message; ArduPilot sets the group's rate.
+            self.set_stream_group(msg.req_stream_id,
+                                  msg.req_message_rate if msg.start_stop else 0)
         elif (kind == "PING" and self.flavour == "px4" and msg.target_system == 0
               and msg.target_component == 0):  # ArduPilot answers TIMESYNC, not PING
             return [self.mav.ping_encode(msg.time_usec, msg.seq, src, comp)]
@@ -76,29 +91,87 @@ class AutopilotCore(AutopilotState):
             return [self.mav.timesync_encode(int(t * 1e9), msg.ts1)]
         return []
 
+    def _heard(self, msg: Any, src: int, t: float) -> None:
+        """A ground station's HEARTBEAT keeps the data link alive (ArduPilot counts only
+        SYSID_MYGCS's, `GCS_Common.cpp` handle_heartbeat)."""
+        if msg.type == 6 and (self.flavour == "px4" or src == self.param("SYSID_MYGCS")):
+            self.last_gcs = t
+
+    def _mission_message(self, msg: Any, t: float) -> list[Any]:
+        if msg.get_type() == "MISSION_SET_CURRENT":
+            return self._set_current(msg.seq)
+        before = self.mission.version
+        replies = self.mission.handle(msg, t)
+        if self.mission.version != before and self.mode in ("mission", "auto"):
+            self.legs = []  # a new mission: flown from its first item
+            self.runner.start()
+        return replies
+
+    def _set_current(self, seq: int) -> list[Any]:
+        """MISSION_SET_CURRENT (and DO_SET_MISSION_CURRENT): MISSION_CURRENT either way;
+        PX4 also says when the item does not exist (`mavlink_mission.cpp`)."""
+        if self.mission.set_current(seq):
+            if self.mode in ("mission", "auto"):
+                self.legs, self.runner.state = [], ACTIVE  # flown from that item now
+            elif self.runner.state == COMPLETE:
+                self.runner.state = NOT_STARTED  # entered later, it starts there
+        elif self.flavour == "px4":
+            self.say("WPM: WP CURR CMD: Not in range")
+        self._reported_current = self.mission.current
+        return [self.mission_current()]
+
     def _command(self, c: Command, t: float) -> tuple[int, list[Any]]:
         p = c.params
-        if c.command == 400:  # MAV_CMD_COMPONENT_ARM_DISARM
-            return self._arm(p[0], p[1], t), []
-        if c.command == 176:  # MAV_CMD_DO_SET_MODE
-            if command_int(p[0]) < 0 or not command_int(p[0]) & CUSTOM:
-                return UNSUPPORTED, []
-            main, sub = command_int(p[1]) & 0xFF, command_int(p[2]) & 0xFF
-            number = main if self.flavour == "ardupilot" else (main << 16) | (sub << 24)
-            return self._set_mode_number(number, t), []
-        if c.command == 22:  # MAV_CMD_NAV_TAKEOFF
-            return self._takeoff(c, t), []
-        if c.command == 21:  # MAV_CMD_NAV_LAND
-            return self._enter("land", t), []
-        if c.command == 20:  # MAV_CMD_NAV_RETURN_TO_LAUNCH
-            return self._enter("rtl", t), []
-        if c.command == 192:  # MAV_CMD_DO_REPOSITION
-            return self._reposition(c, t), []
-        if c.command == 511:  # SET_MESSAGE_INTERVAL: accepted, the rates here are fixed
-            return ACCEPTED, []
+        match c.command:
+            case 400:  # MAV_CMD_COMPONENT_ARM_DISARM
+                return self._arm(p[0], p[1], t), []
+            case 176:  # MAV_CMD_DO_SET_MODE
+                if command_int(p[0]) < 0 or not command_int(p[0]) & CUSTOM:
+                    return UNSUPPORTED, []
+                main, sub = command_int(p[1]) & 0xFF, command_int(p[2]) & 0xFF
+                number = main if self.flavour == "ardupilot" else (main << 16) | (sub << 24)
+                return self._set_mode_number(number, t), []
+            case 22:  # MAV_CMD_NAV_TAKEOFF
+                return self._takeoff(c, t), []
+            case 21:  # MAV_CMD_NAV_LAND
+                return self._enter("land", t), []
+            case 20:  # MAV_CMD_NAV_RETURN_TO_LAUNCH
+                return self._enter("rtl", t), []
+            case 192:  # MAV_CMD_DO_REPOSITION
+                return self._reposition(c, t), []
+            case 300:  # MAV_CMD_MISSION_START
+                return self._mission_start(p[0], p[1], t), []
+            case 224:  # MAV_CMD_DO_SET_MISSION_CURRENT
+                ok = self.mission.set_current(command_int(p[0]))
+                return (ACCEPTED if ok else DENIED), self._set_current(command_int(p[0]))
+            case 178:  # MAV_CMD_DO_CHANGE_SPEED
+                return self._change_speed(p[1]), []
+            case 193:  # MAV_CMD_DO_PAUSE_CONTINUE
+                return self._pause(p[0], t), []
+        return self._message_command(c, t)
+
+    def _message_command(self, c: Command, t: float) -> tuple[int, list[Any]]:
+        """The commands about messages: their rates, one on request, the protocol
+        version."""
+        p = c.params
+        if c.command == 511:  # MAV_CMD_SET_MESSAGE_INTERVAL
+            result = self.streams.set_interval(command_int(p[0]), p[1], (p[2], p[3], p[6]))
+            if result == DENIED:  # ArduPilot says why (`GCS_Common.cpp`)
+                self.say(f"No ap_message for mavlink id ({command_int(p[0])})", 6)
+            return result, []
+        if c.command == 510:  # MAV_CMD_GET_MESSAGE_INTERVAL
+            result, interval = self.streams.get_interval(command_int(p[0]))
+            return result, ([] if interval is None else [
+                self.mav.message_interval_encode(command_int(p[0]) & 0xFFFF, interval)])
+        if c.command == 519:  # MAV_CMD_REQUEST_PROTOCOL_VERSION: PX4 only
+            if self.flavour == "px4":
+                return ACCEPTED, [ProtocolVersion()]
+            return UNSUPPORTED, []
         if c.command in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
             name = ("AUTOPILOT_VERSION" if c.command == 520
                     else MESSAGE_IDS.get(command_int(p[0])))
+            if name is not None and name.startswith(("EKF_", "ESTIMATOR_")):
+                name = name if self.streams.streamable(command_int(p[0])) else None
             if name is None:  # a message this autopilot does not send
                 return (DENIED if self.flavour == "px4" else FAILED), []
             return ACCEPTED, [self._message(name, t)]
@@ -123,6 +196,9 @@ class AutopilotCore(AutopilotState):
         skip_checks = forced and self.flavour == "ardupilot"
         if r.failed_motors or r.mode is Mode.CRASHED or (self.refuse_arm and not skip_checks):
             return self._refused()
+        if self.flavour == "ardupilot" and self.mode in _APM_NOT_ARMABLE and not skip_checks:
+            self.say("Arm: Mode not armable")  # `AP_Arming_Copter.cpp` mandatory_checks
+            return self._refused()
         self.armed, self.flew, self.took_off = True, False, False
         self._ground_since = None
         if self.mode == "takeoff" and self.takeoff_alt is not None:
@@ -131,55 +207,38 @@ class AutopilotCore(AutopilotState):
 
     def _set_mode_number(self, number: int, t: float) -> int:
         name = mode_name(self.flavour, number)
-        modes = ("guided", "hold", "land", "rtl") + (
-            ("takeoff",) if self.flavour == "px4" else ("brake",))
-        if name not in modes:
-            return self._refused()  # a mode this simulation does not fly
+        if name not in _MODES[self.flavour]:
+            return self._refused()  # a mode this simulation does not fly (RC, acro...)
         if name == "takeoff":
             return self._takeoff(Command(22, (0, 0, 0, math.nan, math.nan, math.nan,
                                               math.nan)), t)
         return self._enter(name, t)
 
-    def _enter(self, name: str, t: float) -> int:
-        r = self.robot
-        if name == "guided" and self.flavour == "px4" and t - self.last_setpoint > (
-                self.param("COM_OF_LOSS_T")):
-            return TEMPORARILY_REJECTED  # PX4: no OFFBOARD without a setpoint stream
-        if r.failed_motors or r.mode is Mode.CRASHED:
-            return self._refused()
-        self.mode = name
-        self.takeoff_alt = None
-        if name in ("land", "rtl"):
-            r.release(here=name == "land")
-        elif name in ("hold", "brake", "guided") and r.mode in (
-                Mode.TAKEOFF, Mode.FLYING, Mode.LANDING) and (
-                name != "guided" or self.flavour == "ardupilot"):
-            self._go(r.position)  # stop where it is (ArduPilot GUIDED: until told where)
-        return ACCEPTED
-
-    def _go(self, position: Vec3) -> bool:
-        self.target.position = position
-        self.target.velocity = (0.0, 0.0, 0.0)
-        return self.robot.fly(self.label, self.target)
-
-    def _climb(self, z: float) -> bool:
-        """Straight up to `z` (world frame), at least 0.5 m above the ground."""
-        x, y, _ = self.robot.position
-        self.took_off = True
-        return self._go((x, y, max(z, self.robot.home[2] + 0.5)))
-
     def _px4_takeoff_z(self, alt: float) -> float:
-        """PX4 Navigator's take-off altitude: param7 (m AMSL), or when NaN MIS_TAKEOFF_ALT
-        above where the craft is; never below where it is."""
+        """PX4 Navigator's take-off altitude (`navigator/takeoff.cpp`
+        set_takeoff_position): param7 (m AMSL) but never below MIS_TAKEOFF_ALT above home,
+        MIS_TAKEOFF_ALT above home when NaN, never below where the craft is; each case
+        said in a STATUSTEXT as PX4 says it."""
         here = self.robot.position[2]
-        z = alt - self.geo_origin[2] if math.isfinite(alt) else (
-            here + self.param("MIS_TAKEOFF_ALT"))
+        least = self.robot.home[2] + self.param("MIS_TAKEOFF_ALT")
+        said = f"Using minimum takeoff altitude: {self.param('MIS_TAKEOFF_ALT'):.2f} m"
+        if not math.isfinite(alt):
+            z = least
+            self.say(said, 6)  # info: the usual case, not a complaint
+        else:
+            z = alt - self.geo_origin[2]
+            if z < least - 0.1:  # PX4 does not complain under 10 cm
+                self.say(said, 2)
+            z = max(z, least)
+        if z < here:
+            self.say("Already higher than takeoff altitude", 2)
         return max(z, here)
 
     def _takeoff(self, c: Command, t: float) -> int:
         r, alt = self.robot, c.params[6]
         if r.failed_motors or r.mode is Mode.CRASHED:
             return self._refused()
+        self.legs = []  # a take-off replaces what the craft was flying
         if self.flavour == "px4":
             # Commander: a mode change to AUTO.TAKEOFF (disarmed, it waits for arming);
             # Navigator: the altitude as `_px4_takeoff_z`.
@@ -204,80 +263,153 @@ class AutopilotCore(AutopilotState):
             return UNSUPPORTED  # Commander: only with the change-mode flag, alone
         if self.flavour == "ardupilot" and self.mode != "guided" and not flags & 1:
             return DENIED
-        lat, lon, alt = p[4], p[5], p[6]
-        if not (math.isfinite(lat) and math.isfinite(lon)) or abs(lat) > 90 or abs(
-                lon) > 180:
+        goal = self._reposition_goal(c)
+        if goal is None:
             return DENIED
-        east, north, _ = geodetic_offset(self.geo_origin, (lat, lon, 0.0))
-        z = r.position[2]
-        if math.isfinite(alt):
-            relative = c.frame in (FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT)
-            z = r.home[2] + alt if relative else alt - self.geo_origin[2]
         result = self._enter("hold" if self.flavour == "px4" else "guided", t)
         if result != ACCEPTED:
             return result
         if r.mode in (Mode.TAKEOFF, Mode.FLYING, Mode.LANDING):
-            self._go((east, north, z))
+            self._start([Leg(goal, self.speeds(), hold=math.inf)])
         else:  # on the ground it stays there: both firmwares move a flying craft only
-            self.target.position = (east, north, z)
+            self.target.position = goal
+        return ACCEPTED
+
+    def _reposition_goal(self, c: Command) -> Vec3 | None:
+        """Where a DO_REPOSITION goes (world frame); None: bad coordinates. PX4 keeps the
+        craft's latitude and longitude when they are NaN (QGroundControl's "pause" and
+        "change altitude", `navigator_main.cpp`); ArduPilot refuses them, and 0, 0."""
+        lat, lon, alt = c.params[4], c.params[5], c.params[6]
+        r = self.robot
+        x, y, z = r.position
+        if self.flavour == "px4" and math.isnan(lat) and math.isnan(lon):
+            pass
+        elif not (math.isfinite(lat) and math.isfinite(lon)) or abs(lat) > 90 or abs(
+                lon) > 180 or (self.flavour == "ardupilot" and lat == 0 and lon == 0):
+            return None
+        else:
+            x, y, _ = geodetic_offset(self.geo_origin, (lat, lon, 0.0))
+        if math.isfinite(alt):
+            relative = c.frame in (FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT)
+            z = r.home[2] + alt if relative else alt - self.geo_origin[2]
+        return (x, y, z)
+
+    def _mission_start(self, first: float, last: float, t: float) -> int:
+        """MAV_CMD_MISSION_START: the mission mode (PX4 from item param1 if given;
+        ArduPilot armed only, and refuses first and last items, `GCS_Mavlink.cpp`
+        handle_command_mission_start)."""
+        if self.flavour == "ardupilot":
+            if first != 0 or last != 0:
+                return DENIED
+            if not self.armed:
+                return FAILED  # ArduCopter starts a mission armed only
+            return ACCEPTED if self._enter("auto", t) == ACCEPTED else FAILED
+        if math.isfinite(first) and first >= 0:
+            self.mission.set_current(int(first))
+        return self._enter("mission", t)
+
+    def _change_speed(self, speed: float) -> int:
+        """DO_CHANGE_SPEED param2 (m/s) for the legs of the present mode: PX4 in any mode
+        (-1: no change); ArduCopter in AUTO, GUIDED and RTL, a positive speed."""
+        if self.flavour == "ardupilot" and (self.mode not in ("auto", "guided", "rtl")
+                                            or not speed > 0):
+            return FAILED
+        if speed > 0 and math.isfinite(speed):
+            self.speed_xy = self.runner.speed = speed
+            self.legs = [Leg(leg.goal, self.speeds(), leg.radius, leg.hold, leg.seq)
+                         for leg in self.legs]
+            self._leg_started = False  # the present leg again, at the new speed
+        return ACCEPTED
+
+    def _pause(self, action: float, t: float) -> int:
+        """DO_PAUSE_CONTINUE: ArduCopter stops where it is in AUTO, GUIDED and RTL and
+        goes on with 1; PX4 has no such command (QGroundControl pauses it with a
+        DO_REPOSITION to where it is)."""
+        if self.flavour == "px4":
+            return UNSUPPORTED
+        if self.mode not in ("auto", "guided", "rtl") or self.robot.mode not in (
+                Mode.TAKEOFF, Mode.FLYING):
+            return FAILED
+        if action == 0:
+            if self.legs:
+                self._paused, self.legs = self.legs, []
+            self._go(self.robot.position)
+        elif action == 1:
+            self._start(self._paused or self.legs)
+            self._paused = []
+        else:
+            return DENIED
         return ACCEPTED
 
     def _setpoint(self, msg: Any, t: float) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED (LOCAL_NED; ArduPilot also LOCAL_OFFSET_NED,
+        BODY_NED and BODY_OFFSET_NED, relative to the craft) or _GLOBAL_INT (GLOBAL_INT,
+        GLOBAL_RELATIVE_ALT_INT), in OFFBOARD / GUIDED."""
         self.counters["setpoints"] += 1
         self.last_setpoint = t
         if self.mode != "guided" or not self.armed:
             return
-        hx, hy, hz = self.robot.home
-        mask = msg.type_mask
-        finite = all(map(math.isfinite, (msg.x, msg.y, msg.z)))
-        if not mask & 7 and finite:  # position used (a NaN one is ignored, not flown)
-            self.target.position = (hx + msg.y, hy + msg.x, hz - msg.z)
-        use_velocity = not mask & 56 and all(map(math.isfinite, (msg.vx, msg.vy, msg.vz)))
-        self.target.velocity = (msg.vy, msg.vx, -msg.vz) if use_velocity else (0.0, 0.0, 0.0)
+        position, velocity = self._setpoint_world(msg)
+        if position is not None:
+            self.legs = []  # a setpoint replaces a goto's leg
+            self.target.hold(position, self.target.velocity)
+        self.target.velocity = velocity
         r = self.robot
-        on_ground = r.mode is Mode.PARKED
-        if self.flavour == "ardupilot" and on_ground and not self.took_off:
+        if self.flavour == "ardupilot" and r.mode is Mode.PARKED and not self.took_off:
             return  # ArduCopter: a position target on the ground waits for NAV_TAKEOFF
         if r.flight is not self.target or r.mode not in (Mode.TAKEOFF, Mode.FLYING):
             r.fly(self.label, self.target)
 
-    # -- what happens with time ---------------------------------------------------------
-    def control(self, t: float) -> None:
-        """Mode logic that runs with time: PX4's offboard loss, the end of a take-off,
-        auto-disarm on the ground."""
-        r = self.robot
-        # Retried every tick while a failed craft refuses HOLD: logged once it is in.
-        if (self.flavour == "px4" and self.mode == "guided"
-                and t - self.last_setpoint > self.param("COM_OF_LOSS_T")
-                and self._enter("hold", t) == ACCEPTED):
-            log.warning("robot %d: setpoints stopped: OFFBOARD -> HOLD", r.robot_id)
-        if self.mode == "takeoff" and self.armed and r.mode is Mode.FLYING and abs(
-                r.position[2] - self.target.position[2]) < 0.2:
-            self.mode = "hold"
-        if not self.armed:
-            self._ground_since = None
-            return
-        if r.mode in (Mode.TAKEOFF, Mode.FLYING, Mode.LANDING):
-            self.flew = True
-            self._ground_since = None
-            return
-        if self._ground_since is None:
-            self._ground_since = t
-        delay = self._disarm_delay()
-        if delay is not None and t - self._ground_since >= delay:
-            self.armed, self.took_off, self.flew = False, False, False
-            log.info("robot %d: landed: disarmed", r.robot_id)
+    def _setpoint_world(self, msg: Any) -> tuple[Vec3 | None, Vec3]:
+        """A setpoint's position (None: not given, or in a frame not flown) and velocity
+        in the world frame (x east, y north, z up)."""
+        mask, frame, r = msg.type_mask, msg.coordinate_frame, self.robot
+        is_global = msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT"
+        finite = math.isfinite(msg.alt) if is_global else all(
+            map(math.isfinite, (msg.x, msg.y, msg.z)))
+        use_velocity = not mask & 56 and all(map(math.isfinite, (msg.vx, msg.vy, msg.vz)))
+        vn, ve, vd = (msg.vx, msg.vy, msg.vz) if use_velocity else (0.0, 0.0, 0.0)
+        velocity = (ve, vn, -vd)
+        if mask & 7 or not finite:  # position not used (a NaN one is ignored, not flown)
+            return None, velocity
+        if is_global:
+            if frame not in (5, 6):
+                return None, velocity  # the terrain frame: no terrain here
+            x, y, _ = geodetic_offset(self.geo_origin, (msg.lat_int / 1e7, msg.lon_int / 1e7,
+                                                        0.0))
+            z = r.home[2] + msg.alt if frame == 6 else msg.alt - self.geo_origin[2]
+            return (x, y, z), velocity
+        hx, hy, hz = r.home
+        if frame == 1:
+            return (hx + msg.y, hy + msg.x, hz - msg.z), velocity
+        if self.flavour == "px4" or frame not in (7, 8, 9):
+            return None, velocity  # PX4 flies positions in LOCAL_NED only
+        north, east = msg.x, msg.y
+        if frame in (8, 9):  # body frames: forward, right of the heading
+            yaw = self._euler()[2]
+            north = msg.x * math.cos(yaw) - msg.y * math.sin(yaw)
+            east = msg.x * math.sin(yaw) + msg.y * math.cos(yaw)
+        x, y, z = r.position
+        return (x + east, y + north, z - msg.z), velocity
 
-    def _disarm_delay(self) -> float | None:
-        """s on the ground before the firmware disarms by itself; None: it does not."""
-        if self.flavour == "px4":
-            # Commander: COM_DISARM_LAND after a landing, COM_DISARM_PRFLT if it never
-            # took off; zero or negative turns either off.
-            delay = self.param("COM_DISARM_LAND" if self.flew else "COM_DISARM_PRFLT")
-        elif self.robot.mode is Mode.CRASHED:
-            delay = 2.0  # ArduCopter's crash check disarms after 2 s
-        elif self.flew and self.mode in ("land", "rtl"):
-            return 0.0  # LAND (and RTL's final descent) disarm on touch-down
-        else:
-            delay = self.param("DISARM_DELAY")  # 0 turns it off
-        return delay if delay > 0 else None
+
+class ProtocolVersion(mavlink2.MAVLink_message):  # type: ignore[misc]
+    """PROTOCOL_VERSION (id 300), which pymavlink's dialects lack: PX4 answers
+    MAV_CMD_REQUEST_PROTOCOL_VERSION with MAVLink 2 (version 200, from 100 to 200;
+    `mavlink_main.cpp` send_protocol_version). Hashes zero: no git hashes here."""
+
+    CRC_EXTRA = 217
+    """From the message's fields, as MAVLink computes it (common.xml)."""
+
+    def __init__(self) -> None:
+        super().__init__(300, "PROTOCOL_VERSION")
+        self._fieldnames = ["version", "min_version", "max_version", "spec_version_hash",
+                            "library_version_hash"]
+        self.version, self.min_version, self.max_version = 200, 100, 200
+        self.spec_version_hash = self.library_version_hash = [0] * 8
+
+    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+        payload = struct.pack("<HHH8B8B", self.version, self.min_version, self.max_version,
+                              *self.spec_version_hash, *self.library_version_hash)
+        packed: bytes = self._pack(mav, self.CRC_EXTRA, payload, force_mavlink1=force_mavlink1)
+        return packed

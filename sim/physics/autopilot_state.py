@@ -1,8 +1,10 @@
 """The simulated autopilot's state and what it says on its own (`sim.physics.autopilot`
-has the whole picture): its parameters, status, telemetry streams, the answers to the
-parameter protocol and to the (empty) mission list. `AutopilotState` is the base of
-`sim.physics.autopilot_core.AutopilotCore`, which adds what it does when told (commands,
-modes, setpoints) and with time; this module knows nothing of that one.
+has the whole picture): its parameters, status, telemetry streams (at the rates of
+`autopilot_rates.Streams`), the answers to the parameter protocol, and its mission
+(`autopilot_mission.MissionStore`). `AutopilotState` is the base of
+`sim.physics.autopilot_flight.AutopilotFlight` (what it does with time) and
+`sim.physics.autopilot_core.AutopilotCore` (what it does when told); this module knows
+nothing of those.
 """
 
 from __future__ import annotations
@@ -14,6 +16,10 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from sim.physics.autopilot_mission import Item, MissionRunner, MissionStore
+from sim.physics.autopilot_nav import PathTarget
+from sim.physics.autopilot_params import SR0_GROUPS, default_params
+from sim.physics.autopilot_rates import Streams
 from sim.physics.mavlink_defs import (
     ALL_SENSORS,
     ARMED,
@@ -24,10 +30,12 @@ from sim.physics.mavlink_defs import (
     FRAME_GLOBAL,
     GEO_ORIGIN,
     GUIDED,
+    INT8,
+    INT16,
+    INT32,
     MANUAL_INPUT,
     MOTORS,
     PREARM,
-    RATES,
     REAL32,
     STABILIZE,
     STATE_ACTIVE,
@@ -37,35 +45,21 @@ from sim.physics.mavlink_defs import (
     TEMPORARILY_REJECTED,
     VERSION,
     Param,
-    default_params,
     geodetic,
 )
 from sim.physics.point import PointRobot
 from sim.physics.robot import Mode, QuadRobot
 from swarmd.core.roles import Health
-from swarmd.functions import Setpoint, Vec3
+from swarmd.functions import Vec3
 from swarmd.link.mavlink_modes import Flavour, custom_mode
 
 _LANDED_STATE = {Mode.PARKED: 1, Mode.CRASHED: 1, Mode.FLYING: 2, Mode.TAKEOFF: 3,
                  Mode.LANDING: 4}
 """MAV_LANDED_STATE of each flight mode of the craft (EXTENDED_SYS_STATE)."""
 _EKF_FLAGS = 1 | 2 | 4 | 8 | 16 | 32 | 256 | 512
+_LIMIT = {INT8: 128, INT16: 32768, INT32: 2 ** 31}
+"""The range of each integer parameter type: a value set beyond it is clamped."""
 """EKF_STATUS_REPORT / ESTIMATOR_STATUS flags: attitude, velocities and positions good."""
-
-
-class _Target:
-    """The craft's setpoint in the world frame (a `Flight` for `QuadRobot.fly`)."""
-
-    def __init__(self, position: Vec3) -> None:
-        self.position = position
-        self.velocity: Vec3 = (0.0, 0.0, 0.0)
-
-    def setpoint(self, t: float, position: Vec3) -> Setpoint:
-        return Setpoint(self.position, self.velocity)
-
-    @property
-    def target(self) -> Vec3:
-        return self.position
 
 
 class AutopilotState:
@@ -79,9 +73,11 @@ class AutopilotState:
         self.sysid = sysid
         self.mav = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=1)
         self.geo_origin = geo_origin or GEO_ORIGIN[flavour]
-        self.params = default_params(flavour, sysid)
+        self.streams = Streams(flavour)
+        self.params = default_params(flavour, sysid, self.streams.sr0_params())
         self.armed = False
-        self.mode = "hold"
+        self.mode = "hold" if flavour == "px4" else "stabilize"
+        """What each firmware boots in without RC: PX4 Hold, ArduCopter Stabilize."""
         self.refuse_arm = False
         self.forced = Health.OK
         """`set_health`: a fault the simulator injects (DEGRADED: CRITICAL, else EMERGENCY)."""
@@ -95,8 +91,11 @@ class AutopilotState:
         self.takeoff_alt: float | None = None
         """PX4: param7 (m AMSL, or NaN) of a take-off accepted while disarmed."""
         self.last_setpoint = -math.inf
-        self.target = _Target(robot.position)
-        self._due: dict[str, float] = {}
+        self.target = PathTarget(robot.position, lambda: robot.t)
+        self.mission = MissionStore(flavour, self.mav, self._home_item)
+        self.runner = MissionRunner(self.mission)
+        self.outbox: list[Any] = []
+        """Messages sent with the next telemetry (events: STATUSTEXT, mission progress)."""
         self._reported: tuple[int, int] | None = None
         self._ground_since: float | None = None
         self.boot = time.monotonic()
@@ -160,7 +159,7 @@ class AutopilotState:
             base = CUSTOM | AUTO | GUIDED | STABILIZE
         else:
             base = CUSTOM | STABILIZE | MANUAL_INPUT
-            if self.mode in ("guided", "hold", "brake", "rtl"):
+            if self.mode in ("guided", "hold", "brake", "rtl", "auto"):
                 base |= GUIDED
         return base | (ARMED if self.armed else 0)
 
@@ -169,23 +168,23 @@ class AutopilotState:
                                          self.base_mode(), custom_mode(self.flavour, self.mode),
                                          self.system_status())
 
-    def telemetry(self, t: float, force: bool = False) -> list[Any]:
-        """Messages due at robot time `t`."""
-        out: list[Any] = []
+    def telemetry(self, t: float) -> list[Any]:
+        """The events since last time, then the messages due at robot time `t`."""
+        out, self.outbox = self.outbox, []
         status = (self.system_status(), self.sensors_health())
         changed = status != self._reported
         self._reported = status
-        for name, hz in RATES.items():
-            due = self._due.get(name, 0.0)
-            if t < due and not (changed and name in ("HEARTBEAT", "SYS_STATUS")):
-                continue
-            self._due[name] = max(due + 1.0 / hz, t)
-            out.append(self._message(name, t))
-        return out
+        now = ("HEARTBEAT", "SYS_STATUS") if changed else ()
+        return out + [self._message(name, t) for name in self.streams.due(t, now)]
+
+    def say(self, text: str, severity: int = 4) -> None:
+        """A STATUSTEXT (severity 4 WARNING, 2 CRITICAL, 6 INFO) with the next messages,
+        as both firmwares explain a refusal or an event to the ground station."""
+        self.outbox.append(self.mav.statustext_encode(severity, text.encode()[:50]))
 
     def _message(self, name: str, t: float) -> Any:
-        """The message `name` (a key of RATES or MESSAGE_IDS, or AUTOPILOT_VERSION) at
-        robot time `t`."""
+        """The message `name` (a streamed one, one of MESSAGE_IDS, or AUTOPILOT_VERSION)
+        at robot time `t`."""
         mav = self.mav
         match name:
             case "HEARTBEAT":
@@ -209,6 +208,10 @@ class AutopilotState:
                 return mav.extended_sys_state_encode(0, _LANDED_STATE[self.robot.mode])
             case "HOME_POSITION" | "GPS_GLOBAL_ORIGIN":
                 return self._home_message(name)
+            case "MISSION_CURRENT":
+                return self.mission_current()
+            case "VFR_HUD":
+                return self._vfr_hud()
             case "AUTOPILOT_VERSION":
                 return mav.autopilot_version_encode(
                     CAPABILITIES[self.flavour], VERSION[self.flavour], 0, 0, 0, [0] * 8,
@@ -291,22 +294,47 @@ class AutopilotState:
                     return []
                 name = names[msg.param_index]
             return [self._param_value(name)] if name in self.params else []
-        if kind == "PARAM_SET" and name in self.params:
-            p = self.params[name]
-            if math.isfinite(msg.param_value):
-                p.value = self._unwire(msg.param_value, p.kind)
-            return [self._param_value(name)]
-        return []  # an unknown name: neither firmware answers
+        if kind != "PARAM_SET":
+            return []
+        if name not in self.params:  # PX4 says so (`mavlink_parameters.cpp`); ArduPilot not
+            if self.flavour == "px4":
+                self.say(f"[pm] unknown param: {name}", 6)
+            return []
+        p = self.params[name]
+        if math.isfinite(msg.param_value):
+            value = self._unwire(msg.param_value, p.kind)
+            p.value = value if p.kind == REAL32 else float(max(-_LIMIT[p.kind], min(
+                _LIMIT[p.kind] - 1, value)))
+            if name in SR0_GROUPS:  # ArduPilot: the group's stream rate
+                self.streams.set_group(SR0_GROUPS[name], p.value)
+        return [self._param_value(name)]
 
-    def _mission_count(self, mission_type: int) -> int:
-        # ArduPilot's mission always holds home as item 0; PX4's empty mission is empty.
-        return 1 if self.flavour == "ardupilot" and mission_type == 0 else 0
+    def set_stream_group(self, stream_id: int, hz: float) -> None:
+        """ArduPilot's REQUEST_DATA_STREAM: the group's rate and its SR0_ parameter."""
+        for name in self.streams.set_group(stream_id, hz):
+            self.params[name].value = float(round(self.streams.sr0_params()[name]))
 
-    def _mission_item(self, msg: Any, src: int, comp: int) -> list[Any]:
-        if msg.seq >= self._mission_count(msg.mission_type):
-            # MAV_MISSION_INVALID_SEQUENCE
-            return [self.mav.mission_ack_encode(src, comp, 13, msg.mission_type)]
+    # -- the mission as it is reported -------------------------------------------------
+    def _home_item(self) -> Item:
+        """ArduPilot's mission item 0: home, a NAV_WAYPOINT in the global frame."""
         lat, lon, alt = self.home_geo()
-        return [self.mav.mission_item_int_encode(src, comp, 0, FRAME_GLOBAL, 16, 0, 1, 0, 0, 0,
-                                                 0, round(lat * 1e7), round(lon * 1e7), alt,
-                                                 msg.mission_type)]
+        return Item(FRAME_GLOBAL, 16, 1, (0.0, 0.0, 0.0, 0.0), round(lat * 1e7),
+                    round(lon * 1e7), alt)
+
+    def mission_current(self) -> Any:
+        """MISSION_CURRENT: the current item, the count (without ArduPilot's home), the
+        mission's state and whether the autopilot is in its mission mode."""
+        m = self.mission
+        total = len(m.listed()) - m.first
+        state = 1 if total <= 0 else self.runner.state
+        in_mission = self.mode in ("mission", "auto")
+        return self.mav.mission_current_encode(min(m.current, max(total - 1 + m.first, 0)),
+                                               max(total, 0), state, 1 if in_mission else 2)
+
+    def _vfr_hud(self) -> Any:
+        (vn, ve, vd) = self.local_ned()[1]
+        heading = round(math.degrees(self._euler()[2])) % 360
+        z = self.robot.position[2]
+        throttle = 0 if self.robot.mode in (Mode.PARKED, Mode.CRASHED) else 50
+        return self.mav.vfr_hud_encode(math.hypot(vn, ve), math.hypot(vn, ve), heading,
+                                       throttle, self.geo_origin[2] + z, -vd)

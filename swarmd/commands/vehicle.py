@@ -36,7 +36,9 @@ def register(sim_app: typer.Typer) -> None:
 
         A ground station, MAVSDK, pymavlink or a swarmd daemon connects to it over
         loopback UDP; the connection URLs are printed at start. It answers what PX4 or
-        ArduPilot answer for the messages and commands in docs/mavlink.md.
+        ArduPilot answer for the messages and commands in docs/mavlink.md: arming, modes,
+        take-off, goto, return and landing, missions (upload, download, flown with
+        progress), the parameters ground stations read, and message rates.
 
         Exit codes: 0 stopped by Ctrl-C or SIGTERM, 1 the port cannot be opened, 2 bad
         input or the simulation extra missing.
