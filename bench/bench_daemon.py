@@ -18,10 +18,13 @@ both see the same machine load), then prints the median of each tree and their r
 tree's own code makes its keys and runs its daemons (`--tree PATH` measures another
 checkout). `--profile FILE` runs robot 1 under cProfile, CPU time, from READY until it
 is told to stop, writes the stats to FILE and prints the top entries per frame.
+`--floor` also measures a bare asyncio process that wakes for every frame on the group
+and at 10 Hz and does nothing else (bench/bare_listener.py): the part of robot 1's CPU
+that no change to swarmd's code removes, at the machine's current load.
 
     python bench/bench_daemon.py [--duration 10] [--alone | --failover]
                                  [--auth per-robot|shared|none]
-                                 [--compare REV [--runs 3]] [--profile FILE]
+                                 [--compare REV [--runs 3]] [--profile FILE] [--floor]
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILER = Path(__file__).resolve().parent / "profile_daemon.py"
+BARE = Path(__file__).resolve().parent / "bare_listener.py"
 
 AUTH = {"per-robot": "auth: {mode: per-robot, keys_dir: keys}",
         "shared": "auth: {mode: shared, key_file: swarm.key}", "none": "auth: none"}
@@ -109,12 +113,15 @@ def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
 
         others = [] if args.alone else [launch(r) for r in (2, 3, 4, 5, 6)]
         proc = launch(1)
+        group = importlib.import_module("swarmd.transport.addresses").DEFAULT_GROUP
+        bare = subprocess.Popen([sys.executable, str(BARE), group, str(port)],
+                                stdout=subprocess.PIPE, text=True) if args.floor else None
         try:
-            return _measure_running(args, proc, others)
+            return _measure_running(args, proc, others, bare)
         finally:
-            for p in (proc, *others):
+            for p in (proc, *others, *([bare] if bare else [])):
                 p.send_signal(signal.SIGTERM)
-            for p in (proc, *others):
+            for p in (proc, *others, *([bare] if bare else [])):
                 try:
                     p.wait(timeout=10)
                 except subprocess.TimeoutExpired:
@@ -122,10 +129,14 @@ def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
 
 
 def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
-                     others: list[subprocess.Popen[str]]) -> dict[str, Any] | None:
-    """Wait for robot 1's READY, then measure it (and robot 6, the standby)."""
+                     others: list[subprocess.Popen[str]],
+                     bare: subprocess.Popen[str] | None) -> dict[str, Any] | None:
+    """Wait for robot 1's READY, then measure it (and robot 6, the standby, and the bare
+    listener with `--floor`)."""
     assert proc.stdout is not None
     standby = others[-1] if others else None
+    if bare is not None and (bare.stdout is None or bare.stdout.readline() != "ready\n"):
+        raise SystemExit("bench/bare_listener.py did not start")
     for line in proc.stdout:
         if json.loads(line)["msg"] == "ready":
             break
@@ -138,13 +149,17 @@ def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
         threading.Thread(target=out.read, daemon=True).start()
     t0, c0 = time.monotonic(), cpu_seconds(proc.pid)
     s0 = cpu_seconds(standby.pid) if standby is not None else 0.0
+    b0 = cpu_seconds(bare.pid) if bare is not None else 0.0
     if args.failover:
         others[0].kill()  # robot 2: a crash, nothing said
     time.sleep(args.duration)
     t1, c1 = time.monotonic(), cpu_seconds(proc.pid)
     s1 = cpu_seconds(standby.pid) if standby is not None else 0.0
+    b1 = cpu_seconds(bare.pid) if bare is not None else 0.0
     return {"cpu_percent": round(100.0 * (c1 - c0) / (t1 - t0), 3),
             "standby_cpu_percent": round(100.0 * (s1 - s0) / (t1 - t0), 3),
+            **({"floor_cpu_percent": round(100.0 * (b1 - b0) / (t1 - t0), 3)}
+               if bare is not None else {}),
             "rss_mb": round(status_kb(proc.pid, "VmRSS") / 1024, 1),
             "peak_rss_mb": round(status_kb(proc.pid, "VmHWM") / 1024, 1),
             "seconds": round(t1 - t0, 2), "auth": args.auth}
@@ -161,6 +176,9 @@ def report(args: argparse.Namespace, r: dict[str, Any]) -> int:
     if args.failover:
         print(f"daemon of robot 6, the standby taking f2 over: CPU "
               f"{r['standby_cpu_percent']:.2f}% of one core")
+    if "floor_cpu_percent" in r:
+        print(f"bare asyncio listener on the same group (the floor): CPU "
+              f"{r['floor_cpu_percent']:.2f}% of one core")
     print(json.dumps(r))
     return 0 if r["cpu_percent"] < 1.0 and r["peak_rss_mb"] < 60 else 2
 
@@ -169,7 +187,8 @@ def child_args(args: argparse.Namespace, tree: Path) -> list[str]:
     """This script's command line measuring `tree` once, as `args` asks."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--tree", str(tree),
            "--duration", str(args.duration), "--auth", args.auth]
-    return cmd + ["--alone"] * args.alone + ["--failover"] * args.failover
+    return cmd + ["--alone"] * args.alone + ["--failover"] * args.failover + \
+        ["--floor"] * args.floor
 
 
 def compare(args: argparse.Namespace) -> int:
@@ -200,8 +219,9 @@ def _alternate(args: argparse.Namespace,
                 raise SystemExit(f"{name}: measurement failed:\n{out.stdout}{out.stderr}")
             r = json.loads(lines[-1])
             results[name].append(r)
+            floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
             print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}%, standby "
-                  f"{r['standby_cpu_percent']:.2f}%, RSS {r['rss_mb']:.1f} MB, load "
+                  f"{r['standby_cpu_percent']:.2f}%{floor}, RSS {r['rss_mb']:.1f} MB, load "
                   f"{os.getloadavg()[0]:.2f}", flush=True)
     return results
 
@@ -212,8 +232,9 @@ def _print_comparison(args: argparse.Namespace,
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     summary: dict[str, Any] = {"compare": rev, "runs": args.runs, "auth": args.auth,
                                "duration": args.duration}
-    for key, label in (("cpu_percent", "robot 1 CPU %"),
-                       ("standby_cpu_percent", "standby CPU %"), ("rss_mb", "RSS MB")):
+    keys = [("cpu_percent", "robot 1 CPU %"), ("standby_cpu_percent", "standby CPU %"),
+            ("rss_mb", "RSS MB")] + [("floor_cpu_percent", "floor CPU %")] * args.floor
+    for key, label in keys:
         a = statistics.median(r[key] for r in old)
         b = statistics.median(r[key] for r in new)
         ratio = b / a if a else float("nan")
@@ -239,6 +260,9 @@ def main() -> int:
                     help="measurements of each tree with --compare (default 3)")
     ap.add_argument("--tree", type=Path, default=ROOT,
                     help="the checkout whose daemons are measured (default this one)")
+    ap.add_argument("--floor", action="store_true",
+                    help="also measure a bare asyncio listener on the same group "
+                         "(bench/bare_listener.py): what waking up costs at this load")
     ap.add_argument("--profile", metavar="FILE",
                     help="run robot 1 under cProfile (CPU time, READY to stop); stats to FILE")
     args = ap.parse_args()
