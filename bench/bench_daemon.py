@@ -288,13 +288,13 @@ def print_profile(path: str, top: int = 25) -> None:
 
     stats = pstats.Stats(path)
     raw: Any = stats.stats  # type: ignore[attr-defined]
-    calls = {func[2]: value[1] for func, value in raw.items()
-             if "transport/udp.py" in func[0]}
-    frames = calls.get("_received", 0) + calls.get("send", 0)
+    # Frames in: the runtime's receive callback; out: the transport's send (both trees).
+    calls = {(Path(func[0]).name, func[2]): value[1] for func, value in raw.items()}
+    n_in, n_out = calls.get(("runtime.py", "_on_frame"), 0), calls.get(("udp.py", "send"), 0)
+    frames = n_in + n_out
     total: float = stats.total_tt  # type: ignore[attr-defined]
-    print(f"profile of robot 1: {calls.get('_received', 0)} frames in, "
-          f"{calls.get('send', 0)} out, {total:.3f} s CPU under the profiler "
-          f"({1e6 * total / max(1, frames):.0f} us per frame)")
+    print(f"profile of robot 1: {n_in} frames in, {n_out} out, {total:.3f} s CPU under "
+          f"the profiler ({1e6 * total / max(1, frames):.0f} us per frame)")
     rows = sorted(raw.items(), key=lambda kv: kv[1][3], reverse=True)[:top]
     print(f"{'cumulative us/frame':>20} {'own us/frame':>13} {'calls':>7}  function")
     for (file, line, name), (_, ncalls, tt, ct, _) in rows:
