@@ -233,12 +233,18 @@ def _print_comparison(args: argparse.Namespace,
     summary: dict[str, Any] = {"compare": rev, "runs": args.runs, "auth": args.auth,
                                "duration": args.duration}
     keys = [("cpu_percent", "robot 1 CPU %"), ("standby_cpu_percent", "standby CPU %"),
-            ("rss_mb", "RSS MB")] + [("floor_cpu_percent", "floor CPU %")] * args.floor
+            ("rss_mb", "RSS MB")]
+    if args.floor:
+        # What swarmd's own code costs: each run's robot 1 less the floor beside it.
+        for r in (*old, *new):
+            r["above_floor_percent"] = round(r["cpu_percent"] - r["floor_cpu_percent"], 3)
+        keys += [("floor_cpu_percent", "floor CPU %"),
+                 ("above_floor_percent", "robot 1 - floor")]
     for key, label in keys:
         a = statistics.median(r[key] for r in old)
         b = statistics.median(r[key] for r in new)
         ratio = b / a if a else float("nan")
-        print(f"{label:>14}: {rev} median {a:.3f}, this tree median {b:.3f}, "
+        print(f"{label:>15}: {rev} median {a:.3f}, this tree median {b:.3f}, "
               f"ratio {ratio:.2f}")
         summary[key] = {"rev": a, "this": b, "ratio": round(ratio, 3)}
     print(json.dumps(summary))
