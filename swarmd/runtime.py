@@ -15,14 +15,14 @@ keep their period under load; the runtime's only job is to call `tick()` on time
 
 Receive path. A flood of frames must not delay our own heartbeats (a late heartbeat is a
 false suspicion at the neighbours). A frame that arrives with nothing queued before it,
-no timer due and fewer than `batch` frames fed this way since the last tick or drain goes
-straight to the node from the transport's callback: the common case of an idle robot,
-which so costs one turn of the event loop per frame, not two. Any other frame is
-appended to a bounded deque (drop-oldest, counted as `queue_overflow`: under a flood the
-newest frames are the ones worth reading) and a drain is scheduled. The drain feeds the
-node at most `batch` frames, then yields to the loop with `call_soon`, so a due timer
-runs after at most one batch (~1 ms) however long the queue is. Frames reach the node in
-the order they arrived either way.
+no timer due and fewer than `batch` frames fed this way since the last tick goes straight
+to the node from the transport's callback: the common case of an idle robot (a few frames
+a period), which so costs one turn of the event loop per frame, not two. Any other frame
+(under a flood, all but those few) is appended to a bounded deque (drop-oldest, counted
+as `queue_overflow`: under a flood the newest frames are the ones worth reading) and a
+drain is scheduled. The drain feeds the node at most `batch` frames, then yields to the
+loop with `call_soon`, so a due timer runs after at most one batch (~1 ms) however long
+the queue is. Frames reach the node in the order they arrived either way.
 
 Nothing raised by the transport, the link, the event sink or even the node propagates:
 it is logged, counted in `counters`, and the daemon goes on (common rule: bad input never
@@ -155,8 +155,8 @@ class Runtime:
         self._queue_size = queue_size
         self._drain_scheduled = False
         self._fed = 0
-        """Frames fed to the node from the transport's callback since the last tick or
-        drain (module docstring, "Receive path")."""
+        """Frames fed to the node from the transport's callback since the last tick
+        (module docstring, "Receive path")."""
         self._timer: asyncio.TimerHandle | None = None
         self._armed_at: float | None = None
         self._watchdog: asyncio.TimerHandle | None = None
@@ -480,7 +480,6 @@ class Runtime:
 
     def _drain(self) -> None:
         self._drain_scheduled = False
-        self._fed = 0
         if not self._running:
             return
         queue, loop = self._queue, self.loop
