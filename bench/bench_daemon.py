@@ -195,8 +195,12 @@ def compare(args: argparse.Namespace) -> int:
     """`--compare REV`: REV and this tree alternately, `args.runs` times each."""
     with tempfile.TemporaryDirectory(prefix="bench-daemon-") as tmp:
         other = Path(tmp) / "rev"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--quiet",
-                        str(other), args.compare], check=True)
+        made = subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach",
+                               "--quiet", str(other), args.compare],
+                              capture_output=True, text=True)
+        if made.returncode != 0:
+            raise SystemExit(f"cannot check out {args.compare!r} beside this tree: "
+                             f"{made.stderr.strip()}")
         try:
             results = _alternate(args, {args.compare: other, "this tree": ROOT})
         finally:
