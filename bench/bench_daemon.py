@@ -11,43 +11,58 @@ or `none`. `--failover` kills robot 2 (SIGKILL) as the measurement starts and me
 robot 1 (a watcher of f2: it suspects, warns, sees the takeover) and robot 6 (the standby
 that claims and takes f2 over) through the failover and after it.
 
+`--compare REV` keeps a gain measurable: it checks REV out into a temporary `git
+worktree` and measures it and this tree alternately (`--runs` times each, in one run, so
+both see the same machine load), then prints the median of each tree and their ratio
+(this tree / REV) for robot 1's CPU, the standby's and RSS, with the load average. Each
+tree's own code makes its keys and runs its daemons (`--tree PATH` measures another
+checkout). `--profile FILE` runs robot 1 under cProfile, CPU time, from READY until it
+is told to stop, writes the stats to FILE and prints the top entries per frame.
+`--floor` also measures a bare asyncio process that wakes for every frame on the group
+and at 10 Hz and does nothing else (bench/bare_listener.py): the part of robot 1's CPU
+that no change to swarmd's code removes, at the machine's current load.
+
     python bench/bench_daemon.py [--duration 10] [--alone | --failover]
                                  [--auth per-robot|shared|none]
+                                 [--compare REV [--runs 3]] [--profile FILE] [--floor]
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from swarmd.identity import private_key_path, write_identity  # noqa: E402
-from swarmd.keys import generate_key  # noqa: E402
+PROFILER = Path(__file__).resolve().parent / "profile_daemon.py"
+BARE = Path(__file__).resolve().parent / "bare_listener.py"
 
 AUTH = {"per-robot": "auth: {mode: per-robot, keys_dir: keys}",
         "shared": "auth: {mode: shared, key_file: swarm.key}", "none": "auth: none"}
 
 
-def swarm_file(tmp: Path, auth: str) -> Path:
-    """configs/paper.yaml in `tmp`, signed as `auth` says, with its keys made there."""
-    text = (ROOT / "configs" / "paper.yaml").read_text()
+def swarm_file(root: Path, tmp: Path, auth: str) -> Path:
+    """`root`'s configs/paper.yaml in `tmp`, signed as `auth` says, with its keys made
+    there by `root`'s own code (a tree compared with another makes keys its way)."""
+    text = (root / "configs" / "paper.yaml").read_text()
     lines = [AUTH[auth] if line.startswith("auth:") else line for line in text.splitlines()]
     if auth == "per-robot":
+        identity: Any = importlib.import_module("swarmd.identity")
         for robot in range(1, 7):
-            write_identity(tmp / "keys", robot)
+            identity.write_identity(tmp / "keys", robot)
     elif auth == "shared":
-        generate_key(tmp / "swarm.key")
+        importlib.import_module("swarmd.keys").generate_key(tmp / "swarm.key")
     path = tmp / "paper.yaml"
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -66,21 +81,23 @@ def status_kb(pid: int, key: str) -> int:
     raise KeyError(key)
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=10.0, help="seconds measured")
-    ap.add_argument("--alone", action="store_true", help="robot 1 without its swarm")
-    ap.add_argument("--failover", action="store_true",
-                    help="kill robot 2 as the measurement starts; measure robots 1 and 6")
-    ap.add_argument("--auth", choices=sorted(AUTH), default="per-robot",
-                    help="how the swarm signs (default per-robot)")
-    args = ap.parse_args()
+def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+        port: int = s.getsockname()[1]
+    return port
+
+
+def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
+    """Run the swarm of `root` (robot 1 alone with `--alone`) and measure robot 1 and
+    the standby (robot 6) for `args.duration` s after READY; None if robot 1 never
+    became ready."""
+    port = free_port()
     env = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
+    env["PYTHONPATH"] = str(root)
     with tempfile.TemporaryDirectory() as tmp:
-        swarm = swarm_file(Path(tmp), args.auth)
+        swarm = swarm_file(root, Path(tmp), args.auth)
+        private_key_path: Any = importlib.import_module("swarmd.identity").private_key_path
 
         def launch(robot: int) -> subprocess.Popen[str]:
             cfg = Path(tmp) / f"robot{robot}.yaml"
@@ -89,58 +106,211 @@ def main() -> int:
             cfg.write_text(f"robot: {robot}\nswarm: {swarm}\n"
                            f"transport: {{kind: udp, port: {port}}}\n"
                            f"state_dir: {tmp}/state{robot}\n" + identity)
-            return subprocess.Popen([sys.executable, "-m", "swarmd.cli", "start", "--config",
-                                     str(cfg)], stdout=subprocess.PIPE, text=True, env=env,
-                                    cwd=ROOT)
+            how = [str(PROFILER), args.profile] if robot == 1 and args.profile \
+                else ["-m", "swarmd.cli"]
+            return subprocess.Popen([sys.executable, *how, "start", "--config", str(cfg)],
+                                    stdout=subprocess.PIPE, text=True, env=env, cwd=root)
 
         others = [] if args.alone else [launch(r) for r in (2, 3, 4, 5, 6)]
-        standby = None if args.alone else others[-1]
         proc = launch(1)
-        assert proc.stdout is not None
+        group = importlib.import_module("swarmd.transport.addresses").DEFAULT_GROUP
+        bare = subprocess.Popen([sys.executable, str(BARE), group, str(port)],
+                                stdout=subprocess.PIPE, text=True) if args.floor else None
         try:
-            for line in proc.stdout:
-                if json.loads(line)["msg"] == "ready":
-                    break
-            else:
-                print("daemon exited before READY", file=sys.stderr)
-                return 1
-            # Keep reading stdout so no pipe ever fills (the daemons log their events).
-            for p in (proc, *others):
-                out = p.stdout
-                assert out is not None
-                threading.Thread(target=out.read, daemon=True).start()
-            t0, c0 = time.monotonic(), cpu_seconds(proc.pid)
-            s0 = cpu_seconds(standby.pid) if standby is not None else 0.0
-            if args.failover:
-                others[0].kill()  # robot 2: a crash, nothing said
-            time.sleep(args.duration)
-            t1, c1 = time.monotonic(), cpu_seconds(proc.pid)
-            s1 = cpu_seconds(standby.pid) if standby is not None else 0.0
-            rss = status_kb(proc.pid, "VmRSS") / 1024
-            hwm = status_kb(proc.pid, "VmHWM") / 1024
+            return _measure_running(args, proc, others, bare)
         finally:
-            for p in (proc, *others):
+            for p in (proc, *others, *([bare] if bare else [])):
                 p.send_signal(signal.SIGTERM)
-            for p in (proc, *others):
+            for p in (proc, *others, *([bare] if bare else [])):
                 try:
                     p.wait(timeout=10)
                 except subprocess.TimeoutExpired:
                     p.kill()
-    cpu = 100.0 * (c1 - c0) / (t1 - t0)
+
+
+def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
+                     others: list[subprocess.Popen[str]],
+                     bare: subprocess.Popen[str] | None) -> dict[str, Any] | None:
+    """Wait for robot 1's READY, then measure it (and robot 6, the standby, and the bare
+    listener with `--floor`)."""
+    assert proc.stdout is not None
+    standby = others[-1] if others else None
+    if bare is not None and (bare.stdout is None or bare.stdout.readline() != "ready\n"):
+        raise SystemExit("bench/bare_listener.py did not start")
+    for line in proc.stdout:
+        if json.loads(line)["msg"] == "ready":
+            break
+    else:
+        return None
+    # Keep reading stdout so no pipe ever fills (the daemons log their events).
+    for p in (proc, *others):
+        out = p.stdout
+        assert out is not None
+        threading.Thread(target=out.read, daemon=True).start()
+    t0, c0 = time.monotonic(), cpu_seconds(proc.pid)
+    s0 = cpu_seconds(standby.pid) if standby is not None else 0.0
+    b0 = cpu_seconds(bare.pid) if bare is not None else 0.0
+    if args.failover:
+        others[0].kill()  # robot 2: a crash, nothing said
+    time.sleep(args.duration)
+    t1, c1 = time.monotonic(), cpu_seconds(proc.pid)
+    s1 = cpu_seconds(standby.pid) if standby is not None else 0.0
+    b1 = cpu_seconds(bare.pid) if bare is not None else 0.0
+    return {"cpu_percent": round(100.0 * (c1 - c0) / (t1 - t0), 3),
+            "standby_cpu_percent": round(100.0 * (s1 - s0) / (t1 - t0), 3),
+            **({"floor_cpu_percent": round(100.0 * (b1 - b0) / (t1 - t0), 3)}
+               if bare is not None else {}),
+            "rss_mb": round(status_kb(proc.pid, "VmRSS") / 1024, 1),
+            "peak_rss_mb": round(status_kb(proc.pid, "VmHWM") / 1024, 1),
+            "seconds": round(t1 - t0, 2), "auth": args.auth}
+
+
+def report(args: argparse.Namespace, r: dict[str, Any]) -> int:
+    """Print one measurement; the exit code says whether it met the goals."""
     what = ("alone (warning at 10 Hz)" if args.alone else "in the paper swarm") + \
         (", robot 2 crashing as the measurement starts" if args.failover else "") + \
         f", auth {args.auth}"
-    print(f"daemon of robot 1 {what}, 10 Hz heartbeats, {t1 - t0:.1f} s: "
-          f"CPU {cpu:.2f}% of one core (goal < 1%), RSS {rss:.1f} MB, "
-          f"peak RSS {hwm:.1f} MB (goal < 60 MB)")
-    standby_cpu = 100.0 * (s1 - s0) / (t1 - t0)
+    print(f"daemon of robot 1 {what}, 10 Hz heartbeats, {r['seconds']:.1f} s: "
+          f"CPU {r['cpu_percent']:.2f}% of one core (goal < 1%), RSS {r['rss_mb']:.1f} MB, "
+          f"peak RSS {r['peak_rss_mb']:.1f} MB (goal < 60 MB)")
     if args.failover:
-        print(f"daemon of robot 6, the standby taking f2 over: CPU {standby_cpu:.2f}% of one core")
-    print(json.dumps({"cpu_percent": round(cpu, 3), "standby_cpu_percent": round(standby_cpu, 3),
-                      "rss_mb": round(rss, 1),
-                      "peak_rss_mb": round(hwm, 1), "seconds": round(t1 - t0, 2),
-                      "auth": args.auth}))
-    return 0 if cpu < 1.0 and hwm < 60 else 2
+        print(f"daemon of robot 6, the standby taking f2 over: CPU "
+              f"{r['standby_cpu_percent']:.2f}% of one core")
+    if "floor_cpu_percent" in r:
+        print(f"bare asyncio listener on the same group (the floor): CPU "
+              f"{r['floor_cpu_percent']:.2f}% of one core")
+    print(json.dumps(r))
+    return 0 if r["cpu_percent"] < 1.0 and r["peak_rss_mb"] < 60 else 2
+
+
+def child_args(args: argparse.Namespace, tree: Path) -> list[str]:
+    """This script's command line measuring `tree` once, as `args` asks."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--tree", str(tree),
+           "--duration", str(args.duration), "--auth", args.auth]
+    return cmd + ["--alone"] * args.alone + ["--failover"] * args.failover + \
+        ["--floor"] * args.floor
+
+
+def compare(args: argparse.Namespace) -> int:
+    """`--compare REV`: REV and this tree alternately, `args.runs` times each."""
+    with tempfile.TemporaryDirectory(prefix="bench-daemon-") as tmp:
+        other = Path(tmp) / "rev"
+        made = subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach",
+                               "--quiet", str(other), args.compare],
+                              capture_output=True, text=True)
+        if made.returncode != 0:
+            raise SystemExit(f"cannot check out {args.compare!r} beside this tree: "
+                             f"{made.stderr.strip()}")
+        try:
+            results = _alternate(args, {args.compare: other, "this tree": ROOT})
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                            str(other)], check=False)
+    return _print_comparison(args, results)
+
+
+def _alternate(args: argparse.Namespace,
+               trees: dict[str, Path]) -> dict[str, list[dict[str, Any]]]:
+    """Each tree measured `args.runs` times, taking turns."""
+    results: dict[str, list[dict[str, Any]]] = {name: [] for name in trees}
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}",
+          flush=True)
+    for i in range(args.runs):
+        for name, tree in trees.items():
+            out = subprocess.run(child_args(args, tree), capture_output=True, text=True)
+            lines = out.stdout.strip().splitlines()
+            if not lines or not lines[-1].startswith("{"):
+                raise SystemExit(f"{name}: measurement failed:\n{out.stdout}{out.stderr}")
+            r = json.loads(lines[-1])
+            results[name].append(r)
+            floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
+            print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}%, standby "
+                  f"{r['standby_cpu_percent']:.2f}%{floor}, RSS {r['rss_mb']:.1f} MB, load "
+                  f"{os.getloadavg()[0]:.2f}", flush=True)
+    return results
+
+
+def _print_comparison(args: argparse.Namespace,
+                      results: dict[str, list[dict[str, Any]]]) -> int:
+    (rev, old), (_, new) = results.items()
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    summary: dict[str, Any] = {"compare": rev, "runs": args.runs, "auth": args.auth,
+                               "duration": args.duration}
+    keys = [("cpu_percent", "robot 1 CPU %"), ("standby_cpu_percent", "standby CPU %"),
+            ("rss_mb", "RSS MB")]
+    if args.floor:
+        # What swarmd's own code costs: each run's robot 1 less the floor beside it.
+        for r in (*old, *new):
+            r["above_floor_percent"] = round(r["cpu_percent"] - r["floor_cpu_percent"], 3)
+        keys += [("floor_cpu_percent", "floor CPU %"),
+                 ("above_floor_percent", "robot 1 - floor")]
+    for key, label in keys:
+        a = statistics.median(r[key] for r in old)
+        b = statistics.median(r[key] for r in new)
+        ratio = b / a if a else float("nan")
+        print(f"{label:>15}: {rev} median {a:.3f}, this tree median {b:.3f}, "
+              f"ratio {ratio:.2f}")
+        summary[key] = {"rev": a, "this": b, "ratio": round(ratio, 3)}
+    print(json.dumps(summary))
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=10.0, help="seconds measured")
+    ap.add_argument("--alone", action="store_true", help="robot 1 without its swarm")
+    ap.add_argument("--failover", action="store_true",
+                    help="kill robot 2 as the measurement starts; measure robots 1 and 6")
+    ap.add_argument("--auth", choices=sorted(AUTH), default="per-robot",
+                    help="how the swarm signs (default per-robot)")
+    ap.add_argument("--compare", metavar="REV",
+                    help="measure git revision REV and this tree alternately; print the "
+                         "ratio of medians")
+    ap.add_argument("--runs", type=int, default=3,
+                    help="measurements of each tree with --compare (default 3)")
+    ap.add_argument("--tree", type=Path, default=ROOT,
+                    help="the checkout whose daemons are measured (default this one)")
+    ap.add_argument("--floor", action="store_true",
+                    help="also measure a bare asyncio listener on the same group "
+                         "(bench/bare_listener.py): what waking up costs at this load")
+    ap.add_argument("--profile", metavar="FILE",
+                    help="run robot 1 under cProfile (CPU time, READY to stop); stats to FILE")
+    args = ap.parse_args()
+    if args.compare:
+        if args.runs < 1:
+            ap.error("--runs must be at least 1")
+        return compare(args)
+    root = args.tree.resolve()
+    sys.path.insert(0, str(root))
+    r = measure(args, root)
+    if r is None:
+        print("daemon exited before READY", file=sys.stderr)
+        return 1
+    code = report(args, r)
+    if args.profile:
+        print_profile(args.profile)
+    return code
+
+
+def print_profile(path: str, top: int = 25) -> None:
+    """The top entries of robot 1's profile, in microseconds per frame (in and out)."""
+    import pstats
+
+    stats = pstats.Stats(path)
+    raw: Any = stats.stats  # type: ignore[attr-defined]
+    # Frames in: the runtime's receive callback; out: the transport's send (both trees).
+    calls = {(Path(func[0]).name, func[2]): value[1] for func, value in raw.items()}
+    n_in, n_out = calls.get(("runtime.py", "_on_frame"), 0), calls.get(("udp.py", "send"), 0)
+    frames = n_in + n_out
+    total: float = stats.total_tt  # type: ignore[attr-defined]
+    print(f"profile of robot 1: {n_in} frames in, {n_out} out, {total:.3f} s CPU under "
+          f"the profiler ({1e6 * total / max(1, frames):.0f} us per frame)")
+    rows = sorted(raw.items(), key=lambda kv: kv[1][3], reverse=True)[:top]
+    print(f"{'cumulative us/frame':>20} {'own us/frame':>13} {'calls':>7}  function")
+    for (file, line, name), (_, ncalls, tt, ct, _) in rows:
+        where = f"{Path(file).name}:{line}({name})" if line else name
+        print(f"{1e6 * ct / max(1, frames):>20.1f} {1e6 * tt / max(1, frames):>13.1f} "
+              f"{ncalls:>7}  {where}")
 
 
 if __name__ == "__main__":

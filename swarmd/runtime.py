@@ -14,11 +14,15 @@ schedules its heartbeats from the previous deadline, not from "now + period", so
 keep their period under load; the runtime's only job is to call `tick()` on time.
 
 Receive path. A flood of frames must not delay our own heartbeats (a late heartbeat is a
-false suspicion at the neighbours). The transport's callback only appends the frame to a
-bounded deque (drop-oldest, counted as `queue_overflow`: under a flood the newest frames
-are the ones worth reading) and schedules a drain. The drain feeds the node at most
-`batch` frames, then yields to the loop with `call_soon`, so a due timer runs after at
-most one batch (~1 ms) however long the queue is.
+false suspicion at the neighbours). A frame that arrives with nothing queued before it,
+no timer due and fewer than `batch` frames fed this way since the last tick goes straight
+to the node from the transport's callback: the common case of an idle robot (a few frames
+a period), which so costs one turn of the event loop per frame, not two. Any other frame
+(under a flood, all but those few) is appended to a bounded deque (drop-oldest, counted
+as `queue_overflow`: under a flood the newest frames are the ones worth reading) and a
+drain is scheduled. The drain feeds the node at most `batch` frames, then yields to the
+loop with `call_soon`, so a due timer runs after at most one batch (~1 ms) however long
+the queue is. Frames reach the node in the order they arrived either way.
 
 Nothing raised by the transport, the link, the event sink or even the node propagates:
 it is logged, counted in `counters`, and the daemon goes on (common rule: bad input never
@@ -150,6 +154,9 @@ class Runtime:
         self._queue: deque[bytes] = deque()
         self._queue_size = queue_size
         self._drain_scheduled = False
+        self._fed = 0
+        """Frames fed to the node from the transport's callback since the last tick
+        (module docstring, "Receive path")."""
         self._timer: asyncio.TimerHandle | None = None
         self._armed_at: float | None = None
         self._watchdog: asyncio.TimerHandle | None = None
@@ -396,6 +403,7 @@ class Runtime:
             if self.metrics is not None:
                 self.metrics.heartbeat_lateness(lateness)
         self._counters["ticks"] += 1
+        self._fed = 0
         if now - self._drop_reported_at >= self.drop_report_interval:
             self._drop_reported_at = now
             self._report_drops()
@@ -433,16 +441,33 @@ class Runtime:
         self._counters["received"] += 1
         if self.metrics is not None:
             self.metrics.frame_received()
-        if self.receive_filter is not None:
-            try:
-                keep = self.receive_filter(data, self.loop.time())
-            except Exception:
-                self._counters["filter_errors"] += 1
-                log.exception("receive filter raised; frame kept")
-                keep = True
-            if not keep:
-                self._counters["filtered"] += 1
-                return
+        now = self.loop.time()
+        if self.receive_filter is not None and not self._keep(data, now):
+            return
+        armed = self._armed_at
+        if self._queue or self._drain_scheduled or self._fed >= self.batch \
+                or (armed is not None and now >= armed):
+            self._enqueue(data)
+            return
+        self._fed += 1
+        self._feed(data, now)
+        self._rearm()
+
+    def _keep(self, data: bytes, now: float) -> bool:
+        """The receive filter's verdict (a filter that raises keeps the frame)."""
+        assert self.receive_filter is not None
+        try:
+            keep = self.receive_filter(data, now)
+        except Exception:
+            self._counters["filter_errors"] += 1
+            log.exception("receive filter raised; frame kept")
+            keep = True
+        if not keep:
+            self._counters["filtered"] += 1
+        return keep
+
+    def _enqueue(self, data: bytes) -> None:
+        """Queue a frame for `_drain` (module docstring, "Receive path")."""
         if len(self._queue) >= self._queue_size:
             self._queue.popleft()
             self._counters[RuntimeDrop.QUEUE_OVERFLOW] += 1
@@ -457,26 +482,29 @@ class Runtime:
         self._drain_scheduled = False
         if not self._running:
             return
-        node, queue, loop = self._node, self._queue, self.loop
-        drops = node.drops
+        queue, loop = self._queue, self.loop
         for _ in range(min(self.batch, len(queue))):
-            data = queue.popleft()
-            own = drops[DropReason.OWN]
-            try:
-                actions = node.receive(data, loop.time())
-            except Exception:
-                self._counters["node_errors"] += 1
-                log.exception("core node raised on a frame (a bug); frame dropped")
-                continue
-            if drops[DropReason.OWN] != own and hash(bytes(data)) not in self._sent_digests:
-                self._duplicate_id()
-            if actions:
-                self._execute(actions)
+            self._feed(queue.popleft(), loop.time())
         self._rearm()
         if queue and not self._drain_scheduled:
             # Yield: timers due meanwhile (our heartbeat) run before the next batch.
             self._drain_scheduled = True
             loop.call_soon(self._drain)
+
+    def _feed(self, data: bytes, now: float) -> None:
+        """One frame to the node, its actions executed (the caller re-arms the timer)."""
+        drops = self._node.drops
+        own = drops[DropReason.OWN]
+        try:
+            actions = self._node.receive(data, now)
+        except Exception:
+            self._counters["node_errors"] += 1
+            log.exception("core node raised on a frame (a bug); frame dropped")
+            return
+        if drops[DropReason.OWN] != own and hash(bytes(data)) not in self._sent_digests:
+            self._duplicate_id()
+        if actions:
+            self._execute(actions)
 
     def _duplicate_id(self) -> None:
         """A valid frame with our id that we did not send (module docstring)."""

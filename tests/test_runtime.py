@@ -178,6 +178,34 @@ async def test_runtime_queue_drops_oldest_and_counts(tmp_path: Path, udp_port: i
         await rt.stop(handover=False)
 
 
+async def test_runtime_feeds_an_idle_robots_frame_at_once_and_queues_the_rest(
+        tmp_path: Path, udp_port: int) -> None:
+    """With nothing queued and no timer due, a frame goes from the transport's callback
+    straight to the node (one turn of the loop per frame); after `batch` such frames, and
+    behind any frame queued, frames wait for the drain, in order."""
+    cfg = robot_cfg(tmp_path, 1, udp_port)
+    loop = asyncio.get_running_loop()
+    node = Node(1, cfg.swarm.to_plan(), cfg.swarm.params(), loop.time())
+    transport = MemoryTransport()
+    rt = Runtime(node, transport, NoneLink(), batch=2)
+    await rt.start()
+    try:
+        await wait_until(lambda: bool(transport.sent), 2.0, "the first heartbeat")
+        deadline = rt.next_deadline()
+        while deadline is not None and loop.time() >= deadline:
+            await asyncio.sleep(0)  # let the due tick run first
+            deadline = rt.next_deadline()
+        assert transport.on_frame is not None
+        for i in range(4):  # no await: the loop does not turn meanwhile
+            transport.on_frame(b"garbage %d" % i)
+        assert node.drops["malformed"] == 2  # fed at once, up to the batch
+        assert rt.stats()["queue"] == 2  # the rest wait for the drain
+        await wait_until(lambda: rt.stats()["queue"] == 0, 2.0, "drain")
+        assert node.drops["malformed"] == 4 and rt.stats()["received"] == 4
+    finally:
+        await rt.stop(handover=False)
+
+
 class ExplodingLink(NoneLink):
     def assign(self, function: str, epoch: int, params: Mapping[str, Any]) -> None:
         raise RuntimeError("robot on fire")

@@ -61,8 +61,14 @@ _SEED_DOMAIN = b"swarmd heartbeat chain v1"
 def step(robot: int, link: bytes) -> bytes:
     """The link before `link` in `robot`'s chain (its hash, personalised per robot so a
     table built for one robot's chains is no use on another's)."""
-    return hashlib.blake2b(link, digest_size=LINK_LEN,
-                           person=b"swarmd-hb" + robot.to_bytes(2, "big")).digest()
+    person = _PERSON.get(robot)
+    if person is None:  # robot ids are 16 bits: the table stays small
+        person = _PERSON[robot] = b"swarmd-hb" + robot.to_bytes(2, "big")
+    return hashlib.blake2b(link, digest_size=LINK_LEN, person=person).digest()
+
+
+_PERSON: dict[int, bytes] = {}
+"""robot -> its BLAKE2b personalisation, built once (`step` runs for every link heard)."""
 
 
 def resync_after(params: Params) -> float:

@@ -248,7 +248,8 @@ def _body(msg: Message) -> bytes:
 
 
 def tag(key: bytes, data: bytes) -> bytes:
-    return hmac.new(key, data, hashlib.sha256).digest()[:TAG_LEN]
+    # The one-shot C HMAC: every frame of a keyed swarm is tagged or checked here.
+    return hmac.digest(key, data, hashlib.sha256)[:TAG_LEN]
 
 
 def encode(frame: Frame, key: bytes | None = None, signer: Signer | None = None) -> bytes:
@@ -296,10 +297,9 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     version = first >> 4
     if version != VERSION:
         raise CodecError("version", f"version {version}, this node speaks {VERSION}")
-    try:
-        mtype = MsgType(first & _TYPE_MASK)
-    except ValueError:
-        raise CodecError("malformed", f"unknown message type {first & _TYPE_MASK}") from None
+    mtype = _TYPES[first & _TYPE_MASK]  # a table look-up, not an enum construction
+    if mtype is None:
+        raise CodecError("malformed", f"unknown message type {first & _TYPE_MASK}")
     signed = bool(first & _SIGNED)
     slot_at = HEADER_LEN + _SLOT_AT[mtype]
     got_slot = _read_slot(data, slot_at)

@@ -143,7 +143,7 @@ class UdpTransport:
                                        "interface": self.interface})
 
     def _read_ready(self) -> None:
-        sock = self._sock
+        sock, on_frame, counters = self._sock, self._on_frame, self.counters
         if sock is None:
             return
         for _ in range(READ_BATCH):
@@ -154,7 +154,9 @@ class UdpTransport:
             except OSError as exc:  # e.g. ICMP errors reported on the socket
                 self._error("receive", exc)
                 return
-            self._received(data)
+            counters["received"] += 1
+            if on_frame is not None:
+                on_frame(data)
 
     def send(self, frame: bytes) -> None:
         """Broadcast one frame to the group; errors are counted and reported, never raised."""
@@ -179,11 +181,6 @@ class UdpTransport:
     def _fail_send(self, reason: str, **fields: Any) -> None:
         self.counters["send_errors"] += 1
         self._events.send_error(reason, **fields)
-
-    def _received(self, data: bytes) -> None:
-        self.counters["received"] += 1
-        if self._on_frame is not None:
-            self._on_frame(data)
 
     def _error(self, where: str, exc: Exception) -> None:
         # ICMP errors and the like arrive here; they never stop the socket, so count
