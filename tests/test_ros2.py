@@ -28,7 +28,7 @@ from sim.shared.faults import parse_fault
 from swarmd.config import load_swarm
 from swarmd.core.records import Holder, Snapshot
 from swarmd.core.roles import Health, Role
-from swarmd.link.ros2 import HealthFold
+from swarmd.link.ros2_health import HealthFold
 from swarmd.link.ros2_status import ERROR, OK, STALE, WARN, SwarmStatus
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,20 +39,21 @@ PAPER = ROOT / "configs" / "paper.yaml"
 def test_the_worst_fresh_level_of_the_robots_own_statuses_decides() -> None:
     fold = HealthFold((), "robot2", timeout=2.0)
     assert fold.level(0.0) == STALE  # nothing heard: a fault
-    assert fold.hear("robot2/battery", "robot2", OK, 0.0)
-    assert not fold.hear("robot3/battery", "robot3", ERROR, 0.0)  # another robot's
-    assert not fold.hear("swarmd/paper/f2", "robot2", ERROR, 0.0)  # the swarm's view
-    assert fold.hear("robot2/motors", "robot2", WARN, 0.5)
+    stack = "/swarmd/paper/robot2/stack"
+    assert fold.hear(stack, "robot2/battery", "robot2", OK, 0.0)
+    assert not fold.hear(stack, "robot3/battery", "robot3", ERROR, 0.0)  # another robot's
+    assert not fold.hear(stack, "swarmd/paper/f2", "robot2", ERROR, 0.0)  # the swarm's view
+    assert fold.hear(stack, "robot2/motors", "robot2", WARN, 0.5)
     assert fold.level(1.0) == WARN
-    assert fold.hear("robot2/motors", "robot2", OK, 1.0)
+    assert fold.hear(stack, "robot2/motors", "robot2", OK, 1.0)
     assert fold.level(1.5) == OK
     assert fold.level(3.5) == STALE  # no status within the timeout
 
 
 def test_health_names_select_statuses_whatever_their_hardware_id() -> None:
     fold = HealthFold(("flight",), "robot2", timeout=1.0)
-    assert not fold.hear("battery", "robot2", ERROR, 0.0)
-    assert fold.hear("flight", "px4", ERROR, 0.0)
+    assert not fold.hear("/r2/px4", "battery", "robot2", ERROR, 0.0)
+    assert fold.hear("/r2/px4", "flight", "px4", ERROR, 0.0)
     assert fold.level(0.5) == ERROR
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -198,10 +199,17 @@ class DomainLease:
 
     FIRST, LAST = 1, 100
 
-    def __init__(self) -> None:
+    def __init__(self, domain_id: int | None = None) -> None:
+        """Lease a free id; or, given `domain_id`, use that one (the user's: nothing is
+        leased, and other runs in it hear this one, as the user asked)."""
         import random
         import socket
 
+        self._sock: socket.socket | None = None
+        self.leased = domain_id is None
+        if domain_id is not None:
+            self.domain_id = domain_id
+            return
         ids = list(range(self.FIRST, self.LAST + 1))
         random.shuffle(ids)
         for domain in ids:
@@ -212,7 +220,7 @@ class DomainLease:
                 sock.close()
                 continue
             self.domain_id = domain
-            self._sock: socket.socket | None = sock
+            self._sock = sock
             return
         raise RuntimeError(f"no free ROS 2 domain id in {self.FIRST}..{self.LAST}")
 
@@ -226,8 +234,24 @@ class DomainLease:
         # faulty before any fault. DDS discovery has no bound on a loaded machine. Here
         # the stack never falls silent on its own (its faults are explicit: ERROR, or
         # the whole process), so a long timeout costs nothing.
-        return {"kind": "ros2", "domain_id": self.domain_id, "namespace": f"robot{robot}",
+        return {"kind": "ros2", "domain_id": self.domain_id,
                 "health_timeout": SIM_HEALTH_TIMEOUT}
+
+    @classmethod
+    def for_run(cls) -> DomainLease:
+        """$ROS_DOMAIN_ID when it is set (the user watches that domain), else a leased
+        one; `SimOptions` already refused a value that is not a domain id."""
+        env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        return cls(int(env)) if env else cls()
+
+    def announce(self) -> str:
+        """The line that tells the user where the swarm is and how to watch it."""
+        how = "from ROS_DOMAIN_ID" if not self.leased else \
+            "leased for this run: set ROS_DOMAIN_ID to choose one"
+        return (f"ROS 2 domain {self.domain_id} ({how}); watch the swarm with "
+                f"`ROS_DOMAIN_ID={self.domain_id} ros2 topic echo /diagnostics` or "
+                f"`ROS_DOMAIN_ID={self.domain_id} ros2 run rqt_robot_monitor "
+                f"rqt_robot_monitor`")
 
     def release(self) -> None:
         """Give the id back; idempotent."""
