@@ -188,7 +188,7 @@ class Listener:
                     ("swarmd/goal_pose", PoseStamped, lambda m: (
                         m.header.frame_id, m.pose.position.x, m.pose.position.y,
                         m.pose.position.z))):
-                name = f"/robot{robot}/{topic}"
+                name = f"/swarmd/paper/robot{robot}/{topic}"
                 got = self.late.setdefault(name, [])
                 node.create_subscription(kind, name, lambda m, g=got, r=read: g.append(r(m)),
                                          latched_qos())
@@ -279,9 +279,9 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     # bound of 1 s failed at 1.4 s with the suite running twice over on two cores.
     assert -0.01 <= delay < duration - takeover["t"], delay
     # A late subscriber gets the current assignment (transient-local).
-    assert listener.late["/robot6/swarmd/function"][:1] == ["f2"]
-    assert listener.late["/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
-    assert listener.late["/robot1/swarmd/function"][:1] == ["f1"]
+    assert listener.late["/swarmd/paper/robot6/swarmd/function"][:1] == ["f2"]
+    assert listener.late["/swarmd/paper/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
+    assert listener.late["/swarmd/paper/robot1/swarmd/function"][:1] == ["f1"]
     # The swarm on /diagnostics: f2's holder goes 2 -> 6, as robots 1, 3 and 6 show it.
     for publisher in ("robot1", "robot3", "robot6"):
         assert listener.holders("f2", publisher) == ["2", "6"], publisher

@@ -2,11 +2,12 @@
 ros2 link and robot stacks written from the docs alone (tests/fixtures/ros2_stack.py),
 each in its own process, on a ROS domain leased for the test.
 
-The swarm is small (three actives in a ring, one standby for all three: the paper's
-rules with the fewest processes): start order, several swarms in one domain, who may
-fault a robot, a daemon killed and restarted, a stack restarted, and `swarmd sim --link
-ros2` in the user's domain. Each test waits for what it checks with a bound, never for
-a fixed time it then asserts on. Skipped only without rclpy (the `ros2` extra).
+The swarm is small (`swarms.ring_text`: three actives in a ring, one standby for all
+three: the paper's rules with the fewest processes): start order, several swarms in one
+domain, who may fault a robot, a daemon killed and restarted, a stack restarted, and
+`swarmd sim --link ros2` in the user's domain. Each test waits for what it checks with
+a bound, never for a fixed time it then asserts on. Skipped only without rclpy (the
+`ros2` extra).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import Any
 
 import pytest
 import yaml
+from swarms import ring_text
 
 pytest.importorskip("rclpy", reason="needs the ros2 extra: pip install 'swarmd[ros2]'")
 
@@ -32,23 +34,6 @@ GROUP = "239.255.77.9"
 FUNCTIONS = {1: "f1", 2: "f2", 3: "f3"}
 
 pytestmark = pytest.mark.slow
-
-
-def swarm_text(name: str) -> str:
-    return f"""\
-swarm: {{id: 77, name: {name}}}
-timing: {{preset: udp}}
-auth: none
-functions:
-  f1: {{kind: slot, position: [2.0, 0.0, 1.5]}}
-  f2: {{kind: slot, position: [0.0, 2.0, 1.5]}}
-  f3: {{kind: slot, position: [-2.0, 0.0, 1.5]}}
-robots:
-  - {{id: 1, state: active, function: f1, neighbors: [2, 3]}}
-  - {{id: 2, state: active, function: f2, neighbors: [1, 3]}}
-  - {{id: 3, state: active, function: f3, neighbors: [1, 2]}}
-  - {{id: 4, state: standby, subs: [1, 2, 3]}}
-"""
 
 
 def wait_until(check: Callable[[], bool], timeout: float, what: str) -> None:
@@ -70,7 +55,7 @@ class Field:
         (self.dir / "record").mkdir(parents=True)
         (self.dir / "control").mkdir()
         swarm = self.dir / "swarm.yaml"
-        swarm.write_text(swarm_text(name))
+        swarm.write_text(ring_text(name))
         self.files: dict[int, Path] = {}
         for r in (1, 2, 3, 4):
             doc = {"robot": r, "swarm": str(swarm),
