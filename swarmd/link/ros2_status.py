@@ -120,16 +120,21 @@ class SwarmStatus:
             out.append(Status(level, self.prefix + f, message, self.hardware_id,
                               (("holder", str(holder)), ("epoch", str(epoch)),
                                ("role", role))))
+        out.append(self._own(snap, role, stack))
+        return out
+
+    def _own(self, snap: Snapshot, role: str, stack: tuple[int, str] | None) -> Status:
+        """The publisher's own status: its role, function and health (and, when the link
+        knows its robot does not execute, why)."""
         level = LEVEL_OF_HEALTH.get(snap.health, ERROR)
         message = f"{role} {snap.function or ''}".strip()
         if stack is not None:
             level, message = max(level, stack[0]), f"{message}: {stack[1]}"
-        out.append(Status(
+        return Status(
             level, f"{self.prefix}{self.hardware_id}", message, self.hardware_id,
             (("role", role), ("function", snap.function or ""), ("epoch", str(snap.epoch)),
              ("health", snap.health.name.lower()), ("frames_in", str(snap.frames_in)),
-             ("frames_out", str(snap.frames_out)))))
-        return out
+             ("frames_out", str(snap.frames_out))))
 
 
 def to_message(statuses: list[Status], stamp: Any) -> Any:
