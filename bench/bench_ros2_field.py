@@ -128,7 +128,9 @@ def one_run(case: str) -> float:
     swarm = Swarm(Path(tempfile.mkdtemp(prefix=f"swarmd-bench-ros2-{case}-")))
     try:
         swarm.start()
-        swarm.wait(lambda: all(swarm.flying_since(r, f"f{r}") for r in range(1, 5)), 90)
+        # f2's holder and its standby as planned: a loaded machine may have moved
+        # another slot at the start (f4 to robot 5), which this does not measure.
+        swarm.wait(lambda: all(swarm.flying_since(r, f"f{r}") for r in (1, 2, 3)), 90)
         time.sleep(2.0)  # past every start-up transient
         t0 = fail(swarm, case)
         t1 = swarm.wait(lambda: swarm.flying_since(6, "f2"), 30)

@@ -5,9 +5,9 @@ each in its own process, on a ROS domain leased for the test.
 The swarm is small (`swarms.ring_text`: three actives in a ring, one standby for all
 three: the paper's rules with the fewest processes): start order, several swarms in one
 domain, who may fault a robot, a daemon killed and restarted, a stack restarted, and
-`swarmd sim --link ros2` in the user's domain. Each test waits for what it checks with
-a bound, never for a fixed time it then asserts on. Skipped only without rclpy (the
-`ros2` extra).
+`swarmd sim --link ros2` in the user's domain. Each test waits for what must happen
+with a bound; what must not happen (a robot leaving) is checked after a wait longer
+than the health timeout it would need. Skipped only without rclpy (the `ros2` extra).
 """
 
 from __future__ import annotations

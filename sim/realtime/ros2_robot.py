@@ -5,7 +5,7 @@ user's robot would be: it publishes its health as a DiagnosticStatus (hardware_i
 `robot<id>`) on /diagnostics twice a second, and flies the goal pose it gets on the goal
 topic (slot functions), holds on the function topic's empty name and does the release
 action. It knows nothing of swarmd but those topics; each robot's topics live under its
-own namespace `robot<id>` in the run's own ROS domain.
+own namespace (the link's default, `/swarmd/<swarm>/robot<id>`) in the run's ROS domain.
 
 `SimRos2Link` is what the robot process hands the daemon: the daemon's real `Ros2Link`,
 the stack beside it (its own rclpy context and executor thread) and, with physics, the
@@ -125,7 +125,8 @@ class RobotStack:
 
     def _on_release(self, msg: Any) -> None:
         self._record("release", action=str(msg.data))
-        self._to_loop(self.stop_flying, str(msg.data))
+        if msg.data:  # "": an assign cleared it (docs/ros2.md), nothing to stop
+            self._to_loop(self.stop_flying, str(msg.data))
 
     def stop(self) -> None:
         self.ros.stop()
@@ -226,14 +227,12 @@ class DomainLease:
 
     def link_doc(self, robot: int) -> dict[str, Any]:
         """The robot file's link section for `robot` in this run."""
-        # health_timeout also bounds the link's start-up grace: no health heard that long
-        # after its start, and the robot is reported faulty. The simulated stack starts
-        # with the daemon, in its process, and its DDS participant and the link's found
-        # each other only after more than the default 2 s when tests ran in parallel on
-        # two cores, and after more than 6 s with two suites at once: robots left as
-        # faulty before any fault. DDS discovery has no bound on a loaded machine. Here
-        # the stack never falls silent on its own (its faults are explicit: ERROR, or
-        # the whole process), so a long timeout costs nothing.
+        # The link no longer counts health_timeout before the stack's first status (it
+        # waits for it: DDS discovery between the stack and the link took over 6 s with
+        # two suites at once on two cores). Once heard, the simulated stack never falls
+        # silent on its own (its faults are explicit: ERROR, or the whole process), so
+        # a long timeout costs nothing and keeps a starved executor thread on a loaded
+        # machine from looking like a dead stack.
         return {"kind": "ros2", "domain_id": self.domain_id,
                 "health_timeout": SIM_HEALTH_TIMEOUT}
 
