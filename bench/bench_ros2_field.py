@@ -124,14 +124,17 @@ def fail(swarm: Swarm, case: str) -> float:
     return t0
 
 
-def one_run(case: str) -> float:
+def one_run(case: str) -> float | None:
+    """The delay, or None when the start left robot 6 no standby of f2 to measure."""
     swarm = Swarm(Path(tempfile.mkdtemp(prefix=f"swarmd-bench-ros2-{case}-")))
     try:
         swarm.start()
-        # f2's holder and its standby as planned: a loaded machine may have moved
-        # another slot at the start (f4 to robot 5), which this does not measure.
-        swarm.wait(lambda: all(swarm.flying_since(r, f"f{r}") for r in (1, 2, 3)), 90)
+        swarm.wait(lambda: swarm.flying_since(2, "f2"), 90)
         time.sleep(2.0)  # past every start-up transient
+        if any(e["kind"] == "flying" and e["function"] for e in swarm.record(6)):
+            # A loaded machine started a daemon late and robot 6 took a slot over in
+            # the first second (start-up grace, docs/operations.md): not this figure.
+            return None
         t0 = fail(swarm, case)
         t1 = swarm.wait(lambda: swarm.flying_since(6, "f2"), 30)
         return float(t1) - t0
@@ -145,10 +148,21 @@ def main() -> int:
     ap.add_argument("--cases", default="error,silence,daemon")
     args = ap.parse_args()
     for case in args.cases.split(","):
-        delays = [one_run(case) for _ in range(args.runs)]
+        delays: list[float] = []
+        discarded = 0
+        while len(delays) < args.runs and discarded < 2 * args.runs:
+            got = one_run(case)
+            if got is None:
+                discarded += 1
+            else:
+                delays.append(got)
+        if not delays:
+            print(f"{case:8s}: no run measured ({discarded} discarded)", flush=True)
+            continue
         print(f"{case:8s}: robot 6's stack has f2 {statistics.median(delays):.3f} s after "
               f"robot 2 failed (median of {len(delays)}: "
-              f"{', '.join(f'{d:.3f}' for d in delays)})", flush=True)
+              f"{', '.join(f'{d:.3f}' for d in delays)}; {discarded} runs discarded)",
+              flush=True)
     return 0
 
 
