@@ -82,6 +82,11 @@ class Swarm:
         return [json.loads(x) for x in path.read_text().splitlines()] if path.exists() \
             else []
 
+    def took_f2(self) -> bool:
+        """Robot 6's daemon took f2 over (its event log)."""
+        path = self.dir / "events6.jsonl"
+        return path.exists() and '"takeover","function":"f2"' in path.read_text()
+
     def flying_since(self, robot: int, function: str) -> float | None:
         for e in self.record(robot):
             if e["kind"] == "flying" and e["function"] == function:
@@ -129,7 +134,9 @@ def one_run(case: str) -> float | None:
     swarm = Swarm(Path(tempfile.mkdtemp(prefix=f"swarmd-bench-ros2-{case}-")))
     try:
         swarm.start()
-        swarm.wait(lambda: swarm.flying_since(2, "f2"), 90)
+        if swarm.wait(lambda: "ok" if swarm.flying_since(2, "f2") else
+                      "lost" if swarm.took_f2() else None, 90) == "lost":
+            return None  # robot 2 lost f2 at the start (below)
         time.sleep(2.0)  # past every start-up transient
         if any(e["kind"] == "flying" and e["function"] for e in swarm.record(6)):
             # A loaded machine started a daemon late and robot 6 took a slot over in

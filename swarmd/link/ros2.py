@@ -33,7 +33,7 @@ from typing import Any
 
 from swarmd.core.records import Snapshot
 from swarmd.core.roles import Health
-from swarmd.link.base import HealthCallback
+from swarmd.link.base import CountedLog, HealthCallback
 from swarmd.link.ros2_assignment import LEASE_PERIODS, Assignment
 from swarmd.link.ros2_health import HealthFold, Publishers, StackState, StackWatch, node_fqn
 from swarmd.link.ros2_node import RosThread
@@ -89,6 +89,8 @@ class Ros2Link:
         self._on_health: HealthCallback | None = None
         self._reported: int | None = None
         self._gids: dict[bytes, str] = {}
+        self._foreign_log = CountedLog(log, f"statuses of {cfg.hardware_id} ignored "
+                                            "(docs/ros2.md, 'Who may fault a robot')")
         self._gids_at = float("-inf")
         self._pubs: dict[str, Any] = {}
         self._goal: Any = None
@@ -184,6 +186,11 @@ class Ros2Link:
         publisher = self._publisher_of(info)
         if publisher is None or not self.publishers.accepts(publisher):
             self.counters["foreign_statuses"] += 1
+            if any(self.health.mine(s.name, s.hardware_id) for s in msg.status):
+                # The robot's name from a node that may not speak for it: a stack run
+                # outside the namespace (the usual mistake), or anyone in the domain.
+                self._foreign_log.hit(f"from {publisher or 'an unknown node'}, not "
+                                      f"{self.publishers.describe()}", self.wall())
             return
         now = self.wall()
         self.stack.found(publisher, now)
@@ -196,6 +203,7 @@ class Ros2Link:
 
     def _check_health(self) -> None:
         now = self.wall()
+        self._foreign_log.tick(now)
         if self.stack.found_at is None and now - self._gids_at >= GRAPH_REFRESH:
             self._refresh_graph()  # discovery: when the start-up bound begins
         state, old = self.stack.state(now), self.stack_state
