@@ -295,3 +295,31 @@ def test_sim_with_ros2_runs_in_the_users_domain(tmp_path: Path, domain: int) -> 
     assert f"ROS 2 domain {domain} (from ROS_DOMAIN_ID)" in done.stderr
     assert "ros2 topic echo /diagnostics" in done.stderr
     assert "swarmd/paper/f2" in heard
+
+
+def test_the_docs_robot_node_runs_as_written(tmp_path: Path, domain: int) -> None:
+    """The rclpy node of docs/ros2.md ("A robot-side node"), run as printed beside robot
+    2's daemon of a swarm named `paper`: its health counts and it executes f2."""
+    import re
+
+    text = (ROOT / "docs" / "ros2.md").read_text()
+    section = text[text.index("## A robot-side node"):text.index("## In the field")]
+    code = re.search(r"```python\n(.*?)```", section, re.S)
+    assert code is not None
+    node = tmp_path / "robot_node.py"
+    node.write_text(code.group(1))
+    field = Field(tmp_path, domain, name="paper")
+    try:
+        out = (tmp_path / "node.log").open("wb")
+        field.stacks.append(subprocess.Popen([sys.executable, str(node)], stdout=out,
+                                             stderr=subprocess.STDOUT, env=field.env))
+        field.start_daemon(2)
+        wait_until(lambda: "execute f2" in (tmp_path / "node.log").read_text(), 30,
+                   "the docs' node executes f2")
+        found = "robot health publisher found: /swarmd/paper/robot2/robot_stack"
+        wait_until(lambda: found in (field.dir / "daemon2.log").read_text(), 30,
+                   "the daemon finds the docs' node")
+        time.sleep(2.5)  # past health_timeout: its statuses keep the robot healthy
+        assert field.leaves() == []
+    finally:
+        field.close()
