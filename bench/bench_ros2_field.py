@@ -21,6 +21,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import signal
 import statistics
 import subprocess
@@ -130,23 +131,29 @@ def fail(swarm: Swarm, case: str) -> float:
 
 
 def one_run(case: str) -> float | None:
-    """The delay, or None when the start left robot 6 no standby of f2 to measure."""
+    """The delay, or None when the start left robot 6 no standby of f2 to measure. The
+    run's directory is kept only when the run failed (the error names it)."""
     swarm = Swarm(Path(tempfile.mkdtemp(prefix=f"swarmd-bench-ros2-{case}-")))
     try:
-        swarm.start()
-        if swarm.wait(lambda: "ok" if swarm.flying_since(2, "f2") else
-                      "lost" if swarm.took_f2() else None, 90) == "lost":
-            return None  # robot 2 lost f2 at the start (below)
-        time.sleep(2.0)  # past every start-up transient
-        if any(e["kind"] == "flying" and e["function"] for e in swarm.record(6)):
-            # A loaded machine started a daemon late and robot 6 took a slot over in
-            # the first second (start-up grace, docs/operations.md): not this figure.
-            return None
-        t0 = fail(swarm, case)
-        t1 = swarm.wait(lambda: swarm.flying_since(6, "f2"), 30)
-        return float(t1) - t0
+        delay = measure(swarm, case)
     finally:
         swarm.close()
+    shutil.rmtree(swarm.dir, ignore_errors=True)
+    return delay
+
+
+def measure(swarm: Swarm, case: str) -> float | None:
+    swarm.start()
+    if swarm.wait(lambda: "ok" if swarm.flying_since(2, "f2") else
+                  "lost" if swarm.took_f2() else None, 90) == "lost":
+        return None  # robot 2 lost f2 at the start (below)
+    time.sleep(2.0)  # past every start-up transient
+    if any(e["kind"] == "flying" and e["function"] for e in swarm.record(6)):
+        # A loaded machine started a daemon late and robot 6 took a slot over in the
+        # first second (start-up grace, docs/operations.md): not this figure.
+        return None
+    t0 = fail(swarm, case)
+    return float(swarm.wait(lambda: swarm.flying_since(6, "f2"), 30)) - t0
 
 
 def main() -> int:
