@@ -49,7 +49,7 @@ def _stack(domain: int, seconds: float) -> None:
     from sim.realtime.ros2_robot import RobotStack
     from swarmd.config.robot import Ros2LinkConfig
 
-    cfg = Ros2LinkConfig(kind="ros2", domain_id=domain, namespace="robot1")
+    cfg = Ros2LinkConfig(kind="ros2", domain_id=domain, namespace="/swarmd/paper/robot1")
 
     async def run() -> None:
         stack = RobotStack(1, cfg, fly=lambda f, g: None, stop=lambda a: None)

@@ -148,6 +148,10 @@ class SimOptions:
                             "MuJoCo quadrotor): not with --virtual or --no-physics")
         if self.link == "ros2" and self.virtual:
             problems.append("--link: ros2 runs real processes: not with --virtual")
+        domain = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        if self.link == "ros2" and domain and not (domain.isdigit() and int(domain) <= 232):
+            problems.append(f"ROS_DOMAIN_ID={domain!r}: a ROS 2 domain id is 0..232 "
+                            "(unset it and the run leases a free one)")
         if self.autopilot is not None and self.autopilot not in AUTOPILOTS:
             problems.append(f"--autopilot: {self.autopilot!r} is not one of "
                             f"{', '.join(AUTOPILOTS)}")

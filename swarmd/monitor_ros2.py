@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from swarmd.core.roles import Role
 from swarmd.link.ros2_status import ERROR, OK, STALE, WARN, Status, status_prefix, to_message
 from swarmd.monitor import MonitorState
 
@@ -32,16 +33,7 @@ def monitor_statuses(state: MonitorState, swarm_name: str, now: float) -> list[S
         claim = state.claims.get(f)
         claiming = claim is not None and claim[1] > epoch \
             and now - claim[2] <= state.params.vote_window
-        if row is None:
-            level, message = STALE, "holder never heard"
-        elif row["alerts"]:
-            level, message = ERROR, "; ".join(row["alerts"])
-        elif row["warned_by"] or claiming:
-            level, message = WARN, "suspected: a takeover may be under way"
-        elif "silent" in row["status"] or row["status"] == "left":
-            level, message = STALE, f"robot {holder} {row['status']}"
-        else:
-            level, message = OK, f"held by robot {holder}"
+        level, message = _level(f, holder, row, claiming)
         out.append(Status(level, prefix + f, message, HARDWARE_ID,
                           (("holder", str(holder or 0)), ("epoch", str(epoch)),
                            ("role", "monitor"))))
@@ -50,6 +42,30 @@ def monitor_statuses(state: MonitorState, swarm_name: str, now: float) -> list[S
                       "; ".join(alerts) or f"{len(state.robots)} robots heard", HARDWARE_ID,
                       (("role", "monitor"), ("robots", str(len(state.robots))))))
     return out
+
+
+def _level(f: str, holder: int | None, row: dict[str, Any] | None,
+           claiming: bool) -> tuple[int, str]:
+    """f's level and message, in the daemons' words (`ros2_status`): STALE when its
+    holder is not heard (never, silent, left), never OK unless the holder's own
+    heartbeat says it executes f."""
+    if row is None:
+        return STALE, "holder never heard"
+    # A silent holder is STALE, as the daemons show it; ERROR is for what nobody
+    # answered (no claim, no standby: rule 8).
+    alerts = [a for a in row["alerts"] if not a.startswith("holder of ")]
+    if alerts:
+        return ERROR, "; ".join(alerts)
+    if row["warned_by"] or claiming:
+        return WARN, "suspected: a takeover may be under way"
+    if row["status"] == "left":
+        return STALE, f"robot {holder} left"
+    if "silent" in row["status"]:
+        return STALE, f"robot {holder} not heard"
+    if row["function"] != f or row["role"] != Role.ACTIVE.name:
+        role = str(row["role"] or "unknown").lower()
+        return WARN, f"robot {holder} does not execute {f} ({role})"
+    return OK, f"held by robot {holder}"
 
 
 class MonitorPublisher:

@@ -51,7 +51,7 @@ from typing import Any
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.drops import DropReason
-from swarmd.core.events import Event
+from swarmd.core.events import Event, Started
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
@@ -324,6 +324,8 @@ class Runtime:
                 case Event() as event:
                     changed = True
                     self._event(event)
+                    if isinstance(event, Started) and event.role != "active":
+                        self._release_at_start()
         if self.metrics is not None and actions:
             self.metrics.observe_actions(actions)
         if changed:
@@ -345,6 +347,18 @@ class Runtime:
             self.metrics.frame_sent()
         if not self.first_broadcast.is_set():
             self.first_broadcast.set()
+
+    def _release_at_start(self) -> None:
+        """The node's `started` as a standby (at the start, or after a rejoin hold that
+        found the slot taken, DESIGN rule 2): the robot may still execute what it did
+        before this daemon died, so the link is told to release it before anything
+        else, with no function name (the robot holds nothing now). A holder needs
+        nothing here: its Assign follows its `started`."""
+        try:
+            self._link.release("")
+        except Exception:
+            self._counters["link_errors"] += 1
+            log.exception("robot link release failed", extra={"function": ""})
 
     def _assign(self, function: str, epoch: int) -> None:
         params: Mapping[str, Any] = {}

@@ -53,3 +53,11 @@ def udp_port() -> Iterator[int]:
     running at the same time (pytest -n) never hear each other (sim/realtime/ports.py)."""
     with PortLease() as lease:
         yield lease.port
+
+
+@pytest.fixture(autouse=True)
+def _own_ros_domains(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`swarmd sim --link ros2` runs in $ROS_DOMAIN_ID when it is set: a developer's
+    shell that exports one would put every test's swarm in it, where they hear each
+    other. Tests lease their own domains (`DomainLease`) or pass one explicitly."""
+    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)

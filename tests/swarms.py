@@ -43,3 +43,22 @@ def signed_paper(directory: Path, name: str = "paper.yaml") -> tuple[Path, Path]
 
 def identity_file(keys: Path, robot: int) -> Path:
     return private_key_path(keys, robot)
+
+
+def ring_text(name: str = "ring") -> str:
+    """The smallest swarm with the paper's rules at work: three actives in a ring (each
+    slot watched by the other two, a quorum), one standby for all three; unsigned."""
+    return f"""\
+swarm: {{id: 77, name: {name}}}
+timing: {{preset: udp}}
+auth: none
+functions:
+  f1: {{kind: slot, position: [2.0, 0.0, 1.5]}}
+  f2: {{kind: slot, position: [0.0, 2.0, 1.5]}}
+  f3: {{kind: slot, position: [-2.0, 0.0, 1.5]}}
+robots:
+  - {{id: 1, state: active, function: f1, neighbors: [2, 3]}}
+  - {{id: 2, state: active, function: f2, neighbors: [1, 3]}}
+  - {{id: 3, state: active, function: f3, neighbors: [1, 2]}}
+  - {{id: 4, state: standby, subs: [1, 2, 3]}}
+"""

@@ -279,3 +279,26 @@ def test_the_table_fits_80_columns_without_cutting_a_word() -> None:
     assert row2.split() == ["2", "superseded,", "ACTIVE", "f2", "0", "3.5", "s", "OK", "1,",
                             "3", "2"]
     assert "ALERT robot 2: warned about by [1, 3] for 2.5 s and nobody claimed" in lines
+
+
+def test_the_base_station_never_shows_ok_a_function_its_holder_does_not_execute() -> None:
+    """`swarmd monitor --ros2` in the daemons' words: robot 1 heard as a standby (it
+    left f1 and nobody took it) is not "held by robot 1"; a silent holder is STALE
+    "not heard", as the daemons say it."""
+    from swarmd.link.ros2_status import OK, STALE, WARN
+    from swarmd.monitor_ros2 import monitor_statuses
+
+    state = MonitorState(paper_plan(), params.udp())
+    tx = Sender()
+    for r in (2, 3, 4):
+        state.feed(tx.hb(r, r), 10.0)
+    state.feed(tx.hb(1, 0, role=Role.STANDBY), 10.0)  # robot 1 executes nothing
+    by_name = {s.name: s for s in monitor_statuses(state, "paper", 10.1)}
+    f1 = by_name["swarmd/paper/f1"]
+    assert f1.level == WARN and f1.message == "robot 1 does not execute f1 (standby)"
+    assert dict(f1.values)["role"] == "monitor"
+    assert (by_name["swarmd/paper/f2"].level, by_name["swarmd/paper/f2"].message) == (
+        OK, "held by robot 2")
+    later = {s.name: s for s in monitor_statuses(state, "paper", 12.0)}
+    assert (later["swarmd/paper/f2"].level, later["swarmd/paper/f2"].message) == (
+        STALE, "robot 2 not heard")

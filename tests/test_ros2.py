@@ -28,7 +28,7 @@ from sim.shared.faults import parse_fault
 from swarmd.config import load_swarm
 from swarmd.core.records import Holder, Snapshot
 from swarmd.core.roles import Health, Role
-from swarmd.link.ros2 import HealthFold
+from swarmd.link.ros2_health import HealthFold
 from swarmd.link.ros2_status import ERROR, OK, STALE, WARN, SwarmStatus
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,20 +39,21 @@ PAPER = ROOT / "configs" / "paper.yaml"
 def test_the_worst_fresh_level_of_the_robots_own_statuses_decides() -> None:
     fold = HealthFold((), "robot2", timeout=2.0)
     assert fold.level(0.0) == STALE  # nothing heard: a fault
-    assert fold.hear("robot2/battery", "robot2", OK, 0.0)
-    assert not fold.hear("robot3/battery", "robot3", ERROR, 0.0)  # another robot's
-    assert not fold.hear("swarmd/paper/f2", "robot2", ERROR, 0.0)  # the swarm's view
-    assert fold.hear("robot2/motors", "robot2", WARN, 0.5)
+    stack = "/swarmd/paper/robot2/stack"
+    assert fold.hear(stack, "robot2/battery", "robot2", OK, 0.0)
+    assert not fold.hear(stack, "robot3/battery", "robot3", ERROR, 0.0)  # another robot's
+    assert not fold.hear(stack, "swarmd/paper/f2", "robot2", ERROR, 0.0)  # the swarm's view
+    assert fold.hear(stack, "robot2/motors", "robot2", WARN, 0.5)
     assert fold.level(1.0) == WARN
-    assert fold.hear("robot2/motors", "robot2", OK, 1.0)
+    assert fold.hear(stack, "robot2/motors", "robot2", OK, 1.0)
     assert fold.level(1.5) == OK
     assert fold.level(3.5) == STALE  # no status within the timeout
 
 
 def test_health_names_select_statuses_whatever_their_hardware_id() -> None:
     fold = HealthFold(("flight",), "robot2", timeout=1.0)
-    assert not fold.hear("battery", "robot2", ERROR, 0.0)
-    assert fold.hear("flight", "px4", ERROR, 0.0)
+    assert not fold.hear("/r2/px4", "battery", "robot2", ERROR, 0.0)
+    assert fold.hear("/r2/px4", "flight", "px4", ERROR, 0.0)
     assert fold.level(0.5) == ERROR
 
 
@@ -187,7 +188,7 @@ class Listener:
                     ("swarmd/goal_pose", PoseStamped, lambda m: (
                         m.header.frame_id, m.pose.position.x, m.pose.position.y,
                         m.pose.position.z))):
-                name = f"/robot{robot}/{topic}"
+                name = f"/swarmd/paper/robot{robot}/{topic}"
                 got = self.late.setdefault(name, [])
                 node.create_subscription(kind, name, lambda m, g=got, r=read: g.append(r(m)),
                                          latched_qos())
@@ -278,9 +279,9 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     # bound of 1 s failed at 1.4 s with the suite running twice over on two cores.
     assert -0.01 <= delay < duration - takeover["t"], delay
     # A late subscriber gets the current assignment (transient-local).
-    assert listener.late["/robot6/swarmd/function"][:1] == ["f2"]
-    assert listener.late["/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
-    assert listener.late["/robot1/swarmd/function"][:1] == ["f1"]
+    assert listener.late["/swarmd/paper/robot6/swarmd/function"][:1] == ["f2"]
+    assert listener.late["/swarmd/paper/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
+    assert listener.late["/swarmd/paper/robot1/swarmd/function"][:1] == ["f1"]
     # The swarm on /diagnostics: f2's holder goes 2 -> 6, as robots 1, 3 and 6 show it.
     for publisher in ("robot1", "robot3", "robot6"):
         assert listener.holders("f2", publisher) == ["2", "6"], publisher

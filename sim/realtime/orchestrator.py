@@ -212,11 +212,12 @@ class Orchestrator:
         # that names them (robotfiles.sign_for_run).
         self.swarm_path, self.identity_files = sign_for_run(self._run_dir, self.swarm_path)
         self._ctx = forkserver_context(self.physics)
-        # `--link ros2`: the run's own ROS 2 domain (sim.realtime.ros2_robot).
+        # `--link ros2`: $ROS_DOMAIN_ID, else the run's own domain (ros2_robot).
         if self.link.startswith("ros2"):
             from sim.realtime.ros2_robot import DomainLease
 
-            self.ros_domain = DomainLease()
+            self.ros_domain = DomainLease.for_run()
+            print(self.ros_domain.announce(), file=sys.stderr, flush=True)
         if self.transport in ("xbee", "serial"):
             self.medium = start_medium(len(self.robots), self._run_dir, self.seed,
                                        self.transport)

@@ -5,7 +5,7 @@ user's robot would be: it publishes its health as a DiagnosticStatus (hardware_i
 `robot<id>`) on /diagnostics twice a second, and flies the goal pose it gets on the goal
 topic (slot functions), holds on the function topic's empty name and does the release
 action. It knows nothing of swarmd but those topics; each robot's topics live under its
-own namespace `robot<id>` in the run's own ROS domain.
+own namespace (the link's default, `/swarmd/<swarm>/robot<id>`) in the run's ROS domain.
 
 `SimRos2Link` is what the robot process hands the daemon: the daemon's real `Ros2Link`,
 the stack beside it (its own rclpy context and executor thread) and, with physics, the
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -124,7 +125,8 @@ class RobotStack:
 
     def _on_release(self, msg: Any) -> None:
         self._record("release", action=str(msg.data))
-        self._to_loop(self.stop_flying, str(msg.data))
+        if msg.data:  # "": an assign cleared it (docs/ros2.md), nothing to stop
+            self._to_loop(self.stop_flying, str(msg.data))
 
     def stop(self) -> None:
         self.ros.stop()
@@ -198,10 +200,17 @@ class DomainLease:
 
     FIRST, LAST = 1, 100
 
-    def __init__(self) -> None:
+    def __init__(self, domain_id: int | None = None) -> None:
+        """Lease a free id; or, given `domain_id`, use that one (the user's: nothing is
+        leased, and other runs in it hear this one, as the user asked)."""
         import random
         import socket
 
+        self._sock: socket.socket | None = None
+        self.leased = domain_id is None
+        if domain_id is not None:
+            self.domain_id = domain_id
+            return
         ids = list(range(self.FIRST, self.LAST + 1))
         random.shuffle(ids)
         for domain in ids:
@@ -212,22 +221,36 @@ class DomainLease:
                 sock.close()
                 continue
             self.domain_id = domain
-            self._sock: socket.socket | None = sock
+            self._sock = sock
             return
         raise RuntimeError(f"no free ROS 2 domain id in {self.FIRST}..{self.LAST}")
 
     def link_doc(self, robot: int) -> dict[str, Any]:
         """The robot file's link section for `robot` in this run."""
-        # health_timeout also bounds the link's start-up grace: no health heard that long
-        # after its start, and the robot is reported faulty. The simulated stack starts
-        # with the daemon, in its process, and its DDS participant and the link's found
-        # each other only after more than the default 2 s when tests ran in parallel on
-        # two cores, and after more than 6 s with two suites at once: robots left as
-        # faulty before any fault. DDS discovery has no bound on a loaded machine. Here
-        # the stack never falls silent on its own (its faults are explicit: ERROR, or
-        # the whole process), so a long timeout costs nothing.
-        return {"kind": "ros2", "domain_id": self.domain_id, "namespace": f"robot{robot}",
+        # The link no longer counts health_timeout before the stack's first status (it
+        # waits for it: DDS discovery between the stack and the link took over 6 s with
+        # two suites at once on two cores). Once heard, the simulated stack never falls
+        # silent on its own (its faults are explicit: ERROR, or the whole process), so
+        # a long timeout costs nothing and keeps a starved executor thread on a loaded
+        # machine from looking like a dead stack.
+        return {"kind": "ros2", "domain_id": self.domain_id,
                 "health_timeout": SIM_HEALTH_TIMEOUT}
+
+    @classmethod
+    def for_run(cls) -> DomainLease:
+        """$ROS_DOMAIN_ID when it is set (the user watches that domain), else a leased
+        one; `SimOptions` already refused a value that is not a domain id."""
+        env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        return cls(int(env)) if env else cls()
+
+    def announce(self) -> str:
+        """The line that tells the user where the swarm is and how to watch it."""
+        how = "from ROS_DOMAIN_ID" if not self.leased else \
+            "leased for this run: set ROS_DOMAIN_ID to choose one"
+        return (f"ROS 2 domain {self.domain_id} ({how}); watch the swarm with "
+                f"`ROS_DOMAIN_ID={self.domain_id} ros2 topic echo /diagnostics` or "
+                f"`ROS_DOMAIN_ID={self.domain_id} ros2 run rqt_robot_monitor "
+                f"rqt_robot_monitor`")
 
     def release(self) -> None:
         """Give the id back; idempotent."""

@@ -135,8 +135,9 @@ LinkOpt = Annotated[str, typer.Option(
     "link over loopback UDP to a simulated autopilot, one system id and UDP port per "
     "robot, that flies the craft; faults reach the daemon only as MAVLink health) "
     "or ros2 (the daemon's ROS 2 link and a small rclpy robot stack per robot, in "
-    "the run's own ROS domain; also with --no-physics; needs swarmd\\[ros2], "
-    "docs/ros2.md). Default: direct.")]
+    "domain $ROS_DOMAIN_ID when it is set, else one leased for the run; the first "
+    "line names it and how to watch it; also with --no-physics; needs "
+    "swarmd\\[ros2], docs/ros2.md). Default: direct.")]
 AutopilotOpt = Annotated[str | None, typer.Option(
     "--autopilot", metavar="NAME",
     help="Flavour of the simulated autopilot of --link mavlink: px4 "

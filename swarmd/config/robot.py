@@ -18,6 +18,7 @@ can be copied as a whole. See docs/config.md.
 from __future__ import annotations
 
 import ipaddress
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -192,7 +193,17 @@ class Ros2LinkConfig(_Model):
     kind: Literal["ros2"]
     node_name: str | None = Field(default=None, min_length=1)
     """The daemon's ROS 2 node; None: swarmd_robot<id>."""
-    namespace: str = ""
+    namespace: str | None = None
+    """The daemon's node namespace, where its relative topics live and where the robot's
+    stack runs; None: /swarmd/<swarm name>/robot<id>, so the robots of two swarms in one
+    domain never share a topic or a health (docs/ros2.md, "In the field")."""
+    health_node: str | None = Field(default=None, min_length=2, pattern=r"^/")
+    """The fully qualified node (/ns/name) whose statuses are this robot's health; None:
+    any node in `namespace`."""
+    startup_timeout: float = Field(default=30.0, gt=0, description="s")
+    """No health publisher of this robot found this long after the start: an alert (the
+    function is kept; the daemon goes on waiting). Never a hand-over: a stack that is
+    still booting is not a faulty robot."""
     domain_id: int | None = Field(default=None, ge=0, le=232)
     """None: $ROS_DOMAIN_ID (else 0), as any ROS 2 node."""
     localhost_only: bool = True
@@ -205,10 +216,13 @@ class Ros2LinkConfig(_Model):
     hardware_id: str | None = None
     """None: robot<id>."""
     health_timeout: float = Field(default=2.0, gt=0, description="s")
-    """No status of this robot for this long: faulty (STALE)."""
+    """No status of this robot for this long, once its publisher was found: faulty
+    (STALE)."""
     goal_topic: str = Field(default="swarmd/goal_pose", min_length=1)
     function_topic: str = Field(default="swarmd/function", min_length=1)
     release_topic: str = Field(default="swarmd/release", min_length=1)
+    assignment_topic: str = Field(default="swarmd/assignment", min_length=1)
+    """The whole assignment in one latched message, with seq, boot and lease."""
     frame_id: str = "map"
     release: Literal["hold", "land"] = "hold"
     republish_interval: float = Field(default=1.0, gt=0, description="s")
@@ -352,7 +366,7 @@ def from_source(src: Source) -> RobotConfig:
         problems = _deployable(swarm, f.robot, identity_file, src, problems)
     key_files = tuple(src.resolve(k) for k in f.key_files)
     _check_keys_and_metrics(f, key_files, src, problems)
-    link = _resolved_link(f, src)
+    link = _resolved_link(f, src, swarm)
     if swarm is None or any(p.severity == "error" for p in problems):
         raise ConfigError(problems)
     return RobotConfig(
@@ -399,16 +413,29 @@ def _check_keys_and_metrics(f: RobotFile, key_files: tuple[Path, ...], src: Sour
         )
 
 
-def _resolved_link(f: RobotFile, src: Source) -> LinkConfig:
+def _resolved_link(f: RobotFile, src: Source, swarm: SwarmConfig | None) -> LinkConfig:
     """The robot file's link, its socket path resolved and a ros2 link's names filled."""
     link = f.link
     if isinstance(link, SocketLinkConfig):
         link = link.model_copy(update={"path": str(src.resolve(link.path))})
     elif isinstance(link, Ros2LinkConfig):
+        swarm_name = (swarm.swarm.name or f"swarm{swarm.swarm.id}") if swarm else "swarm"
+        namespace = link.namespace if link.namespace is not None \
+            else ros2_namespace(swarm_name, f.robot)
         link = link.model_copy(update={
             "node_name": link.node_name or f"swarmd_robot{f.robot}",
-            "hardware_id": link.hardware_id or f"robot{f.robot}"})
+            "hardware_id": link.hardware_id or f"robot{f.robot}",
+            "namespace": namespace})
     return link
+
+
+def ros2_namespace(swarm_name: str, robot: int) -> str:
+    """/swarmd/<swarm>/robot<id>, the swarm's name made a valid ROS 2 name token
+    (letters, digits, underscores; not starting with a digit)."""
+    token = re.sub(r"[^A-Za-z0-9_]", "_", swarm_name)
+    if not token or token[0].isdigit():
+        token = f"swarm_{token}"
+    return f"/swarmd/{token}/robot{robot}"
 
 
 def _deployable(swarm: SwarmConfig, robot: int, identity_file: Path | None, src: Source,

@@ -198,7 +198,9 @@ class Pilot:
         return True
 
     def release(self, function: str | None, now: float) -> None:
-        if function is not None and function != self.function:
+        """Stop `function` (whatever flies when it is None or "": the daemon's start as
+        a standby, which must stop what the vehicle flew before the daemon died)."""
+        if function and function != self.function:
             return
         self.function, self.flight = None, None
         self._stream_started = None
@@ -273,7 +275,9 @@ class Pilot:
     def _plan(self, now: float) -> None:
         v = self.view
         if self._releasing is not None:
-            if v.mode == self._releasing or self._recent("release", now):
+            if not v.armed:
+                self._releasing = None  # disarmed: nothing flies, nothing to hold or land
+            elif v.mode == self._releasing or self._recent("release", now):
                 self._releasing = None if v.mode == self._releasing else self._releasing
             else:
                 self._step("release", now, lambda: self._mode_cmd("release", self._releasing))

@@ -87,8 +87,12 @@ class SwarmStatus:
                 self.alerts.pop(function, None)
         return True
 
-    def statuses(self, snap: Snapshot, now: float) -> list[Status]:
-        """Every status, for the snapshot taken at `now` (the node's clock)."""
+    def statuses(self, snap: Snapshot, now: float,
+                 stack: tuple[int, str] | None = None) -> list[Status]:
+        """Every status, for the snapshot taken at `now` (the node's clock). `stack`:
+        what the link knows of the robot's own stack when it does not execute what the
+        daemon holds (waiting for it, never heard, faulty): its own function is then
+        shown at that level, never OK (a function nobody executes)."""
         self.known = {f: (int(h[0]), int(h[1])) for f, h in snap.known.items()}
         role = snap.role.name.lower()
         out = []
@@ -107,6 +111,8 @@ class SwarmStatus:
                 level, message = ERROR, alert[0]
             elif f in snap.suspects or snap.votes.get(f) or f in self.claiming:
                 level, message = WARN, "suspected: a takeover may be under way"
+            elif mine and stack is not None:
+                level, message = stack[0], f"held by robot {holder}: {stack[1]}"
             elif mine or now - heard_at <= self.t_max:
                 level, message = OK, f"held by robot {holder}"
             else:
@@ -114,13 +120,21 @@ class SwarmStatus:
             out.append(Status(level, self.prefix + f, message, self.hardware_id,
                               (("holder", str(holder)), ("epoch", str(epoch)),
                                ("role", role))))
-        out.append(Status(
-            LEVEL_OF_HEALTH.get(snap.health, ERROR), f"{self.prefix}{self.hardware_id}",
-            f"{role} {snap.function or ''}".strip(), self.hardware_id,
+        out.append(self._own(snap, role, stack))
+        return out
+
+    def _own(self, snap: Snapshot, role: str, stack: tuple[int, str] | None) -> Status:
+        """The publisher's own status: its role, function and health (and, when the link
+        knows its robot does not execute, why)."""
+        level = LEVEL_OF_HEALTH.get(snap.health, ERROR)
+        message = f"{role} {snap.function or ''}".strip()
+        if stack is not None:
+            level, message = max(level, stack[0]), f"{message}: {stack[1]}"
+        return Status(
+            level, f"{self.prefix}{self.hardware_id}", message, self.hardware_id,
             (("role", role), ("function", snap.function or ""), ("epoch", str(snap.epoch)),
              ("health", snap.health.name.lower()), ("frames_in", str(snap.frames_in)),
-             ("frames_out", str(snap.frames_out)))))
-        return out
+             ("frames_out", str(snap.frames_out))))
 
 
 def to_message(statuses: list[Status], stamp: Any) -> Any:

@@ -208,9 +208,10 @@ class SocketLink:
         self._send(self._current)
 
     def release(self, function: str) -> None:
-        if self._current is not None and self._current.get("assign") == function:
-            self._current = None
-        self._send({"release": function})
+        # What a robot that (re)connects is told first: it holds nothing now ("" from a
+        # daemon that starts as a standby: stop whatever you executed before).
+        self._current = {"release": function}
+        self._send(self._current)
 
     async def close(self) -> None:
         """Stop listening, drop clients, remove the socket file."""
