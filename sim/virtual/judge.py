@@ -16,6 +16,7 @@ from sim.shared.invariants import Checker, Violation
 from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+from swarmd.core.records import Snapshot
 from swarmd.core.roles import Health, Role
 
 
@@ -117,14 +118,23 @@ def views(swarm: FinishedRun) -> list[Violation]:
         return []
     snaps = {rid: r.node.snapshot() for rid, r in swarm.robots.items()
              if r.alive and not r.paused and r.node is not None}
+    return view_violations(swarm.plan, snaps, swarm.duration)
+
+
+def view_violations(plan: SwarmPlan, snaps: Mapping[int, Snapshot],
+                    t: float) -> list[Violation]:
+    """Invariant 8 on the snapshots of the live robots at a quiet moment `t` (also what
+    the explorer, `sim.virtual.explore`, judges its final states by): one view of each
+    slot among the robots that hear it, and the live, healthy holder it names executes
+    it."""
     # A robot that reported itself faulty has left the protocol (rule 7): it hears
     # and heartbeats nothing that matters, so its view is nobody's business.
     snaps = {rid: sx for rid, sx in snaps.items() if sx.health != Health.FAULTY}
     out: list[Violation] = []
-    for f in swarm.plan.functions:
-        slot = swarm.plan.slot(f)
+    for f in plan.functions:
+        slot = plan.slot(f)
         seen = {rid: sx.known[f] for rid, sx in snaps.items()
-                if slot in swarm.plan.relevant(rid).slots or sx.function == f}
+                if slot in plan.relevant(rid).slots or sx.function == f}
         named = {h[0] for h in seen.values()}
         executing = {rid for rid, sx in snaps.items()
                      if sx.role == Role.ACTIVE and sx.function == f}
@@ -132,7 +142,7 @@ def views(swarm: FinishedRun) -> list[Violation]:
             # (Views that all name dead robots are an unheld slot: invariant 1 and
             # rule 8's alert judge it.)
             shown = ", ".join(f"{r}: {h[0]}@{h[1]}" for r, h in sorted(seen.items()))
-            out.append(Violation(swarm.duration, "views_disagree", None,
+            out.append(Violation(t, "views_disagree", None,
                                  f"{f} is held by different robots in different views "
                                  f"({shown})"))
             continue
@@ -142,10 +152,10 @@ def views(swarm: FinishedRun) -> list[Violation]:
         sh = snaps.get(holder)
         if sh is not None and sh.health == Health.OK and not (
                 sh.role == Role.ACTIVE and sh.function == f):
-            out.append(Violation(swarm.duration, "orphaned", holder,
+            out.append(Violation(t, "orphaned", holder,
                                  f"every view names robot {holder} the holder of {f}, "
                                  f"which it does not execute"))
     return out
 
 
-__all__ = ["FinishedRun", "muted", "views"]
+__all__ = ["FinishedRun", "muted", "view_violations", "views"]
