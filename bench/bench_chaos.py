@@ -14,6 +14,7 @@ the fault kinds drawn and the violations by kind, each with the command that rep
     python bench/bench_chaos.py --seeds 1000 --dense      # 4-8 faults within 1.5 s
     python bench/bench_chaos.py --seeds 1000 --auth none  # unsigned (also: shared)
     python bench/bench_chaos.py --seed 1234 --verbose     # replay one seed
+    python bench/bench_chaos.py --seeds 600 --wide        # compound link faults too
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
 `--ring8`: configs/ring8.yaml (eight actives in a ring, three standbys covering all
@@ -60,6 +61,8 @@ class Case:
     duration: float
     loss_model: str = "bernoulli"
     burst_len: float = 4.0
+    compound: tuple[str, ...] = ()
+    """`--wide`: the compound link faults (`WIDE_KINDS`) drawn on top of the classic draw."""
 
     def describe(self) -> str:
         model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
@@ -70,6 +73,8 @@ class Case:
                          f"{', '.join(self.plan.watched_by(p.function))}" if p.function
                          else f"standby, subs {', '.join(p.subs)}"))
         lines.append("  faults: " + " ".join(f.spec() for f in self.faults))
+        if self.compound:
+            lines.append("  compound (--wide): " + ", ".join(self.compound))
         return "\n".join(lines)
 
 
@@ -92,9 +97,17 @@ def draw_swarm(rng: random.Random, max_robots: int = 60) -> SwarmPlan:
                      {f: tuple(sorted(w, key=fs.index)) for f, w in watches.items()})
 
 
-def draw_case(seed: int, max_robots: int = 60, dense: bool = False) -> Case:
+def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
+              wide: bool = False) -> Case:
     """The swarm and schedule of one seed. `dense`: 4-8 faults within 1.5 s, mostly on
-    neighbours (clustered failures)."""
+    neighbours (clustered failures). `wide`: the same draw, then one or two compound
+    link faults (`WIDE_KINDS`, `_draw_compound`) on top; a seed drawn without it
+    replays exactly as it always did."""
+    case = _draw_classic(seed, max_robots, dense)
+    return _widen(case, random.Random(f"wide-{seed}")) if wide else case
+
+
+def _draw_classic(seed: int, max_robots: int, dense: bool) -> Case:
     rng = random.Random(seed)
     plan = draw_swarm(rng, max_robots)
     ids = sorted(plan.robots)
@@ -145,6 +158,126 @@ def _draw_fault(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str, 
     return Fault(FaultKind(kind), at, tuple(targets))
 
 
+# ------------------------------------------------------------------ the wide draw
+WIDE_KINDS = ("overlapping-cuts", "muted-while-cut", "fade-restart", "deaf-takeover",
+              "burst-40")
+"""Compound link faults `--wide` adds (docs/sim.md, "Random chaos"):
+- `overlapping-cuts`: two or three one-way partitions (`partition:A>B`) in force at once;
+- `muted-while-cut`: a robot muted entirely (`fade`, or `partition:R>rest`) while a group
+  is cut off (a two-way partition);
+- `fade-restart`: a robot whose transmissions fade while it restarts (crash, then back);
+- `deaf-takeover`: a holder crashes while its standby, or one of its watchers, is deaf
+  to the robots it needs to hear (the watchers, or the standby);
+- `burst-40`: bursty loss (Gilbert-Elliott) of 20 to 40 %."""
+
+
+def _widen(case: Case, rng: random.Random) -> Case:
+    """`case` with one or two compound faults (`WIDE_KINDS`) drawn by `rng` on top."""
+    plan, ids = case.plan, sorted(case.plan.robots)
+    faults = list(case.faults)
+    loss, model, burst = case.loss, case.loss_model, case.burst_len
+    base = min(f.at for f in faults)
+    kinds = tuple(rng.sample(WIDE_KINDS, rng.randint(1, 2)))
+    for kind in kinds:
+        at = round(base + rng.uniform(0.0, 2.0), 3)
+        if kind == "burst-40":
+            loss, model, burst = round(rng.uniform(0.2, 0.4), 2), "burst", \
+                round(rng.uniform(2.0, 8.0), 1)
+        else:
+            faults += _draw_compound(rng, plan, ids, kind, at)
+    last = max((f.end or f.at) for f in faults)
+    return Case(case.seed, plan, tuple(faults), loss, round(last + 8.0, 3), model, burst,
+                kinds)
+
+
+def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str,
+                   at: float) -> list[Fault]:
+    """The faults of one compound kind (`WIDE_KINDS`, all but the loss) from `at`."""
+    def length() -> float:
+        return round(rng.uniform(0.5, 3.0), 2)
+
+    if kind == "overlapping-cuts":
+        out, t = [], at
+        for _ in range(rng.randint(2, 3)):
+            a = rng.choice(ids)
+            near = _neighbours(plan, a) or [r for r in ids if r != a]
+            b = tuple(sorted(rng.sample(near, rng.randint(1, min(2, len(near))))))
+            out.append(Fault(FaultKind.PARTITION, t, (a, *b), length(), ((a,), b), oneway=True))
+            t = round(t + rng.uniform(0.0, 0.8), 3)  # starts while the one before lasts
+        return out
+    if kind == "muted-while-cut":
+        group = tuple(sorted(rng.sample(ids, rng.randint(1, len(ids) - 1))))
+        rest = tuple(r for r in ids if r not in group)
+        muted = rng.choice(ids)
+        others = tuple(r for r in ids if r != muted)
+        mute = Fault(FaultKind.FADE, at, (muted,), length()) if rng.random() < 0.5 else \
+            Fault(FaultKind.PARTITION, at, (muted, *others), length(), ((muted,), others),
+                  oneway=True)
+        cut_at, cut_for = round(at + rng.uniform(0.0, 0.5), 3), length()
+        # The group's cut as one one-way partition each way: the virtual medium holds
+        # one two-way partition at a time, one-way cuts overlap anything.
+        return [mute, Fault(FaultKind.PARTITION, cut_at, (*group, *rest), cut_for,
+                            (group, rest), oneway=True),
+                Fault(FaultKind.PARTITION, cut_at, (*rest, *group), cut_for, (rest, group),
+                      oneway=True)]
+    if kind == "fade-restart":
+        r = rng.choice(ids)
+        back = round(at + rng.uniform(0.1, 1.5), 3)
+        crash = [Fault(FaultKind.CRASH, at, (r,))] if rng.random() < 0.5 else []
+        fade_for = round(back - at + 0.2 + rng.uniform(0.3, 2.0), 2)  # past the restart
+        return [Fault(FaultKind.FADE, round(at - 0.2, 3), (r,), fade_for), *crash,
+                Fault(FaultKind.RESTART, back, (r,))]
+    return _deaf_takeover(rng, plan, ids, at, length())
+
+
+def _deaf_takeover(rng: random.Random, plan: SwarmPlan, ids: list[int], at: float,
+                   length: float) -> list[Fault]:
+    """A holder crashes at `at`; from just before, its standby is deaf to its watchers,
+    or one of its watchers is deaf to the standby (the claim and the new heartbeats)."""
+    actives = [r for r in ids if plan.robots[r].function is not None]
+    holder = rng.choice(actives)
+    f = plan.robots[holder].function
+    assert f is not None
+    standbys = [r for r in plan.covered_by(f) if r != holder] or [rng.choice(ids)]
+    standby = standbys[0]
+    watchers = [r for r in actives if plan.robots[r].function in plan.watched_by(f)
+                and r not in (holder, standby)] or [r for r in ids if r != holder]
+    start = round(at - rng.uniform(0.0, 0.5), 3)
+    if rng.random() < 0.5:  # a deaf standby: the warnings do not reach it
+        heard = tuple(sorted(rng.sample(watchers, min(len(watchers), rng.randint(1, 2)))))
+        deaf = Fault(FaultKind.DEAF, start, (standby,), length, (heard,))
+    else:  # a deaf watcher: it misses the claim and the new holder
+        deaf = Fault(FaultKind.DEAF, start, (rng.choice(watchers),), length, ((standby,),))
+    return [deaf, Fault(FaultKind.CRASH, at, (holder,))]
+
+
+def wide_kinds(case: Case) -> list[str]:
+    """The compound kinds a wide case holds, recognised from its faults."""
+    out = []
+    if case.loss_model == "burst" and case.loss >= 0.2 and "burst-40" in case.compound:
+        out.append("burst-40")
+    oneways = [f for f in case.faults if f.oneway]
+    if any(a is not b and a.at <= b.at < (a.end or a.at) for a in oneways for b in oneways):
+        out.append("overlapping-cuts")
+    mutes = [f for f in case.faults if f.kind is FaultKind.FADE or (
+        f.oneway and len(f.groups[0]) == 1 and len(f.groups[1]) == len(case.plan.robots) - 1)]
+    cuts = [f for f in case.faults if f.kind is FaultKind.PARTITION]
+    if any(m is not c and _overlap(m, c) for m in mutes for c in cuts):
+        out.append("muted-while-cut")
+    fades = [f for f in case.faults if f.kind is FaultKind.FADE]
+    if any(r.kind is FaultKind.RESTART and r.robots[0] in fd.robots and _overlap(fd, r)
+           for fd in fades for r in case.faults):
+        out.append("fade-restart")
+    deafs = [f for f in case.faults if f.kind is FaultKind.DEAF]
+    if any(c.kind is FaultKind.CRASH and _overlap(d, c) for d in deafs for c in case.faults):
+        out.append("deaf-takeover")
+    return out
+
+
+def _overlap(a: Fault, b: Fault) -> bool:
+    return a.at <= (b.end or b.at) and b.at <= (a.end or a.at)
+
+
 def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
     """Robots next to `robot` in the plan: holders of the slots it watches or that watch
     it, the standbys covering its slot (or, for a standby, the holders of its subs)."""
@@ -170,11 +303,13 @@ DRAWN: collections.Counter[str] = collections.Counter()
 
 
 def chaos(seeds: Sequence[int], max_robots: int, verbose: bool, dense: bool = False,
-          auth: str | None = None) -> dict[str, list[tuple[int, Violation]]]:
+          auth: str | None = None, wide: bool = False
+          ) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
-        case = draw_case(seed, max_robots, dense)
+        case = draw_case(seed, max_robots, dense, wide)
         DRAWN.update("oneway" if f.oneway else f.kind for f in case.faults)
+        DRAWN.update(f"wide {k}" for k in case.compound)
         if case.loss_model == "burst":
             DRAWN["burst loss"] += 1
         res = run_case(case, auth)
@@ -243,19 +378,19 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
-def _chaos_chunk(args: tuple[int, int, int, bool, str]
+def _chaos_chunk(args: tuple[int, int, int, bool, str, bool]
                  ) -> tuple[dict[str, list[tuple[int, Violation]]], collections.Counter[str]]:
-    first, last, max_robots, dense, auth = args
+    first, last, max_robots, dense, auth, wide = args
     DRAWN.clear()
-    return chaos(range(first, last), max_robots, False, dense, auth), DRAWN.copy()
+    return chaos(range(first, last), max_robots, False, dense, auth, wide), DRAWN.copy()
 
 
 def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
-                    auth: str) -> dict[str, list[tuple[int, Violation]]]:
+                    auth: str, wide: bool = False) -> dict[str, list[tuple[int, Violation]]]:
     from concurrent.futures import ProcessPoolExecutor
 
     step = 50
-    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth)
+    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide)
               for s in range(seeds.start, seeds.stop, step)]
     found: dict[str, list[tuple[int, Violation]]] = {}
     with ProcessPoolExecutor(jobs) as pool:
@@ -280,6 +415,11 @@ def main() -> None:
                     help="4-8 faults a run within 1.5 s, mostly on neighbours")
     ap.add_argument("--auth", choices=("per-robot", "shared", "none"), default="per-robot",
                     help="authentication mode (default per-robot, as shipped)")
+    ap.add_argument("--wide", action="store_true",
+                    help="add compound link faults: overlapping one-way cuts, a robot muted "
+                         "while a group is cut, fades during restarts, deafness during a "
+                         "takeover, bursty loss up to 40 %% (a seed without it replays as "
+                         "before)")
     a = ap.parse_args()
     global AUTH
     AUTH = a.auth
@@ -289,21 +429,21 @@ def main() -> None:
     seeds = range(a.seed, a.seed + 1) if a.seed is not None else range(a.seeds)
     t0 = time.perf_counter()
     if a.jobs > 1 and len(seeds) > 1:
-        found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth)
+        found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth, a.wide)
     else:
-        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth)
+        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
-    print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}, auth {a.auth}, "
-          f"{total} violation(s) in {wall:.1f} s")
+    print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{' (wide)' if a.wide else ''}, "
+          f"auth {a.auth}, {total} violation(s) in {wall:.1f} s")
     print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
     for kind, hits in sorted(found.items()):
         runs = sorted({s for s, _ in hits})
         print(f"  {kind}: {len(hits)} in {len(runs)} run(s)")
         for seed, v in hits[:5]:
             extra = ("" if a.max_robots == 60 else f" --max-robots {a.max_robots}") \
-                + (" --dense" if a.dense else "") + ("" if a.auth == "per-robot"
-                                                     else f" --auth {a.auth}")
+                + (" --dense" if a.dense else "") + (" --wide" if a.wide else "") \
+                + ("" if a.auth == "per-robot" else f" --auth {a.auth}")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")
     sys.exit(1 if total else 0)

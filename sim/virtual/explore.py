@@ -167,8 +167,9 @@ AT = 1.0
 
 
 def fault_sets(plan: SwarmPlan, params: Params) -> Iterator[tuple[str, tuple[Fault, ...]]]:
-    """Up to two faults around robot 1 (f1's holder) and f1's first standby: what the
-    explorer scripts for each swarm."""
+    """Up to two faults around robot 1 (f1's holder), f1's first standby and its first
+    watcher: what the explorer scripts for each swarm. Each begins at `AT`; a fade or
+    cut lasts past the takeover bound, so the slot is taken over under it."""
     sb = next(r for r in plan.covered_by("f1") if plan.robots[r].function is None)
     watchers = [r for r, p in sorted(plan.robots.items()) if p.function in
                 plan.watched_by("f1")]
@@ -185,6 +186,12 @@ def fault_sets(plan: SwarmPlan, params: Params) -> Iterator[tuple[str, tuple[Fau
     yield "cut-off", (Fault(FaultKind.PARTITION, AT, (1, *rest), tb + 0.5, ((1,), rest)),)
     yield "deaf-standby-crash", (Fault(FaultKind.DEAF, AT, (sb,), 1.0, (tuple(watchers),)),
                                  Fault(FaultKind.CRASH, AT, (1,)))
+    yield "fade-restart", (Fault(FaultKind.FADE, AT, (1,), tb + 0.5),
+                           Fault(FaultKind.RESTART, AT + 0.5, (1,)))
+    yield "deaf-watcher-crash", (Fault(FaultKind.DEAF, AT, (watchers[0],), 1.5, ((sb,),)),
+                                 Fault(FaultKind.CRASH, AT, (1,)))
+    yield "muted-standby-crash", (Fault(FaultKind.FADE, AT, (sb,), 1.0),
+                                  Fault(FaultKind.CRASH, AT, (1,)))
     yield "two-cuts", (Fault(FaultKind.PARTITION, AT, (1, sb), tb + 0.5, ((1,), (sb,)),
                              oneway=True),
                        Fault(FaultKind.PARTITION, AT + 0.5, (sb, 1), 1.0, ((sb,), (1,)),
