@@ -121,3 +121,26 @@ def test_a_few_wide_seeds_run_and_no_node_raises() -> None:
     found = bench.chaos(range(12), max_robots=12, verbose=False, wide=True)
     assert "raised" not in found, found["raised"][:3]
     assert {f"wide {k}" for k in bench.WIDE_KINDS} <= set(bench.DRAWN)
+
+
+def test_the_virtual_medium_holds_overlapping_one_way_partitions() -> None:
+    """`partition:1>2@1+2` and `partition:1>3@2+2` overlap over [2, 3): each cut holds
+    over its own window only. Robot 2 stops hearing 1 at 1 s and hears it again at
+    3 s, robot 3 from 2 s to 4 s: each suspects 1 one `t_max` into its cut and hears it
+    again (its `refute`) when its own cut heals, not when the other one does."""
+    from sim.virtual.explore import swarm
+    from sim.virtual.simulator import run_virtual
+
+    plan, params = swarm("four")
+    res = run_virtual(plan, params, duration=6.0,
+                      faults=[parse_fault("partition:1>2@1+2"),
+                              parse_fault("partition:1>3@2+2")])
+    heard = {(e["robot"], e["event"]): e["t"] for e in reversed(res.events)
+             if e["event"] in ("suspect", "refute") and e.get("subject") == 1}
+    assert set(heard) == {(2, "suspect"), (2, "refute"), (3, "suspect"), (3, "refute")}
+    hb = params.heartbeat_interval  # a suspicion comes t_max after the last beat heard
+    assert 1.0 + params.t_max - hb <= heard[(2, "suspect")] <= 1.0 + params.t_max + hb
+    assert 3.0 <= heard[(2, "refute")] < 3.1
+    assert 2.0 + params.t_max - hb <= heard[(3, "suspect")] <= 2.0 + params.t_max + hb
+    assert 4.0 <= heard[(3, "refute")] < 4.1
+    assert res.violations == []
