@@ -107,10 +107,14 @@ def test_the_wide_draw_draws_every_compound_link_fault() -> None:
     assert drawn == set(bench.WIDE_KINDS)
 
 
-WIDE_SEEDS: tuple[int, ...] = ()
-"""Wide seeds (`python bench/bench_chaos.py --seed N --wide --max-robots 12`) that broke
-an invariant on the core before slots became one forward-only entry (docs/sim.md,
-"Random chaos"): once it is, each must run clean in every mode."""
+WIDE_SEEDS: tuple[int, ...] = (21,)
+"""Wide seeds (`python bench/bench_chaos.py --seed N --wide --verbose`, 3-60 robots) that
+broke an invariant on the core before slots became one forward-only entry: once it is,
+each must run clean in every mode (`bench.chaos(WIDE_SEEDS, 60, False, auth=..., wide=True)`).
+- 21, per robot (clean unsigned and with a shared key): robot 21 restarts through a fade
+  and takes its slot back; it drops its neighbour 22's heartbeats as `unanchored` for
+  longer than T_max, warns about 22 (alive, holding f22 at epoch 1, no standby covers
+  f22), then hears it again without logging an answer: `warning_unresolved`."""
 
 
 def test_a_few_wide_seeds_run_and_no_node_raises() -> None:
