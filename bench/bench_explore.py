@@ -42,7 +42,7 @@ from swarmd.core.records import Holder  # noqa: E402
 
 class LastHeardNode(Node):
     """A test-only mutant: the view of a slot is the last heartbeat heard for it, not
-    the greatest (epoch, then lower id). It reaches into the node's private view dict
+    the greatest (epoch, then lower id). It reaches into the node's private slot table
     on purpose; it exists to show that the explorer catches a broken merge."""
 
     def receive(self, data: bytes, now: float) -> list[Action]:
@@ -55,8 +55,15 @@ class LastHeardNode(Node):
         if isinstance(msg, wire.Heartbeat) and msg.function and frame.sender != self.robot_id:
             f = self.plan.function_at(msg.function)
             if f is not None:
-                self._known[f] = Holder(frame.sender, msg.epoch)
+                _overwrite(self._known, f, Holder(frame.sender, msg.epoch))
         return actions
+
+
+def _overwrite(known: Any, f: str, entry: Holder) -> None:
+    """Set a view behind the merge: the slot table's private entries (swarmd.core.slots,
+    which offers no way to lower one), or a plain dict of views."""
+    entries = getattr(known, "_entries", known)
+    entries[f] = entry
 
 
 MUTANTS: dict[str, NodeFactory] = {"last-heard": LastHeardNode}

@@ -109,12 +109,20 @@ def test_the_wide_draw_draws_every_compound_link_fault() -> None:
 
 WIDE_SEEDS: tuple[int, ...] = (21,)
 """Wide seeds (`python bench/bench_chaos.py --seed N --wide --verbose`, 3-60 robots) that
-broke an invariant on the core before slots became one forward-only entry: once it is,
-each must run clean in every mode (`bench.chaos(WIDE_SEEDS, 60, False, auth=..., wide=True)`).
+broke an invariant on the core before the slot table (swarmd/core/slots.py); each must
+run clean in every mode (`test_wide_seeds_run_clean_in_every_mode`).
 - 21, per robot (clean unsigned and with a shared key): robot 21 restarts through a fade
   and takes its slot back; it drops its neighbour 22's heartbeats as `unanchored` for
   longer than T_max, warns about 22 (alive, holding f22 at epoch 1, no standby covers
   f22), then hears it again without logging an answer: `warning_unresolved`."""
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_wide_seeds_run_clean_in_every_mode(auth: str) -> None:
+    bench = _bench()
+    found = bench.chaos(WIDE_SEEDS, max_robots=60, verbose=False, auth=auth, wide=True)
+    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
+    assert hits == {}, hits
 
 
 def test_a_few_wide_seeds_run_and_no_node_raises() -> None:
