@@ -139,10 +139,11 @@ def test_a_liar_with_a_dead_co_watcher_replaces_nobody() -> None:
 def test_a_partition_that_looks_like_a_collision_is_taken_over_then_settled(
         paper: tuple[SwarmPlan, Params], auth: str) -> None:
     # {1,2} | {3,4,5,6}: the standbys' side cannot tell it from robots 1 and 2 colliding.
-    # When it heals one of each pair stops (DESIGN rule 9): in every mode the cut-off
-    # holders are fenced by the newer entry (rule 2; the slot table only moves forward,
-    # DESIGN "Convergence": per robot the standbys' certificates still verify, whatever
-    # the holders refuted meanwhile).
+    # When it heals one of each pair stops (DESIGN rule 9): unsigned, the cut-off
+    # holders are fenced by the newer entry (rule 2); signed per robot, they refute the
+    # warnings in the standbys' certificates, and their reassertions at the next epoch
+    # outrank the standbys' takeovers, which are fenced (DESIGN "Convergence": the slot
+    # table only moves forward).
     plan, params = paper
     res = run(plan, "partition:1,2|3,4,5,6@2+3", duration=8.0, params=params, auth=auth)
     assert res.violations == []
@@ -150,8 +151,12 @@ def test_a_partition_that_looks_like_a_collision_is_taken_over_then_settled(
     assert {f: e["robot"] for f, e in takeovers.items()} == {"f1": 5, "f2": 6}
     fenced = {e["robot"]: e["t"] for e in res.events if e["event"] == "fenced"}
     assert min(fenced.values()) >= 5.0  # after the heal
-    assert set(fenced) == {1, 2}
-    assert res.holders() == {"f1": [5], "f2": [6], "f3": [3], "f4": [4]}
+    if auth == "none":
+        assert set(fenced) == {1, 2}
+        assert res.holders() == {"f1": [5], "f2": [6], "f3": [3], "f4": [4]}
+    else:
+        assert set(fenced) == {5, 6}
+        assert res.holders() == {"f1": [1], "f2": [2], "f3": [3], "f4": [4]}
 
 
 # -- rule 10: claims believed for a bounded time -------------------------------------------

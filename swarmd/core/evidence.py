@@ -87,10 +87,12 @@ class EvidenceStore:
         the epoch of f as known). None when the suspect refuted it; otherwise the
         pending claims it now certifies (claimant, claim, its signed bytes), still
         fresh at `now`, for the node to count."""
-        if not raw or epoch + 1 < floor:
-            # Older than the takeover we know of. Evidence about the epoch just below it
-            # is kept: it may back a rival claim of that same takeover, which the lower
-            # id wins (the paper's race, after a partition healed).
+        if not raw or epoch + 2 < floor:
+            # Older than anything that can still change our view. Evidence about the two
+            # epochs below it is kept: about E - 1, it may back a rival claim of that same
+            # takeover, which the lower id wins (the paper's race, after a partition
+            # healed); about E - 2, a takeover at E - 1 that its holder refuted, whose
+            # reassertion at E outranks a rival there (DESIGN, "Convergence").
             return []
         refuted = witness != suspect \
             and self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw)
@@ -204,16 +206,18 @@ class EvidenceStore:
         return self.reasserted(f, claimant, epoch) is not None
 
     def voided_by(self, f: str, claimant: int, epoch: int) -> int | None:
-        """The holder whose signed REFUTEs void the certified takeover (claimant, epoch) of
-        f — the robot it replaced, alive after the warnings that backed it (rule 4) —
-        or None. A takeover backed by the holder's own LEAVE is never void."""
+        """The holder whose signed word voids the certified takeover (claimant, epoch) of
+        f, or None: the robot it replaced, which signed a REFUTE of that very claim
+        (`REFUTE(claimant, f, epoch, seq)`, the claim's own epoch: it was holding f, and
+        not stalled, when the claim reached it; rule 4). One signed frame decides it, so
+        every robot that holds that frame and the certificate judges alike, whichever
+        warnings each happens to hold. A takeover backed by the holder's own LEAVE is
+        never void."""
         entry = self._certified.get(f, {}).get((claimant, epoch))
         if entry is None or entry[1].get(entry[0]) == _LEAVE_BACKED:
             return None
-        claim = wire.Claim(entry[0], self._plan.slot(f), epoch)
-        if self.certify(f, claimant, claim, 0, refutes=True):
-            return None
-        return entry[0]
+        failed = entry[0]
+        return failed if self.refuted_up_to(f, failed, epoch, claimant) >= 0 else None
 
     def reasserted(self, f: str, holder: int, epoch: int) -> int | None:
         """Is (holder, epoch) of f the reassertion of `holder`'s hold at `epoch - 2` over a
@@ -257,7 +261,8 @@ class EvidenceStore:
         who = self._robot_id if claimant is None else claimant
         return tuple(got[w] for w in self._backers(f, suspect, epoch, who))
 
-    def view_frames(self, f: str, holder: int, epoch: int, now: float) -> tuple[bytes, ...]:
+    def view_frames(self, f: str, holder: int, epoch: int, now: float,
+                    every: float | None = None) -> tuple[bytes, ...]:
         """Another robot's view of f is older than the takeover by `holder` at `epoch`
         certified here (it heartbeats f at an older epoch, or warns about an older
         holder): the whole certificate — the evidence against the robot replaced, then
@@ -268,12 +273,13 @@ class EvidenceStore:
         voided = self.reasserted(f, holder, epoch)
         if voided is not None:
             # A reassertion: the takeover it outranks, then the refutes that void it.
-            got = self._refutes.get(f, {}).get((holder, epoch - 2), {})
-            refutes = tuple(raw for _, raw in got.values())
+            got = self._refutes.get(f, {}).get((holder, epoch - 1), {}).get(voided)
+            refutes = (got[1],) if got is not None else ()
             frames = self._takeover_frames(f, voided, epoch - 1) + refutes
         else:
             frames = self._takeover_frames(f, holder, epoch)
-        if not frames or now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
+        gap = self._params.t_max if every is None else every
+        if not frames or now - self._evidence_relayed_at.get(f, -1e18) < gap:
             return ()
         self._evidence_relayed_at[f] = now
         return frames

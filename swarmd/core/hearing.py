@@ -11,10 +11,12 @@ from __future__ import annotations
 from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.drops import DropReason
+from swarmd.core.evidence import seq_of
 from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.slots import greater
+from swarmd.core.state import Standby
 from swarmd.core.witness import witnesses
 
 
@@ -36,6 +38,8 @@ class Hearing(NodeBase):
                 and not self._ev.is_certified(f, sender, hb.epoch):
             self._uncertified_beat(f, hb, now)
             return
+        if self._holds(f) and sender != self._robot_id:
+            self._refute_claim(f, sender, hb.epoch, 0, now)  # if it replaces us, rule 4
         ahead = self._forward(f, entry)
         if ahead != entry:
             # Per robot: a takeover that the robot it replaced refuted. Its holder is
@@ -126,12 +130,10 @@ class Hearing(NodeBase):
         if claim is not None and claim.function == f:
             if epoch >= claim.epoch:
                 self._emit(ev.Backoff(subject=claim.failed, function=f, winner=sender))
-                self._claim = None
-                self._to(Trigger.SUPERSEDED)
+                self._to(Trigger.SUPERSEDED, Standby())
             elif sender == claim.failed:
                 self._emit(ev.Refute(subject=sender, function=f))
-                self._claim = None
-                self._to(Trigger.REFUTED)
+                self._to(Trigger.REFUTED, Standby())
         if self._rejoin is not None and self._rejoin.function == f and sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
 
@@ -217,8 +219,7 @@ class Hearing(NodeBase):
         claim = self._claim
         if claim is not None and claim.function == f and new.epoch >= claim.epoch:
             self._emit(ev.Backoff(subject=claim.failed, function=f, winner=new.robot))
-            self._claim = None
-            self._to(Trigger.SUPERSEDED)
+            self._to(Trigger.SUPERSEDED, Standby())
         watch = self._watches.get(f)
         if watch is not None:
             watch.claim_heard(now)
@@ -282,12 +283,13 @@ class Hearing(NodeBase):
             mine = self._claim.epoch
             if c.epoch > mine or (c.epoch == mine and sender < self._robot_id):
                 self._emit(ev.Backoff(subject=self._claim.failed, function=f, winner=sender))
-                self._claim = None
-                self._to(Trigger.BACKOFF)
+                self._to(Trigger.BACKOFF, Standby())
             return
         if self._role == Role.ACTIVE and f == self._function:
-            if c.failed == self._robot_id and c.epoch > self._epoch and self._heartbeat_now(now):
-                self._emit(ev.Refute(subject=self._robot_id, function=f))
+            if c.failed == self._robot_id and c.epoch > self._epoch:
+                self._refute_claim(f, sender, c.epoch, seq_of(raw) if raw else 0, now)
+                if self._heartbeat_now(now):
+                    self._emit(ev.Refute(subject=self._robot_id, function=f))
             return
         watch = self._watches.get(f)
         if watch is not None and c.epoch > self._known[f].epoch:

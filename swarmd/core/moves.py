@@ -15,6 +15,7 @@ from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder
 from swarmd.core.roles import Role, Trigger
 from swarmd.core.slots import greater
+from swarmd.core.state import Active, Claiming, Fenced, Standby
 from swarmd.core.watchdog import SlotWatch
 
 
@@ -31,11 +32,11 @@ class Moves(NodeBase):
     # ------------------------------------------------------------------ the wait state
     def _start_claim(self, f: str, failed: int, epoch: int, now: float,
                      trigger: Trigger = Trigger.QUORUM) -> None:
-        self._to(trigger)
         # 65535 takeovers of one slot: saturate rather than wrap.
         new_epoch = min(epoch + 1, EPOCH_MAX)
-        self._claim = WaitState(f, failed, epoch, new_epoch, now + self._params.claim_hold,
-                                now + self._params.warn_interval)
+        self._to(trigger, Claiming(WaitState(f, failed, epoch, new_epoch,
+                                             now + self._params.claim_hold,
+                                             now + self._params.warn_interval)))
         self._clear_votes()
         self._emit(ev.Claim(subject=failed, function=f, epoch=new_epoch))
         self._send_claim()
@@ -72,27 +73,24 @@ class Moves(NodeBase):
             # Its certificate was refuted during the hold (or never complete): a takeover
             # no other robot would believe is none (DESIGN, "Convergence").
             self._emit(ev.Refute(subject=c.failed, function=c.function))
-            self._claim = None
-            self._to(Trigger.REFUTED)
+            self._to(Trigger.REFUTED, Standby())
             return
         if greater(self._known[c.function], Holder(self._robot_id, c.epoch)):
             # The slot moved past our claim during the hold: a greater entry is never
             # lowered (`slots.py`), so ours would be fenced at once.
             self._emit(ev.Backoff(subject=c.failed, function=c.function,
                                   winner=self._known[c.function].robot))
-            self._claim = None
-            self._to(Trigger.SUPERSEDED)
+            self._to(Trigger.SUPERSEDED, Standby())
             return
-        self._claim = None
-        self._to(Trigger.CLAIM_HELD)
         if self._identity is not None:
             self._ev.took_over(c.function, c.failed, c.old_epoch, c.epoch)
         self._emit(ev.Takeover(function=c.function, epoch=c.epoch, replaced=c.failed))
-        self._become_holder(c.function, c.epoch, now)
+        self._become_holder(Trigger.CLAIM_HELD, c.function, c.epoch, now)
 
-    def _become_holder(self, f: str, epoch: int, now: float) -> None:
-        """Execute f at `epoch` from now: tell the robot, watch f's neighbours, heartbeat."""
-        self._function, self._epoch = f, epoch
+    def _become_holder(self, trigger: Trigger, f: str, epoch: int, now: float) -> None:
+        """Execute f at `epoch` from now: the entry (us, epoch) in the table, tell the
+        robot, watch f's neighbours, heartbeat."""
+        self._to(trigger, Active(f, epoch))
         self._known.merge(f, Holder(self._robot_id, epoch))
         self._pending.append(Assign(f, epoch))
         self._watch_neighbours(now)
@@ -103,45 +101,35 @@ class Moves(NodeBase):
         f = self._function
         assert f is not None
         self._emit(ev.Fenced(function=f, epoch=epoch))
-        self._release()
-        self._to(Trigger.FENCE)
-        self._fenced_until = now + self._params.heartbeat_interval
-
-    def _release(self) -> None:
-        if self._function is not None:
-            self._pending.append(Release(self._function))
-        self._function = None
-        self._epoch = 0
-        self._watches = {}
+        self._pending.append(Release(f))
+        self._to(Trigger.FENCE, Fenced(now + self._params.heartbeat_interval))
 
     # ------------------------------------------------------------------ rejoin (rule 2)
     def _finish_rejoin(self, now: float) -> None:
-        assert self._rejoin is not None
-        rejoin, self._rejoin = self._rejoin, None
+        rejoin = self._rejoin
+        assert rejoin is not None
         if not rejoin.resumes(self._known[rejoin.function]):
-            self._to(Trigger.OUTDATED)
+            self._to(Trigger.OUTDATED, Standby())
             self._emit(ev.Started(role="standby", function=None))
             return
-        self._to(Trigger.REJOIN)
         self._emit(ev.Started(role="active", function=rejoin.function))
-        self._become_holder(rejoin.function, rejoin.epoch, now)
+        self._become_holder(Trigger.REJOIN, rejoin.function, rejoin.epoch, now)
 
     def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
         """Someone holds, warns about or claims our old slot at `seen_epoch`: newer than
         the one we held (or held by another robot), we stay a standby."""
         assert self._rejoin is not None
         if self._rejoin.superseded(self._known[f], seen_epoch):
-            self._rejoin = None
-            self._to(Trigger.OUTDATED)
+            self._to(Trigger.OUTDATED, Standby())
             self._emit(ev.Started(role="standby", function=None))
 
     # ------------------------------------------------------------------ watchdogs
     def _watch_neighbours(self, now: float) -> None:
-        assert self._function is not None
-        self._watches = {}
-        for g in self._plan.watched(self._function):
-            holder = self._known[g].robot
-            self._watches[g] = SlotWatch(g, self._params, now, self._heard_at.get(holder))
+        state = self._state
+        assert isinstance(state, Active)
+        state.watches = {g: SlotWatch(g, self._params, now,
+                                      self._heard_at.get(self._known[g].robot))
+                         for g in self._plan.watched(state.function)}
 
     def _watch_fired(self, g: str, watch: SlotWatch, now: float) -> None:
         subject, epoch = self._known[g]

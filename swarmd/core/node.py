@@ -44,6 +44,7 @@ from swarmd.core.replay import ReplayFilter
 from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.signed import Signed
+from swarmd.core.state import Active, Fenced, Standby
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import WatchState
 from swarmd.core.witness import Ears
@@ -69,10 +70,8 @@ class Node(Hearing, Moves, Signed, Restart):
         self._known = self._views(restored)
         self._covers = frozenset(f for f in plan.functions if robot_id in plan.covered_by(f))
         self._relevant = plan.relevant(robot_id)
-        self._role, self._function, self._epoch = Role.STANDBY, None, 0
-        self._watches = {}
+        self._state = Standby()
         self._votes = {f: VoteCounter(params.vote_window) for f in self._covers}
-        self._claim, self._fenced_until, self._rejoin = None, None, None
         self._heard_at = {}
         self._ears = Ears(robot_id, plan, params, now)
         self._claims_seen = ClaimMemory(params)
@@ -89,8 +88,7 @@ class Node(Hearing, Moves, Signed, Restart):
         if restored is not None:
             self._restore(restored, now)
         elif (own := plan.robots[robot_id].function) is not None:
-            self._role, self._function = Role.ACTIVE, own
-            self._epoch = self._known[own].epoch
+            self._state = Active(own, self._known[own].epoch)
             self._watch_neighbours(now)
 
     # ------------------------------------------------------------------ read-only
@@ -239,9 +237,8 @@ class Node(Hearing, Moves, Signed, Restart):
             self._start(now)
         if self._rejoin is not None and now >= self._rejoin.until:
             self._finish_rejoin(now)
-        if self._fenced_until is not None and now >= self._fenced_until:
-            self._fenced_until = None
-            self._to(Trigger.FENCE_DONE)
+        if isinstance(self._state, Fenced) and now >= self._state.until:
+            self._to(Trigger.FENCE_DONE, Standby())
         self._claim_due(now)
         for g, watch in self._watches.items():
             if now >= watch.deadline:
@@ -265,13 +262,12 @@ class Node(Hearing, Moves, Signed, Restart):
                 self._emit(ev.Leave(function=f, reason="fault"))
                 self._send(wire.Leave(self._plan.slot(f), self._epoch, wire.LeaveReason.FAULT),
                            evidence=True)
-                self._release()
-            self._claim = None
-            if self._rejoin is not None:
-                self._rejoin = None  # a faulty robot resumes nothing: it is a standby now
-                if self._started:
-                    self._emit(ev.Started(role="standby", function=None))
-            self._to(Trigger.FAULT)
+                self._pending.append(Release(f))
+            if self._rejoin is not None and self._started:
+                # A faulty robot resumes nothing: it is a standby now.
+                self._emit(ev.Started(role="standby", function=None))
+            state = self._state
+            self._to(Trigger.FAULT, state if isinstance(state, Fenced) else Standby())
             self._clear_votes()
         elif was_faulty:
             self._beat.next = now  # back to heartbeating as a standby at once
@@ -327,8 +323,8 @@ class Node(Hearing, Moves, Signed, Restart):
             candidates.append(self._beat.next)
         if self._claim is not None:
             candidates.append(min(self._claim.until, self._claim.resend))
-        if self._fenced_until is not None:
-            candidates.append(self._fenced_until)
+        if isinstance(self._state, Fenced):
+            candidates.append(self._state.until)
         if self._rejoin is not None:
             candidates.append(self._rejoin.until)
         return min(candidates) if candidates else None

@@ -11,6 +11,7 @@ defined there.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Mapping
 
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
@@ -18,6 +19,7 @@ from swarmd.core.auth import Identity, Signer, Verifier
 from swarmd.core.chain import OwnChain, PeerChains
 from swarmd.core.claims import ClaimMemory, WaitState
 from swarmd.core.drops import DropReason
+from swarmd.core.errors import TransitionError
 from swarmd.core.events import Event
 from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
@@ -28,6 +30,7 @@ from swarmd.core.rejoin import Rejoin
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
 from swarmd.core.slots import SlotTable
+from swarmd.core.state import NO_WATCHES, Active, Claiming, Rejoining, RoleState
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import Ears
@@ -53,14 +56,9 @@ class NodeBase:
     only moves forward (`slots.py`)."""
     _covers: frozenset[str]
     _relevant: Relevant
-    _role: Role
-    _function: str | None
-    _epoch: int
-    _watches: dict[str, SlotWatch]
+    _state: RoleState
+    """What this robot is doing, with that role's data (`state.py`)."""
     _votes: dict[str, VoteCounter]
-    _claim: WaitState | None
-    _fenced_until: float | None
-    _rejoin: Rejoin | None
     _heard_at: dict[int, float]
     """robot -> last frame accepted from it."""
     _ears: Ears
@@ -82,6 +80,43 @@ class NodeBase:
     _stopped: bool
     _started: bool
     _pending: list[Action]
+
+    # ------------------------------------------------------------------ the role
+    # Read-only views of `_state`: a role's data exists only while the robot has that
+    # role, and changes only with it (`_to`).
+    @property
+    def _role(self) -> Role:
+        return self._state.role
+
+    @property
+    def _function(self) -> str | None:
+        return self._state.function if isinstance(self._state, Active) else None
+
+    @property
+    def _epoch(self) -> int:
+        return self._state.epoch if isinstance(self._state, Active) else 0
+
+    @property
+    def _watches(self) -> Mapping[str, SlotWatch]:
+        return self._state.watches if isinstance(self._state, Active) else NO_WATCHES
+
+    @property
+    def _claim(self) -> WaitState | None:
+        return self._state.wait if isinstance(self._state, Claiming) else None
+
+    @property
+    def _rejoin(self) -> Rejoin | None:
+        return self._state.rejoin if isinstance(self._state, Rejoining) else None
+
+    def _to(self, trigger: Trigger, state: RoleState) -> None:
+        """The one way a role changes: `trigger` must lead from the current role to
+        `state`'s in the table (`roles.TRANSITIONS`), which raises `TransitionError`
+        otherwise."""
+        role = transition(self._state.role, trigger)
+        if role != state.role:
+            raise TransitionError(f"{trigger.name} leads {self._state.role.name} to "
+                                  f"{role.name}, not {state.role.name}")
+        self._state = state
 
     # ------------------------------------------------------------------ plumbing
     def _send(self, msg: wire.Message, *, evidence: bool = False) -> bytes:
@@ -114,9 +149,6 @@ class NodeBase:
             self._drops[DropReason.BAD_FUNCTION] += 1
         return f
 
-    def _to(self, trigger: Trigger) -> None:
-        self._role = transition(self._role, trigger)
-
     def _clear_votes(self) -> None:
         for v in self._votes.values():
             v.clear()
@@ -142,13 +174,10 @@ class NodeBase:
     def _learn_holder(self, f: str, new: Holder, now: float) -> None:
         raise NotImplementedError
 
-    def _relay_view(self, f: str, now: float) -> None:
+    def _relay_view(self, f: str, now: float, every: float | None = None) -> None:
         raise NotImplementedError
 
     def _fence(self, epoch: int, now: float) -> None:
-        raise NotImplementedError
-
-    def _release(self) -> None:
         raise NotImplementedError
 
     def _start_claim(self, f: str, failed: int, epoch: int, now: float,
@@ -178,6 +207,9 @@ class NodeBase:
         raise NotImplementedError
 
     def _forward(self, f: str, new: Holder) -> Holder:
+        raise NotImplementedError
+
+    def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
         raise NotImplementedError
 
     def _reassert(self, f: str, epoch: int, now: float) -> None:

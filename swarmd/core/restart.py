@@ -11,8 +11,8 @@ from swarmd.core.drops import DropReason
 from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
-from swarmd.core.roles import Role
 from swarmd.core.slots import SlotTable
+from swarmd.core.state import Rejoining
 
 
 class Restart(NodeBase):
@@ -51,8 +51,8 @@ class Restart(NodeBase):
                 self._known = SlotTable((g, self._initial(g) if g == f else e)
                                         for g, e in self._known.items())
         if held is not None:
-            self._rejoin = Rejoin(self._robot_id, *held, now + self._params.rejoin_hold)
-            self._role = Role.REJOINING
+            self._state = Rejoining(Rejoin(self._robot_id, *held,
+                                           now + self._params.rejoin_hold))
 
 
 __all__ = ["Restart"]

@@ -17,6 +17,7 @@ from swarmd.core.nodebase import NodeBase
 from swarmd.core.records import Holder, Restored
 from swarmd.core.roles import Role, Trigger
 from swarmd.core.slots import greater
+from swarmd.core.state import Active, Standby
 
 _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
@@ -83,13 +84,26 @@ class Signed(NodeBase):
         """We hold f, and a takeover of our hold that our refutes void reached us: we
         hold f on at the reassertion's epoch (`_forward`), tell the robot, and heartbeat
         it at once (an anchor: the epoch changed) so the others move forward too. The log
-        calls it a takeover of f from the claimant it outranks, which it is."""
-        outranked = self._ev.reasserted(f, self._robot_id, epoch)
-        self._epoch = epoch
-        self._emit(ev.Takeover(function=f, epoch=epoch,
-                               replaced=outranked if outranked is not None else 0))
+        says `refute` about ourselves: the suspicion of us ended refuted (rule 4); it is
+        not a takeover (nobody new executes f)."""
+        assert isinstance(self._state, Active)
+        self._state.epoch = epoch
+        self._emit(ev.Refute(subject=self._robot_id, function=f))
         self._pending.append(Assign(f, epoch))
         self._heartbeat_now(now)
+
+    def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
+        """Per robot: we hold f one epoch below a certified claim of it that replaces us,
+        and we are alive, not stalled (rule 4): sign that we refute that claim, once. The
+        signed REFUTE names the claimant and the claim's epoch; with the claim's
+        certificate it proves our reassertion (`_forward`) to every robot alike."""
+        if self._identity is None or not self._holds(f) or epoch != self._epoch + 1 \
+                or now - self._stalled_at <= self._params.t_max \
+                or self._ev.replaced(f, claimant, epoch) != self._robot_id \
+                or self._ev.refuted_up_to(f, self._robot_id, epoch, claimant) >= 0:
+            return
+        msg = wire.Refute(claimant, self._plan.slot(f), epoch, seq)
+        self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
 
     def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
         """Someone still believes an older holder of our slot: relay the certificate of
@@ -98,7 +112,7 @@ class Signed(NodeBase):
             return
         if self._identity is not None \
                 and self._ev.reasserted(f, self._robot_id, self._epoch) is not None:
-            self._relay_view(f, now)  # our hold is a reassertion: its proof is the view's
+            self._relay_view(f, now, every)  # a reassertion: its proof is the view's
             return
         mine = self._ev.relay(f, now, every)
         if mine is None:
@@ -138,7 +152,7 @@ class Signed(NodeBase):
         if said is not None:
             self._record_evidence(f, *said, cert.raw, now)
 
-    def _relay_view(self, f: str, now: float) -> None:
+    def _relay_view(self, f: str, now: float, every: float | None = None) -> None:
         """Someone's view of f is older than ours (it heartbeats f, or warns about f's
         holder, at an older epoch): if a certificate here backs our view, relay it
         whole, the signed CLAIM last (`EvidenceStore.view_frames`), at most once per
@@ -147,7 +161,7 @@ class Signed(NodeBase):
         about the new one, and the slot's standby would count no quorum (DESIGN,
         "Convergence")."""
         holder, epoch = self._known[f]
-        for raw in self._ev.view_frames(f, holder, epoch, now):
+        for raw in self._ev.view_frames(f, holder, epoch, now, every):
             self._send_cert(f, raw)
 
     def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
@@ -206,12 +220,19 @@ class Signed(NodeBase):
                 f, self._robot_id, wire.Claim(c.failed, self._plan.slot(f), c.epoch), 0,
                 refutes=True):
             self._emit(ev.Refute(subject=c.failed, function=f))
-            self._claim = None
-            self._to(Trigger.REFUTED)
+            self._to(Trigger.REFUTED, Standby())
         known = self._known[f]
         ahead = self._forward(f, known)
         if ahead != known:
             self._learn_holder(f, ahead, now)
+        # A refute of a claim (its own epoch, `_refute_claim`) proves the refuter's
+        # reassertion one epoch above it, whatever entry our view holds now: a relayed
+        # proof brings it to a robot whose view moved on without it (a rival at that
+        # epoch, or none).
+        mine = Holder(refuter.robot, refuter.epoch + 1)
+        if refuter.epoch < EPOCH_MAX and greater(mine, self._known[f]) \
+                and self._ev.reasserted(f, mine.robot, mine.epoch) is not None:
+            self._learn_holder(f, mine, now)
 
     def _relay_refutes(self, f: str, now: float) -> None:
         """Someone acts on a takeover of f that refutes we hold void (an uncertified
