@@ -37,7 +37,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "link": ("swarmd.link",),
     "config": ("swarmd.config",),
     "services": ("swarmd.runtime", "swarmd.state", "swarmd.metrics", "swarmd.budget",
-                 "swarmd.launch"),
+                 "swarmd.launch", "swarmd.revocation"),
     "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.monitor_ros2", "swarmd.check",
                "swarmd.waiting"),
     "sim.shared": ("sim.shared",),
