@@ -30,6 +30,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from swarmd import signals
 from swarmd import state as state_mod
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
@@ -500,13 +501,23 @@ async def _lifecycle(daemon: Daemon, stop: asyncio.Event,
 
 def _install_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event,
                      daemon: Daemon) -> list[signal.Signals]:
-    """SIGTERM and SIGINT set `stop`, SIGHUP reloads: the signals handled, to remove."""
+    """SIGTERM and SIGINT set `stop`, SIGHUP reloads: the signals handled, to remove.
+    What arrived before, while `swarmd start` was starting (swarmd/signals.py), is acted
+    on now: a stop stops the daemon as soon as it has started, a reload reloads it."""
     installed: list[signal.Signals] = []
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
         installed.append(sig)
     loop.add_signal_handler(signal.SIGHUP, daemon.reload)
     installed.append(signal.SIGHUP)
+    early = signals.take()
+    if early:
+        log.info("signals received while starting", extra={
+            "signals": [signal.Signals(s).name for s in early]})
+    if any(s != signal.SIGHUP for s in early):
+        stop.set()
+    elif early:
+        loop.call_soon(daemon.reload)
     return installed
 
 
