@@ -713,8 +713,10 @@ async def test_the_monitor_bounds_seqs_as_the_daemons_do(paper: Paper, mode: str
 
 def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> None:
     """Per-robot mode: one heartbeat with the swarm key in robot 1's name holding f2 at
-    epoch 1 supersedes nobody (robot 1 is shown `unverified`, no split brain); standby
-    6's heartbeat at epoch 1 after its signed CLAIM does supersede robot 2."""
+    epoch 1 supersedes nobody (robot 1 is shown `unverified`, no split brain). Row 2:
+    standby 6's own signed CLAIM for f2 with no certificate, and its anchor at epoch 1,
+    supersede nobody either (the daemons are unmoved by them: so is the monitor); with
+    the warnings of a quorum of f2's watchers (its certificate) they do."""
     from swarmd.monitor import MonitorState
 
     plan, params = paper
@@ -733,9 +735,18 @@ def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> 
     assert rows[2]["status"] == "live" and rows[1]["status"] == "unverified"
     assert state.alerts(0.2) == []
     claim = _signed(ids[6], plan, 6, next(seq), wire.Claim(2, 2, 1))
-    state.feed(claim, 0.3)
+    state.feed(claim, 0.3)  # no certificate
     state.feed(beat(6, 2, 1), 0.3)
-    rows = {r["robot"]: r for r in state.rows(0.35)}
+    for r in range(1, 5):
+        state.feed(beat(r, r, 0), 0.35)
+    rows = {r["robot"]: r for r in state.rows(0.4)}
+    assert rows[2]["status"] == "live" and rows[6]["status"] == "unverified"
+    assert state.alerts(0.4) == []
+    for witness in (1, 3):  # f2's watchers warn about robot 2: the certificate
+        state.feed(_signed(ids[witness], plan, witness, next(seq), wire.Warn(2, 2, 0)), 0.5)
+    state.feed(_signed(ids[6], plan, 6, next(seq), wire.Claim(2, 2, 1)), 0.5)
+    state.feed(beat(6, 2, 1), 0.5)
+    rows = {r["robot"]: r for r in state.rows(0.55)}
     assert rows[2]["status"] == "superseded" and rows[6]["status"] == "live"
 
 

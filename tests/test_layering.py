@@ -39,6 +39,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "services": ("swarmd.runtime", "swarmd.state", "swarmd.metrics", "swarmd.budget",
                  "swarmd.launch", "swarmd.revocation"),
     "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.monitor_ros2", "swarmd.check",
+               "swarmd.monitor_claims",
                "swarmd.waiting"),
     "sim.shared": ("sim.shared",),
     "sim.virtual": ("sim.virtual",),
