@@ -49,6 +49,7 @@ from swarmd.revocation import EXIT_REVOKED, revoked_in
 from swarmd.runtime import EventSink, ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
+from swarmd.verify_budget import VerifyBudget
 from swarmd.waiting import Waiting, describe_channel, report_waiting
 
 log = logging.getLogger("swarmd.daemon")
@@ -181,7 +182,7 @@ class Daemon:
         if material is None:
             return None
         self.signer = Ed25519Signer(cfg.robot, material.private_key)
-        self.keyring = Keyring(material.public_keys, material.revoked)
+        self.keyring = Keyring(material.public_keys, material.revoked, VerifyBudget())
         return Identity(self.signer, self.keyring)
 
     @staticmethod

@@ -77,6 +77,12 @@ own next frames leaves them a hole to be heard in; only a forger that keeps more
 this many holes busy, between two frames of the sender, makes one be forgotten."""
 
 
+def header_seq(data: bytes) -> int:
+    """The sequence number in a frame's header (bytes 5-10, `wire.HEADER`), unverified:
+    for `ReplayFilter.stale` before the frame is decoded (`wire.peek` checked its size)."""
+    return int.from_bytes(data[5:11], "big")
+
+
 class _Seen:
     """One stretch of a sender's seqs: the floor (every seq at or below it counts as
     seen), the last `WINDOW` seqs accepted above it (a set for the test, a heap to
@@ -208,6 +214,19 @@ class ReplayFilter:
             return False
         self.state[sender] = _Sender(_Seen(top))
         return True
+
+    def stale(self, sender: int, seq: int, now: float) -> DropReason | None:
+        """What `check` would say of a frame that is no longer new (`replay`, `seq_jump`),
+        moving nothing: the cheap test a receiver makes before checking a signature, so
+        a flood of played-back signed frames costs no signature check."""
+        bound = self.limit(now)
+        if bound is not None and seq > bound:
+            return DropReason.SEQ_JUMP
+        known = self.state.get(sender)
+        if known is None:
+            return None
+        where = known.stretch(seq)
+        return DropReason.REPLAY if where is None or not where.fresh(seq) else None
 
     def accept(self, sender: int, seq: int, now: float | None = None) -> bool:
         return self.check(sender, seq, now) is None
