@@ -303,7 +303,7 @@ class Daemon:
             node, transport, link,
             function_params=self.function_params,
             event_sink=self.on_event,
-            receive_filter=self.receive_filter,
+            receive_filter=self._receive_filter(),
             state_writer=self.state_file.write_snapshot,
             persist_after=persist_after,
             # Without an endpoint nobody reads the counters: spare the per-frame cost.
@@ -311,6 +311,17 @@ class Daemon:
             notifier=self.notifier,
             time_origin=self.time_origin,
         )
+
+    def _receive_filter(self) -> ReceiveFilter | None:
+        """The injected filter (the simulator's losses), then, per robot, the signature
+        budget's (`VerifyBudget.allows`: a flood past it is not even decoded)."""
+        budget = self.keyring.budget if self.keyring is not None else None
+        outer = self.receive_filter
+        if budget is None:
+            return outer
+        if outer is None:
+            return lambda data, now: budget.allows(data)
+        return lambda data, now: outer(data, now) and budget.allows(data)
 
     def _watch(self, link: RobotLink, runtime: Runtime) -> None:
         # A link that publishes the swarm's view (ros2) reads the node only through its

@@ -20,13 +20,17 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-PER_ROBOT_RATE = 40.0
-"""Signature checks a second for frames in one robot's name."""
-PER_ROBOT_BURST = 80.0
-TOTAL_RATE = 400.0
-"""Signature checks a second in all: at 0.5 ms each (a loaded 2-core machine), a fifth
-of one core at most."""
-TOTAL_BURST = 400.0
+PER_ROBOT_RATE = 20.0
+"""Signature checks a second for frames in one robot's name: its anchors (about one a
+second), a failover's warnings, claims and certificates (a few dozen, in a burst)."""
+PER_ROBOT_BURST = 40.0
+TOTAL_RATE = 100.0
+"""Signature checks a second in all: 2-10% of one core at 0.2-1 ms a check
+(`bench/bench_verify_flood.py` measures the check on the machine it runs on)."""
+TOTAL_BURST = 100.0
+SIGNED_MIN = 11 + 64
+"""bytes: the shortest frame that carries an Ed25519 signature (header and signature;
+a frame tagged with the swarm key carries 8 bytes, and every such frame is shorter)."""
 
 
 class _Bucket:
@@ -53,6 +57,22 @@ class VerifyBudget:
         self._robots: dict[int, _Bucket] = {}
         self.refused = 0
         """Checks not made (counted once each)."""
+
+    def allows(self, data: bytes) -> bool:
+        """The daemon's receive filter (`Runtime(receive_filter=)`), before the frame is
+        decoded: False for a frame that carries a signature to check (its signed bit
+        set, and long enough for a 64-byte signature: an anchor, a WARN, CLAIM, LEAVE,
+        REFUTE or CERT) in the name of a robot whose budget is spent, so a flood past
+        the budget costs no decoding either. Counted in `refused`."""
+        if len(data) < SIGNED_MIN or not data[0] & 0x08:
+            return True
+        robot = int.from_bytes(data[3:5], "big")
+        mine = self._robots.get(robot)
+        now = self._clock()
+        if (mine is None or mine.fill(now) >= 1.0) and self._total.fill(now) >= 1.0:
+            return True
+        self.refused += 1
+        return False
 
     def take(self, robot: int) -> bool:
         now = self._clock()

@@ -38,7 +38,7 @@ def test_a_heartbeat_in_a_robots_name_far_ahead_mutes_nobody(paper: Paper, auth:
     assert res.violations == []  # no healthy robot replaced, fenced or muted
     assert takeovers(res) == [] and named(res, "fenced") == []
     assert res.holders() == HOLDERS
-    assert drops(res, "seq_jump") == 0 or auth != "per-robot"
+    assert drops(res, "seq_jump") >= 4  # the 91-minute one, beyond every clock bound
     assert res.drops[2].get("own", 0) >= 1  # robot 2 heard them and counted them
 
 

@@ -45,7 +45,7 @@ def test_a_keyring_with_a_budget_checks_no_more_than_it() -> None:
     data = b"frame"
     good = Ed25519Signer(1, priv).sign(data)
     verdicts = [ring.verify(1, data, good) for _ in range(1000)]
-    assert sum(verdicts) == 80 and ring.budget is not None and ring.budget.refused == 920
+    assert sum(verdicts) == 40 and ring.budget is not None and ring.budget.refused == 960
     assert not ring.verify(9, data, good)  # unknown robot: no check, no budget spent
     clock.t = 10.0
     assert ring.verify(1, data, good)
@@ -79,3 +79,20 @@ def test_played_back_signed_frames_cost_no_signature_check(paper: Paper) -> None
         node.receive(frame, 1.0 + 0.001 * i)
     assert counting.calls == 1
     assert node.drops["replay"] == 999 and node.drops["seq_jump"] == 1000
+
+
+def test_past_the_budget_a_signed_frame_is_not_even_decoded(paper: Paper) -> None:
+    """The daemon's receive filter: once robot 2's budget is spent, its signed frames
+    are dropped before decoding; its chain-linked heartbeats (no signature) and other
+    robots' frames pass."""
+    plan, _params = paper
+    ids = fake_identities(plan.robots)
+    clock = _Clock()
+    b = VerifyBudget(per_robot=1, per_robot_burst=1, total=100, total_burst=100, clock=clock)
+    anchor2 = signed_beat(ids[2], plan.swarm_id, 2, 10**12, 2, 0)
+    anchor3 = signed_beat(ids[3], plan.swarm_id, 3, 10**12, 3, 0)
+    linked2 = signed_beat(None, plan.swarm_id, 2, 10**12 + 1, 2, 0)
+    assert b.allows(anchor2) and b.take(2)
+    assert not b.allows(anchor2) and b.allows(linked2) and b.allows(anchor3)
+    clock.t = 1.0
+    assert b.allows(anchor2)
