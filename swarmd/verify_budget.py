@@ -55,26 +55,40 @@ class VerifyBudget:
         self._per = (per_robot, per_robot_burst)
         self._total = _Bucket(total, total_burst, clock())
         self._robots: dict[int, _Bucket] = {}
+        self._credits: dict[int, int] = {}
+        """Checks `allows` took from the budget for frames still on their way."""
         self.refused = 0
         """Checks not made (counted once each)."""
 
     def allows(self, data: bytes) -> bool:
         """The daemon's receive filter (`Runtime(receive_filter=)`), before the frame is
-        decoded: False for a frame that carries a signature to check (its signed bit
-        set, and long enough for a 64-byte signature: an anchor, a WARN, CLAIM, LEAVE,
-        REFUTE or CERT) in the name of a robot whose budget is spent, so a flood past
-        the budget costs no decoding either. Counted in `refused`."""
+        queued and decoded: False for a frame that carries a signature to check (its
+        signed bit set, and long enough for a 64-byte signature: an anchor, a WARN,
+        CLAIM, LEAVE, REFUTE or CERT) in the name of a robot whose budget is spent, so a
+        flood past the budget costs no decoding either (counted in `refused`). A frame it
+        lets through takes its check from the budget now, as a credit the check then
+        spends (`take`): frames queued together cannot overdraw it. Credits are capped,
+        so played-back frames (dropped before any check) spend nothing more."""
         if len(data) < SIGNED_MIN or not data[0] & 0x08:
             return True
         robot = int.from_bytes(data[3:5], "big")
-        mine = self._robots.get(robot)
-        now = self._clock()
-        if (mine is None or mine.fill(now) >= 1.0) and self._total.fill(now) >= 1.0:
+        if self._credits.get(robot, 0) >= self._per[1]:
             return True
-        self.refused += 1
-        return False
+        if not self._spend(robot):
+            return False
+        self._credits[robot] = self._credits.get(robot, 0) + 1
+        return True
 
     def take(self, robot: int) -> bool:
+        """One signature check of a frame in `robot`'s name: a credit `allows` took, or
+        the budget now."""
+        credit = self._credits.get(robot, 0)
+        if credit > 0:
+            self._credits[robot] = credit - 1
+            return True
+        return self._spend(robot)
+
+    def _spend(self, robot: int) -> bool:
         now = self._clock()
         mine = self._robots.get(robot)
         if mine is None:
