@@ -20,14 +20,15 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-PER_ROBOT_RATE = 20.0
+PER_ROBOT_RATE = 40.0
 """Signature checks a second for frames in one robot's name: its anchors (about one a
-second), a failover's warnings, claims and certificates (a few dozen, in a burst)."""
-PER_ROBOT_BURST = 40.0
-TOTAL_RATE = 100.0
-"""Signature checks a second in all: 2-10% of one core at 0.2-1 ms a check
+second), its warnings (one each warn interval while it suspects), and the certificates
+relayed with claims, in which its warnings travel again (a few dozen a second at most)."""
+PER_ROBOT_BURST = 80.0
+TOTAL_RATE = 150.0
+"""Signature checks a second in all: 3-15% of one core at 0.2-1 ms a check
 (`bench/bench_verify_flood.py` measures the check on the machine it runs on)."""
-TOTAL_BURST = 100.0
+TOTAL_BURST = 150.0
 SIGNED_MIN = 11 + 64
 """bytes: the shortest frame that carries an Ed25519 signature (header and signature;
 a frame tagged with the swarm key carries 8 bytes, and every such frame is shorter)."""

@@ -45,7 +45,7 @@ def test_a_keyring_with_a_budget_checks_no_more_than_it() -> None:
     data = b"frame"
     good = Ed25519Signer(1, priv).sign(data)
     verdicts = [ring.verify(1, data, good) for _ in range(1000)]
-    assert sum(verdicts) == 40 and ring.budget is not None and ring.budget.refused == 960
+    assert sum(verdicts) == 80 and ring.budget is not None and ring.budget.refused == 920
     assert not ring.verify(9, data, good)  # unknown robot: no check, no budget spent
     clock.t = 10.0
     assert ring.verify(1, data, good)
