@@ -6,6 +6,15 @@ file only assembles them, so owners of different commands never edit the same co
 
 from __future__ import annotations
 
+import sys
+
+if sys.argv[1:2] == ["start"]:
+    # First of all, before the imports below take their time: a SIGHUP or SIGTERM
+    # while the daemon starts must not kill it (swarmd/signals.py).
+    from swarmd import signals
+
+    signals.defer()
+
 import importlib
 import inspect
 import re

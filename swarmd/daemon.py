@@ -30,11 +30,13 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from swarmd import signals
 from swarmd import state as state_mod
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
-from swarmd.core.events import NAME_KEY, Alert, event_of
+from swarmd.core.events import NAME_KEY, Alert, Leave, event_of
 from swarmd.core.node import Node
+from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
 from swarmd.eventlog import EventLog
 from swarmd.identity import Ed25519Signer, Keyring
@@ -43,9 +45,11 @@ from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
 from swarmd.metrics import Metrics, MetricsServer
 from swarmd.notify import Notifier
+from swarmd.revocation import EXIT_REVOKED, revoked_in
 from swarmd.runtime import EventSink, ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
+from swarmd.verify_budget import VerifyBudget
 from swarmd.waiting import Waiting, describe_channel, report_waiting
 
 log = logging.getLogger("swarmd.daemon")
@@ -156,6 +160,7 @@ class Daemon:
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
+        self.revoked = asyncio.Event()  # a reload found this robot revoked: EXIT_REVOKED
 
     def _init_started(self) -> None:
         """What `start` makes: None until it runs."""
@@ -177,7 +182,7 @@ class Daemon:
         if material is None:
             return None
         self.signer = Ed25519Signer(cfg.robot, material.private_key)
-        self.keyring = Keyring(material.public_keys, material.revoked)
+        self.keyring = Keyring(material.public_keys, material.revoked, VerifyBudget())
         return Identity(self.signer, self.keyring)
 
     @staticmethod
@@ -298,7 +303,7 @@ class Daemon:
             node, transport, link,
             function_params=self.function_params,
             event_sink=self.on_event,
-            receive_filter=self.receive_filter,
+            receive_filter=self._receive_filter(),
             state_writer=self.state_file.write_snapshot,
             persist_after=persist_after,
             # Without an endpoint nobody reads the counters: spare the per-frame cost.
@@ -306,6 +311,17 @@ class Daemon:
             notifier=self.notifier,
             time_origin=self.time_origin,
         )
+
+    def _receive_filter(self) -> ReceiveFilter | None:
+        """The injected filter (the simulator's losses), then, per robot, the signature
+        budget's (`VerifyBudget.allows`: a flood past it is not even decoded)."""
+        budget = self.keyring.budget if self.keyring is not None else None
+        outer = self.receive_filter
+        if budget is None:
+            return outer
+        if outer is None:
+            return lambda data, now: budget.allows(data)
+        return lambda data, now: outer(data, now) and budget.allows(data)
 
     def _watch(self, link: RobotLink, runtime: Runtime) -> None:
         # A link that publishes the swarm's view (ros2) reads the node only through its
@@ -345,6 +361,9 @@ class Daemon:
         try:
             new = load_robot(self.config_path)
         except ConfigError as exc:
+            if revoked_in(self.running_cfg.swarm.source, self.robot_id):
+                self._revoked()
+                return
             self.reload_errors += 1
             log.error("SIGHUP: config not reloaded", extra={
                 "problems": [str(p) for p in exc.problems]})
@@ -367,6 +386,25 @@ class Daemon:
         log.info("SIGHUP: config reloaded", extra={
             "keys": len(keys) if keys is not None else None,
             "restart_needed_for": restart_needed})
+
+    def _revoked(self) -> None:
+        """SIGHUP found this robot in the swarm file's `auth.revoked` (swarmd.revocation):
+        nobody accepts its frames any more and its slot is being taken over, so it stops
+        acting: one log line, a `leave` (reason `revoked`) in its event log if it held a
+        function, then `run_daemon` releases it through the link and exits."""
+        if self.revoked.is_set():
+            return
+        self.revoked.set()
+        snap = self.runtime.snapshot() if self.runtime is not None else None
+        held = snap.function if snap is not None and snap.role == Role.ACTIVE else None
+        log.error("revoked: this robot's key is revoked in the swarm file; releasing its "
+                  "function and stopping", extra={
+                      "robot": self.robot_id, "function": held,
+                      "swarm_file": self.running_cfg.swarm.source,
+                      "exit_status": EXIT_REVOKED})
+        if held is not None:
+            self.on_event(Leave(function=held, reason="revoked").record(
+                round(time.time() - self.time_origin, 6), self.robot_id))
 
     def _reload_keys(self, new: RobotConfig) -> tuple[bytes, ...] | None:
         """SIGHUP: the new config's keys, given to the node; None when refused (the
@@ -465,20 +503,33 @@ async def _lifecycle(daemon: Daemon, stop: asyncio.Event,
     if runtime is None:
         return EXIT_FAILURE
     await _serve(daemon, runtime, stop, on_ready)
+    revoked = daemon.revoked.is_set()
+    if revoked:  # nobody accepts its LEAVE: release the robot and go
+        daemon.handover_on_stop = False
     log.info("stopping", extra={"handover": daemon.handover_on_stop})
     await daemon.stop()
-    return EXIT_OK
+    return EXIT_REVOKED if revoked else EXIT_OK
 
 
 def _install_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event,
                      daemon: Daemon) -> list[signal.Signals]:
-    """SIGTERM and SIGINT set `stop`, SIGHUP reloads: the signals handled, to remove."""
+    """SIGTERM and SIGINT set `stop`, SIGHUP reloads: the signals handled, to remove.
+    What arrived before, while `swarmd start` was starting (swarmd/signals.py), is acted
+    on now: a stop stops the daemon as soon as it has started, a reload reloads it."""
     installed: list[signal.Signals] = []
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
         installed.append(sig)
     loop.add_signal_handler(signal.SIGHUP, daemon.reload)
     installed.append(signal.SIGHUP)
+    early = signals.take()
+    if early:
+        log.info("signals received while starting", extra={
+            "signals": [signal.Signals(s).name for s in early]})
+    if any(s != signal.SIGHUP for s in early):
+        stop.set()
+    elif early:
+        loop.call_soon(daemon.reload)
     return installed
 
 
@@ -507,7 +558,12 @@ async def _serve(daemon: Daemon, runtime: Runtime, stop: asyncio.Event,
         log.info("ready", extra={"robot": daemon.robot_id})
         if on_ready is not None:
             on_ready(daemon)
-        await stop.wait()
+        waits = [asyncio.ensure_future(e.wait()) for e in (stop, daemon.revoked)]
+        try:
+            await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for w in waits:
+                w.cancel()
     except asyncio.CancelledError:
         await _stop_cancelled(daemon)
         raise

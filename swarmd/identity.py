@@ -43,6 +43,7 @@ from cryptography.hazmat.primitives.serialization import (
 from swarmd.core.auth import PUBLIC_KEY_LEN, SIGNATURE_LEN, Identity
 from swarmd.files import FileRefused, file_kind, read_regular_file, write_atomic
 from swarmd.keys import KeyFileError, read_private_file
+from swarmd.verify_budget import VerifyBudget
 
 __all__ = [
     "PRIVATE_KEY_LEN",
@@ -132,9 +133,12 @@ class Keyring:
     length, a bad signature all give False (the core counts the drop).
     """
 
-    def __init__(self, public_keys: PublicKeys, revoked: Iterable[int] = ()) -> None:
+    def __init__(self, public_keys: PublicKeys, revoked: Iterable[int] = (),
+                 budget: VerifyBudget | None = None) -> None:
         self._keys: dict[int, tuple[Ed25519PublicKey, ...]] = {}
         self._revoked: frozenset[int] = frozenset()
+        self.budget = budget
+        """The daemon's: how many signatures it checks a second (`verify_budget`)."""
         self.replace(public_keys, revoked)
 
     def replace(self, public_keys: PublicKeys, revoked: Iterable[int] = ()) -> None:
@@ -169,8 +173,11 @@ class Keyring:
         return tuple(_public_bytes(k) for k in self._keys.get(robot, ()))
 
     def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
-        if robot in self._revoked or len(signature) != SIGNATURE_LEN:
+        if robot in self._revoked or len(signature) != SIGNATURE_LEN \
+                or robot not in self._keys:
             return False
+        if self.budget is not None and not self.budget.take(robot):
+            return False  # a flood of signed frames: not checked, so not believed
         for key in self._keys.get(robot, ()):
             try:
                 key.verify(bytes(signature), bytes(data))

@@ -29,12 +29,14 @@ clock), so one bit-flipped or forged frame far ahead is a `seq_jump` drop, not a
 muted for good that shows `silent` with false alerts. What the monitor cannot verify it
 shows as such: in per-robot mode a heartbeat is signed by no robot (the swarm key, or
 nothing), so a heartbeat at a newer epoch (or of another robot at the plan's epoch 0) is
-believed only from the robot whose signed CLAIM for that slot and epoch was heard, as
-the daemons believe only a certified holder. Any other is shown with the status
-`unverified` and moves nobody: no `superseded`, no split brain. A monitor started after
-a takeover has not heard its claim, so the new holder shows `unverified` until the next
-one. Shared-key and unsigned swarms have nothing more to check: what the daemons take,
-the monitor shows.
+believed only from the robot whose CLAIM for that slot and epoch was heard *with its
+certificate*, judged exactly as a daemon judges it (`swarmd.monitor_claims`: a signed
+CLAIM alone, which any insider can make for a slot it covers, vouches for nothing).
+Any other is shown with the status `unverified` and moves nobody: no `superseded`, no
+split brain. A monitor started after a takeover has not heard its claim, so the new
+holder shows `unverified` until it overhears the claim again with its certificate (the
+new holder relays both to any robot that still shows an older view). Shared-key and
+unsigned swarms have nothing more to check: what the daemons take, the monitor shows.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
+from swarmd.monitor_claims import MonitorClaims
 from swarmd.transport.base import Channel, Transport
 
 
@@ -110,8 +113,8 @@ class MonitorState:
         """function -> (claimant, epoch, time) of the last CLAIM heard."""
         self.newest: dict[str, tuple[int, int]] = {}
         """function -> (epoch, robot) of the newest-epoch ACTIVE heartbeat heard for it."""
-        self.signed_claims: set[tuple[str, int, int]] = set()
-        """Per-robot mode: (function, epoch, claimant) of every signed CLAIM heard."""
+        self.certified = MonitorClaims(plan, params) if verifier is not None else None
+        """Per-robot mode: the takeovers a daemon would believe (`monitor_claims`)."""
         self.chains = PeerChains(1 / params.heartbeat_interval)
         """Per-robot mode: each robot's heartbeat chain (`swarmd.core.chain`)."""
         self.replay = ReplayFilter()
@@ -129,7 +132,7 @@ class MonitorState:
             return True
         if epoch == 0 and self.plan.initial_holder(function) == robot:
             return True
-        return (function, epoch, robot) in self.signed_claims
+        return self.certified is not None and self.certified.believed(function, epoch, robot)
 
     def _drop(self, reason: DropReason | MonitorDrop | str) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
@@ -146,6 +149,8 @@ class MonitorState:
         seen.last_seq = frame.seq
         seen.last_heard = now
         seen.frames += 1
+        if self.certified is not None:  # evidence, refutes and claims, as a daemon
+            self.certified.frame(frame, now)
         match frame.msg:
             case wire.Heartbeat(function, epoch, role, health):
                 self._on_heartbeat(seen, frame.sender, function, epoch, role, health)
@@ -179,7 +184,11 @@ class MonitorState:
             self._drop(DropReason.UNKNOWN_SENDER)
             return None
         if isinstance(frame.msg, wire.Cert):
-            return None  # relays a signed frame; no replay filter, as in the daemons
+            # Relays a signed frame: no replay filter, as in the daemons; a piece of a
+            # certificate, perhaps (`monitor_claims`).
+            if self.certified is not None:
+                self.certified.frame(frame, now)
+            return None
         msg = frame.msg
         if isinstance(msg, wire.Heartbeat) and self.verifier is not None \
                 and not self.chains.check(frame.sender, msg.n, msg.link, now,
@@ -217,8 +226,6 @@ class MonitorState:
         name = self.plan.function_at(function)
         if name is not None:
             self.claims[name] = (sender, epoch, now)
-            if self.verifier is not None:  # decoded: signed by its sender
-                self.signed_claims.add((name, epoch, sender))
         failed_seen = self.robots.get(failed)
         if failed_seen is not None:
             # A claim tells the watchers to stop warning (paper section IV-A).

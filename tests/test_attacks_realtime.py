@@ -38,6 +38,11 @@ ATTACKS: dict[str, tuple[str, ...]] = {
     "epoch": ("forge:1@3:epoch",),
     # a HEARTBEAT and a WARN as robot 3 at sequence number 2^48-1
     "seq": ("forge:3@3:seq",),
+    # two heartbeats as robot 2 that anyone could make, 91 and 30 minutes ahead of its
+    # counter: its counter must not move, the receivers must keep hearing it
+    "ahead": ("forge:2@3:ahead",),
+    # the same in every robot's name, then robot 2 dies: f2 is taken over as usual
+    "ahead_all": (*(f"forge:{r}@3:ahead" for r in range(1, 7)), "crash:2@3.5"),
     # robot 2 dies; robot 1 spams CLAIMs for f2 (and every other slot) at new epochs
     "claim": ("crash:2@3", "forge:1@3:claim"),
     # robot 4 sends WARNs in the names of every other witness about every holder
@@ -47,7 +52,7 @@ ATTACKS: dict[str, tuple[str, ...]] = {
     "replay": ("crash:6@1.5", "crash:2@2.5", "restart:6@3", "forge:1@3:replay"),
 }
 DROPS = {"epoch": "uncertified", "seq": "seq_jump", "claim": "uncertified", "warn": "auth",
-         "replay": "replay"}
+         "replay": "replay", "ahead": "seq_jump", "ahead_all": "seq_jump"}
 """The counted drop each attack shows as in per-robot mode (DESIGN section 2)."""
 
 
@@ -116,7 +121,8 @@ def test_per_robot_one_insider_breaks_nothing(runs: dict[tuple[str, str], Run],
     assert out["process_problems"] == []
     assert code == 0 and out["ok"] is True
     # Only the dead robot is replaced, by its standby, within the bound (+ one T_max).
-    dead = {"claim": "crash:2@3", "replay": "crash:2@2.5"}.get(attack)
+    dead = {"claim": "crash:2@3", "replay": "crash:2@2.5", "ahead_all": "crash:2@3.5"}.get(
+        attack)
     assert out["takeovers"] == (1 if dead else 0)
     assert out["holders"] == {"f1": [1], "f2": [6 if dead else 2], "f3": [3], "f4": [4]}
     if dead is not None:
@@ -163,15 +169,16 @@ def test_shared_key_claim_spam_keeps_a_dead_robot_unreplaced(
     assert ("no_takeover", 2) in kinds and "f2" not in out["holders"] and code == 1
 
 
-@pytest.mark.parametrize("attack", ["seq", "warn", "replay"])
+@pytest.mark.parametrize("attack", ["seq", "warn", "replay", "ahead", "ahead_all"])
 def test_shared_key_what_is_still_stopped(runs: dict[tuple[str, str], Run],
                                           attack: str) -> None:
-    """A max seq is bounded (`seq_jump`), replays are replays; WARNs in other names do
-    reach the quorum, but the standby's own ears (rule 9: it hears the suspect) keep a
-    healthy robot in its slot."""
+    """A max seq is bounded (`seq_jump`), replays are replays, a frame in a robot's own
+    name ahead of it moves its counter no more and mutes it to nobody; WARNs in other
+    names do reach the quorum, but the standby's own ears (rule 9: it hears the suspect)
+    keep a healthy robot in its slot."""
     code, out = runs["shared", attack].result()
     assert out["violations"] == [] and code == 0
-    dead = attack == "replay"
+    dead = attack in ("replay", "ahead_all")
     assert out["holders"] == {"f1": [1], "f2": [6 if dead else 2], "f3": [3], "f4": [4]}
     if attack != "warn":
         hit = {r for r, d in out["drops"].items() if d.get(DROPS[attack], 0) > 0}

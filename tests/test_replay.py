@@ -33,9 +33,17 @@ def test_reordered_within_window_accepted_once() -> None:
 
 def test_older_than_window_dropped() -> None:
     f = ReplayFilter()
-    assert f.accept(7, 1000)
-    assert not f.accept(7, 1000 - WINDOW)
+    assert all(f.accept(7, s) for s in range(1000, 1000 + WINDOW + 1))
+    assert not f.accept(7, 1000)
     assert not f.accept(7, 1)
+
+
+def test_a_sender_heard_first_has_no_floor_until_a_window_is_heard() -> None:
+    """The first frame heard of a sender may be a forgery far ahead of it: until WINDOW
+    of its frames are heard, any not seen yet counts (replay.UNKNOWN)."""
+    f = ReplayFilter()
+    assert f.accept(7, 10**9)
+    assert f.accept(7, 1000) and f.accept(7, 999) and not f.accept(7, 1000)
 
 
 def test_big_jump_forgets_the_window() -> None:

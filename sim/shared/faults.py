@@ -49,7 +49,7 @@ class FaultKind(StrEnum):
 
 KINDS: tuple[str, ...] = tuple(k.value for k in FaultKind)
 """The kinds' words, in the order `--help` and the docs list them."""
-ATTACKS = ("epoch", "seq", "claim", "warn", "replay")
+ATTACKS = ("epoch", "seq", "ahead", "claim", "warn", "replay")
 """What a `forge` fault sends (module docstring)."""
 _DURATION_KINDS = {FaultKind.PAUSE, FaultKind.PARTITION, FaultKind.FADE, FaultKind.DEAF}
 LINK_KINDS = (FaultKind.PARTITION, FaultKind.FADE, FaultKind.DEAF)

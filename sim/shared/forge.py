@@ -10,13 +10,22 @@ swarm key). One definition, pure, so any simulator can deliver them.
   wait state's silence, renewed forever).
 - `warn`: WARNs in the names of every witness of every slot but R, about the slot's
   holder (a quorum of invented witnesses).
+- `ahead`: two HEARTBEATs as R that anyone could make (no signature, a made-up chain
+  link), one 91 minutes ahead of R's counter (beyond what receivers take, within what
+  a robot that followed frames in its own name would have followed) and one 30 minutes
+  ahead (within the receivers' clock bound, so they take it): a robot's counter must
+  not move on them, and the receivers must keep hearing R's own next frames.
 - `replay`: every frame R's radio recorded on the channel before T (the last
   `CAPTURE`), played back verbatim (the heartbeats of a robot that died since, to a
   standby that restarted since, say).
 
 Forged frames in other robots' names carry R's signature (that is all R can make) and
-a sequence number a little above the last one R heard from that robot. R's own node
-hears them too (the insider is another radio with R's key).
+a sequence number `CLEAR` above the last one R heard from that robot, clear of the
+seqs the robot itself sends during a run: a forged frame that takes the very seq a
+robot sends next gets that one frame of the robot dropped as a replay (one forged
+frame per lost frame, a jam in that robot's name: DESIGN, "Sequence numbers"), which
+is not what these attacks probe. R's own node hears them too (the insider is another
+radio with R's key); its counter does not move on them.
 """
 
 from __future__ import annotations
@@ -30,6 +39,9 @@ from swarmd.core.chain import LINK_LEN
 from swarmd.core.node import Snapshot
 from swarmd.core.plan import SwarmPlan
 
+CLEAR = 100_000
+"""How far above a robot's last seq forged frames start (about three hours of frames
+at 10 Hz: clear of the robot's own; well within the receivers' clock bound)."""
 REPEATING = frozenset({"claim", "warn", "replay"})
 """Attacks sent again every warn interval; `epoch` and `seq` are one burst."""
 CAPTURE = 512
@@ -50,7 +62,7 @@ class _Insider:
 
     def frame(self, sender: int, msg: wire.Message, seq: int | None = None) -> None:
         if seq is None:  # a little ahead of the last one heard, so it is not a replay
-            seq = min(self.seqs.get(sender, self.snap.seq) + 8 + len(self.out), wire.SEQ_MAX)
+            seq = min(self.seqs.get(sender, self.snap.seq) + CLEAR + len(self.out), wire.SEQ_MAX)
         if self.signer is not None and isinstance(msg, wire.Heartbeat):
             # Per-robot mode: R's key signs a heartbeat of its own as an anchor, on a
             # chain of its own making (it cannot make another robot's links).
@@ -77,9 +89,12 @@ def forged_frames(attack: str, plan: SwarmPlan, snap: Snapshot, *, keys: Sequenc
         case "epoch":
             for f in plan.functions:
                 if f not in held:
-                    insider.frame(me, wire.Heartbeat(plan.slot(f), 0xFFFF, 1, 0), snap.seq + 1)
+                    insider.frame(me, wire.Heartbeat(plan.slot(f), 0xFFFF, 1, 0),
+                                  snap.seq + CLEAR)
         case "seq":
             _seq_probe(insider)
+        case "ahead":
+            _ahead(insider)
         case "claim":
             _claims(insider, held, round_)
         case "warn":
@@ -104,6 +119,26 @@ def _seq_probe(insider: _Insider) -> None:
     insider.frame(me, wire.Warn(holder, plan.slot(some), max(0, epoch - 1)), wire.SEQ_MAX)
 
 
+AHEAD_PROBES = (91 * 60 * 100_000, 30 * 60 * 100_000)
+"""How far ahead of R's counter the `ahead` heartbeats are, in seq units (10 us)."""
+
+
+def _ahead(insider: _Insider) -> None:
+    """`ahead`: R's current heartbeat, far ahead, made without R's key."""
+    plan, snap = insider.plan, insider.snap
+    slot = plan.slot(snap.function) if snap.function is not None else 0
+    linked = insider.signer is not None  # per-robot mode: a heartbeat carries a link
+    for i, ahead in enumerate(AHEAD_PROBES):
+        msg = wire.Heartbeat(slot, snap.epoch if slot else 0, int(snap.role), 0,
+                             (7 + i) % 256 if linked else 0,
+                             bytes([0x5A + i]) * LINK_LEN if linked else b"")
+        frame = wire.Frame(plan.swarm_id, snap.robot_id, min(snap.seq + ahead, wire.SEQ_MAX),
+                           msg)
+        # The signer only makes `encode` lay out the link: a heartbeat that is no anchor
+        # is not signed, so nothing here needs R's key.
+        insider.out.append(wire.encode(frame, insider.key, insider.signer))
+
+
 def _claims(insider: _Insider, held: set[str], round_: int) -> None:
     """`claim`: a claim as R for every slot it does not hold, a new epoch each round."""
     plan, snap = insider.plan, insider.snap
@@ -112,7 +147,8 @@ def _claims(insider: _Insider, held: set[str], round_: int) -> None:
             holder, epoch = snap.known[f]
             insider.frame(snap.robot_id,
                           wire.Claim(holder, plan.slot(f), min(0xFFFF, epoch + 1 + round_)),
-                          snap.seq + 1 + round_ * len(plan.functions) + len(insider.out))
+                          snap.seq + CLEAR + round_ * len(plan.functions)
+                          + len(insider.out))
 
 
 def _warns(insider: _Insider) -> None:

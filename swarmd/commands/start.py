@@ -3,7 +3,8 @@
 Logs one JSON object a line on stdout (journald), or readable lines on a terminal
 (`--log-format`), appends the event log if configured,
 stops cleanly on SIGTERM / SIGINT (LEAVE when it held a function and handover_on_stop),
-reloads on SIGHUP. Exit codes: 0 clean stop, 1 start-up failure, 2 unusable config.
+reloads on SIGHUP. Exit codes: 0 clean stop, 1 start-up failure, 2 unusable config,
+3 this robot's key is revoked (swarmd.revocation; not restarted by the unit).
 """
 
 from __future__ import annotations
@@ -55,7 +56,9 @@ def register(app: typer.Typer) -> None:
         alert hook (docs/daemon.md).
 
         Exit codes: 0 clean stop, 1 start-up failure (transport, link, state_dir, key
-        file), 2 unusable config (every problem logged with its file and field).
+        file), 2 unusable config (every problem logged with its file and field), 3 this
+        robot's key is revoked in the swarm file (at start, or learnt by a SIGHUP: it
+        released its function through its link and stopped; docs/operations.md).
 
         Example: swarmd start --config /etc/swarmd/robot.yaml
         """
@@ -70,6 +73,7 @@ def _start(config: Path, log_level: str, log_format: str | None) -> None:
     from swarmd.config import ConfigError, load_robot
     from swarmd.daemon import EXIT_CONFIG, run_daemon
     from swarmd.logs import LogFormat, default_format, setup_logging
+    from swarmd.revocation import EXIT_REVOKED, revoked_problem
 
     fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"
     setup_logging(log_level, fmt=fmt)
@@ -80,7 +84,8 @@ def _start(config: Path, log_level: str, log_format: str | None) -> None:
         # Every problem on its own line, each naming file and field.
         for problem in exc.problems:
             log.error(str(problem), extra={"config": str(config)})
-        raise typer.Exit(EXIT_CONFIG) from None
+        revoked = revoked_problem(exc.problems) is not None
+        raise typer.Exit(EXIT_REVOKED if revoked else EXIT_CONFIG) from None
     setup_logging(log_level, fmt=fmt, robot=cfg.robot)
     for warning in cfg.warnings:
         log.warning(str(warning))

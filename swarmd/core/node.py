@@ -40,7 +40,7 @@ from swarmd.core.moves import Moves
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder, Restored, Snapshot
-from swarmd.core.replay import ReplayFilter
+from swarmd.core.replay import ReplayFilter, header_seq
 from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.signed import Signed
@@ -134,6 +134,14 @@ class Node(Hearing, Moves, Signed, Restart):
         self._advance(now)
         if self._stopped:
             return self._drain()
+        if head is not None and head.swarm_id == self._plan.swarm_id \
+                and head.sender != self._robot_id and head.sender in self._plan.robots \
+                and head.mtype != wire.MsgType.CERT:
+            # Cheap checks before the tag or signature (DESIGN "Who can still do what"):
+            # a frame played back, or beyond the clock bound, costs no signature check.
+            stale = self._replay.stale(head.sender, header_seq(data), now)
+            if stale is not None:
+                return self._drop(stale)
         try:
             frame = wire.decode(data, self._keys, self._verifier)
         except wire.CodecError as exc:
@@ -217,15 +225,13 @@ class Node(Hearing, Moves, Signed, Restart):
         """A verified frame sent as this robot. Multicast loopback echoes our own frames
         (`own`; the runtime tells a second daemon with our id by frames it did not send).
         One from before this node started is a replay, not a duplicate robot
-        (`replay`). One above our counter was sent by another daemon with our id or a
-        forger holding our key: our counter moves above it, so receivers that took it
-        do not drop our next frames as replays (a jump cannot mute us; DESIGN section 2,
-        "Sequence numbers")."""
+        (`replay`). Either way it moves none of our counters: a robot's seq, epoch and
+        chain move only on what it sends itself, so a frame in its name from elsewhere
+        (a forger, a second daemon with our id) cannot push our counter past what the
+        receivers accept (DESIGN section 2, "Sequence numbers"); the receivers' filter
+        keeps hearing our next frames even if it took the forged one (`replay.py`)."""
         if frame.seq < self._seq_start:
             return self._drop(DropReason.REPLAY)
-        if self._seq < frame.seq <= (self._replay.follow_limit(now) or wire.SEQ_MAX):
-            # Further ahead, every receiver drops it as `seq_jump`: nothing to follow.
-            self._seq = frame.seq
         return self._drop(DropReason.OWN)
 
     def tick(self, now: float) -> list[Action]:
@@ -337,7 +343,7 @@ class Node(Hearing, Moves, Signed, Restart):
             votes={f: len(v.witnesses) for f, v in self._votes.items() if v.witnesses},
             drops=dict(self._drops), seq=self._seq, frames_in=self._frames_in,
             frames_out=self._frames_out, heard=dict(self._heard_at),
-            peer_seq={r: st[0] for r, st in self._replay.state.items()},
+            peer_seq=self._replay.tops(),
             certificate=self._ev.certificate(self._function),
         )
 

@@ -17,11 +17,19 @@ Bad input never takes the daemon down: a line that is not JSON, not an object, t
 or with an unknown health value is counted in `counters["bad_lines"]` and ignored (it
 does not refresh the health timer); the log says so once, then at most once every 10 s
 with the count (`CountedLog`: "bad lines from the robot: 523 in the last 10 s").
-The robot link never starves the protocol: a connection handles at most
-`LINES_PER_TURN` lines or `BYTES_PER_TURN` bytes per turn of the event loop, and stops
-reading its socket until it has handled what it holds, so a robot writing a megabyte of
-short garbage lines delays the daemon's timers by one turn's budget (about a
-millisecond), not seconds; the kernel's socket buffer then holds the robot back.
+The robot link never starves the protocol: the link as a whole, all its connections
+together, handles at most `LINES_PER_TURN` lines or `BYTES_PER_TURN` bytes per turn of
+the event loop, and a connection that holds more stops reading its socket and waits its
+turn (round robin: each turn the budget goes first to whoever waited longest), so a
+robot writing a megabyte of short garbage lines delays the daemon's timers by one
+turn's budget (about a millisecond), not seconds, however many connections it opens;
+the kernel's socket buffers then hold the writers back. Reading is budgeted too: a new
+connection, and one whose last read was bulk (`BULK_READ`) or that holds lines for a
+later turn, is paused and reads again only when its turn comes, `RESUMES_PER_TURN` a
+turn, so a turn reads from a few sockets however many are open (a controller's health
+lines are small: its connection is never paused for them). At most `MAX_CONNECTIONS`
+are open at once: one more is closed unread (counted in `counters["refused"]`, logged
+at most once every 10 s).
 
 Whatever parsing a line raises (a RecursionError for `[` nested thousands deep, a
 ValueError for an integer of thousands of digits) is such a bad line too; a line longer
@@ -60,9 +68,21 @@ HEALTH_NAMES = {"ok": Health.OK, "degraded": Health.DEGRADED, "faulty": Health.F
 LINE_LIMIT = 64 * 1024
 """bytes. A longer line is garbage: counted as one bad line and skipped to its newline."""
 LINES_PER_TURN = 64
-"""Lines one connection handles per turn of the event loop (module docstring)."""
+"""Lines the link handles per turn of the event loop, all connections together (module
+docstring)."""
 BYTES_PER_TURN = 64 * 1024
-"""bytes of lines one connection handles per turn of the event loop (at least one line)."""
+"""bytes of lines the link handles per turn of the event loop, all connections together
+(at least one line a turn)."""
+MAX_CONNECTIONS = 256
+"""Connections open at once (the robot's controller and a few tools; a burst of one-line
+clients). One more is closed unread, and counted."""
+RESUMES_PER_TURN = 2
+"""Connections that may read from their socket again per turn of the loop (module
+docstring): what a turn reads is bounded by this many reads (asyncio's 256 KiB each),
+not by how many connections are open."""
+BULK_READ = 16 * 1024
+"""bytes. A read this large pauses its connection until its turn to read comes again: a
+controller's health lines (a few hundred bytes) never wait."""
 WRITE_BUFFER_LIMIT = 256 * 1024
 """bytes. A robot that stops reading is disconnected rather than growing our memory."""
 
@@ -80,7 +100,8 @@ class SocketLink:
         self.path = Path(path)
         self.health_timeout = health_timeout
         self.counters: dict[str, int] = {"bad_lines": 0, "health": 0, "timeouts": 0,
-                                         "connections": 0, "write_errors": 0}
+                                         "connections": 0, "write_errors": 0, "refused": 0,
+                                         "bytes_read": 0}
         self._on_health: HealthCallback | None = None
         self._server: asyncio.AbstractServer | None = None
         self._connections: set[_Connection] = set()
@@ -88,6 +109,14 @@ class SocketLink:
         self._timed_out = False
         self._current: dict[str, Any] | None = None
         self._bad_log = CountedLog(log, "bad lines from the robot")
+        self._refused_log = CountedLog(log, "robot socket connections refused")
+        self._turn_lines = self._turn_bytes = 0
+        """What this turn of the loop has handled so far (`_spend`)."""
+        self._turn_reset: asyncio.Handle | None = None
+        self._waiting: dict[_Connection, None] = {}
+        """Connections holding lines for a later turn, the longest waiting first."""
+        self._to_resume: dict[_Connection, None] = {}
+        """Paused connections waiting for their turn to read, the longest first."""
 
     async def start(self, on_health: HealthCallback) -> None:
         """Listen on the socket path and arm the health timer."""
@@ -131,11 +160,59 @@ class SocketLink:
                 self._on_health(Health.FAULTY)
 
     # -- clients (called by _Connection) --------------------------------------------------
-    def _connected(self, conn: _Connection) -> None:
+    def _connected(self, conn: _Connection) -> bool:
+        """A new connection: False (and closed) if `MAX_CONNECTIONS` are open."""
+        if len(self._connections) >= MAX_CONNECTIONS:
+            self.counters["refused"] += 1
+            self._note(self._refused_log, f"{MAX_CONNECTIONS} connections already open")
+            return False
         self.counters["connections"] += 1
         self._connections.add(conn)
         if self._current is not None:
             self._write(conn, self._current)
+        return True
+
+    def _spend(self, size: int) -> bool:
+        """May one more line of `size` bytes be handled this turn (module docstring)?"""
+        if self._turn_lines >= LINES_PER_TURN or (
+                self._turn_lines and self._turn_bytes + size > BYTES_PER_TURN):
+            return False
+        if self._turn_reset is None:
+            with contextlib.suppress(RuntimeError):  # no loop: the parser driven alone
+                self._turn_reset = asyncio.get_running_loop().call_soon(self._next_turn)
+        self._turn_lines += 1
+        self._turn_bytes += size
+        return True
+
+    def _wait(self, conn: _Connection) -> None:
+        """`conn` holds lines for a later turn: it is handled again next turn, after
+        those that waited longer."""
+        self._waiting[conn] = None
+        self._turn_coming()
+
+    def _read_later(self, conn: _Connection) -> None:
+        """`conn` (paused) may read again when its turn comes (`RESUMES_PER_TURN`)."""
+        self._to_resume[conn] = None
+        self._turn_coming()
+
+    def _turn_coming(self) -> None:
+        if self._turn_reset is None:
+            self._turn_reset = asyncio.get_running_loop().call_soon(self._next_turn)
+
+    def _next_turn(self) -> None:
+        """A new turn of the loop (run first in it): a fresh budget, spent first on the
+        connections that waited, in order; then the next few paused connections may
+        read again."""
+        self._turn_reset = None
+        self._turn_lines = self._turn_bytes = 0
+        waiting, self._waiting = self._waiting, {}
+        for conn in waiting:
+            conn._handle()
+        for conn in list(self._to_resume)[:RESUMES_PER_TURN]:
+            del self._to_resume[conn]
+            conn._resume()
+        if self._to_resume:
+            self._turn_coming()
 
     def _disconnected(self, conn: _Connection, exc: Exception | None) -> None:
         self._connections.discard(conn)
@@ -145,14 +222,19 @@ class SocketLink:
 
     def _bad(self, why: str) -> None:
         self.counters["bad_lines"] += 1
+        self._note(self._bad_log, why)
+
+    @staticmethod
+    def _note(counted: CountedLog, why: str) -> None:
+        """One more of what `counted` logs, at most once every 10 s with the count."""
         try:
             loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
         except RuntimeError:  # the line parser driven on its own (fuzzing, tests)
             loop = None
         now = loop.time() if loop is not None else time.monotonic()
-        if self._bad_log.hit(why, now, link="socket") and loop is not None:
+        if counted.hit(why, now, link="socket") and loop is not None:
             running = loop
-            running.call_at(self._bad_log.due, lambda: self._bad_log.tick(running.time()))
+            running.call_at(counted.due, lambda: counted.tick(running.time()))
 
     def _line(self, line: bytes) -> None:
         text = line.strip()
@@ -244,16 +326,27 @@ class _Connection(asyncio.Protocol):
         self._fd = -1
         self._paused = False
         self._lost = False
-        self._later: asyncio.Handle | None = None
+        self._later = False
+        """Lines wait for a later turn (`SocketLink._wait`)."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
         sock = transport.get_extra_info("socket")
+        self.transport = transport
         self._fd = sock.fileno() if sock is not None else -1
-        self.link._connected(self)
+        if not self.link._connected(self):
+            self.transport, self._fd, self._lost = None, -1, True  # nothing of it is read
+            transport.abort()
+            return
+        # It reads when its turn comes: a burst of new connections is read a few a turn.
+        transport.pause_reading()
+        self._paused = True
+        self.link._read_later(self)
 
     def data_received(self, data: bytes) -> None:
+        if self.transport is None:
+            return
+        self.link.counters["bytes_read"] += len(data)
         if self._skipping:  # the rest of an overlong line, up to its newline
             end = data.find(b"\n")
             if end < 0:
@@ -262,37 +355,50 @@ class _Connection(asyncio.Protocol):
             data = data[end + 1:]
         self._buffer += data
         self._handle()
+        if len(data) >= BULK_READ and not self._paused and self.transport is not None:
+            self.transport.pause_reading()  # a bulk writer reads again in its turn
+            self._paused = True
+            self.link._read_later(self)
 
     def _handle(self) -> None:
-        """Handle this turn's share of the complete lines held; if more remain, stop
-        reading and come back next turn (module docstring: the loop is never starved)."""
-        self._later = None
-        start = lines = 0
+        """Handle the complete lines held, as far as the link's budget for this turn
+        goes; if more remain, stop reading and wait for a later turn (module docstring:
+        the loop is never starved)."""
+        self._later = False
+        start = 0
         while (end := self._buffer.find(b"\n", start)) >= 0:
-            if lines >= LINES_PER_TURN or start >= BYTES_PER_TURN:
+            if not self.link._spend(end + 1 - start):
                 break
             if end - start > LINE_LIMIT:
                 self.link._bad(f"line longer than {LINE_LIMIT} bytes; skipped")
             else:
                 self.link._line(bytes(self._buffer[start : end + 1]))
-            start, lines = end + 1, lines + 1
+            start = end + 1
         del self._buffer[:start]
         transport = self.transport
-        if self._buffer.find(b"\n") >= 0:  # more next turn
+        if self._buffer.find(b"\n") >= 0:  # more in a later turn
             if transport is not None and not self._paused:
                 transport.pause_reading()
                 self._paused = True
-            self._later = asyncio.get_running_loop().call_soon(self._handle)
+            self._later = True
+            self.link._wait(self)
             return
-        if self._paused and transport is not None and not transport.is_closing():
-            transport.resume_reading()
-        self._paused = False
+        if self._paused:
+            self.link._read_later(self)
         if len(self._buffer) > LINE_LIMIT:
             self.link._bad(f"line longer than {LINE_LIMIT} bytes; skipped")
             self._buffer.clear()
             self._skipping = True
         if self._lost:
             self._rest()
+
+    def _resume(self) -> None:
+        """Its turn to read from its socket again (`SocketLink._next_turn`)."""
+        transport = self.transport
+        if self._paused and not self._later and transport is not None \
+                and not transport.is_closing():
+            transport.resume_reading()
+            self._paused = False
 
     def eof_received(self) -> bool:
         # Close our side too; `connection_lost` follows and handles what is left (lines
@@ -304,7 +410,7 @@ class _Connection(asyncio.Protocol):
         self._lost = True
         if exc is not None:
             self._drain()
-        if self._later is None:
+        if not self._later:
             self._handle()  # then a last line without a newline, also after a reset
         self.link._disconnected(self, exc)
 
