@@ -43,9 +43,9 @@ Invariants (each violation names the time, robot and what went wrong):
 5. no node raises on any input (virtual simulator: exceptions are reported here);
 6. epochs come from takeovers: a robot fenced at an epoch that no takeover of its slot
    produced (`fenced_without_takeover`) was fenced by a forged or invented epoch, and
-   its slot is orphaned (every robot now believes a holder that executes nothing); the
-   one exception is a robot fenced one epoch above its own takeover, which the robot it
-   replaced voided by its refutes (the reassertion, DESIGN "Convergence");
+   its slot is orphaned (every robot now believes a holder that executes nothing); one
+   epoch above a takeover is allowed: the reassertion of the holder it replaced, whose
+   refute voided it (DESIGN "Convergence");
 7. nobody is muted (`muted`, virtual simulator: `VirtualSwarm` judges it from the
    nodes, see `sim.virtual.simulator`): a live, healthy robot whose current frames some
    robot that should hear them has not accepted for ten heartbeat periods;
@@ -189,8 +189,6 @@ class Checker:
     """Robots whose node has logged `started` (since their last crash or restart)."""
     epochs: set[tuple[str, int]] = field(default_factory=set)
     """(function, epoch) pairs some takeover produced (invariant 6)."""
-    claimed: dict[tuple[str, int], int] = field(default_factory=dict)
-    """(function, epoch) -> the robot whose takeover produced it (invariant 6)."""
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
@@ -311,11 +309,11 @@ class Checker:
         epoch = int(rec["epoch"])
         for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
             del self.episodes[key]
-        if epoch and (f, epoch) not in self.epochs \
-                and self.claimed.get((f, epoch - 1)) != r:
-            # (A robot fenced one epoch above its own takeover was outranked by the
-            # holder it replaced, whose refutes voided that takeover: its reassertion,
-            # DESIGN "Convergence". Any other epoch no takeover made is forged.)
+        if epoch and (f, epoch) not in self.epochs and (f, epoch - 1) not in self.epochs:
+            # (One epoch above a takeover is the reassertion of the holder it replaced,
+            # whose refute voided it, DESIGN "Convergence"; robots other than that holder
+            # may derive it, and be fenced by it, before the holder logs its `refute`.
+            # Any other epoch no takeover made is forged.)
             self.violations.append(Violation(
                 t, "fenced_without_takeover", r,
                 f"robot {r} fenced on {f} at epoch {epoch}, which no takeover produced: "
@@ -324,7 +322,6 @@ class Checker:
     def _on_takeover(self, t: float, r: int, rec: dict[str, Any]) -> None:
         f = rec["function"]
         self.epochs.add((f, int(rec["epoch"])))
-        self.claimed[(f, int(rec["epoch"]))] = r
         for key in [k for k in self.episodes if k[1] == f]:
             del self.episodes[key]  # the warning ended in a takeover
         self.held_since[(f, r)] = t

@@ -44,7 +44,7 @@ class Hearing(NodeBase):
         if ahead != entry:
             # Per robot: a takeover that the robot it replaced refuted. Its holder is
             # outranked by that robot's reassertion; show it why.
-            self._learn_holder(f, ahead, now)
+            self._learn_reassertion(f, ahead, now)
             self._relay_view(f, now)
             return
         self._known.merge(f, entry)
@@ -116,12 +116,15 @@ class Hearing(NodeBase):
         watch = self._watches.get(f)
         if watch is not None:
             suspected = watch.suspecting
-            if watch.heard(now) and suspected and epoch <= before.epoch:
+            reasserted = self._identity is not None and epoch > before.epoch \
+                and self._ev.reasserted(f, sender, epoch) is not None
+            if watch.heard(now) and suspected and (epoch <= before.epoch or reasserted):
                 # The suspect heard alive (rule 4), or the rival that won the suspect's
                 # own takeover race at its epoch (lowest id): the suspicion is over, and
                 # the log says so (the paper's property: every warning ends in a
                 # takeover, a refutation or an alert). A holder at a newer epoch ends it
-                # by its takeover.
+                # by its takeover, unless that epoch is its reassertion (per robot: it
+                # refuted the takeover we suspected, DESIGN "Convergence").
                 self._emit(ev.Refute(subject=sender, function=f))
         votes = self._votes.get(f)
         if votes is not None and votes.witnesses:
@@ -305,9 +308,10 @@ class Hearing(NodeBase):
         """Per-robot mode: does this CLAIM (signed bytes `raw`) act here? Only with a
         certificate this robot verified; its signed bytes are kept for `_relay_view`."""
         if (sender, c.epoch) == tuple(self._known[f]):
-            # The holder re-announcing its certificate (`_relay_cert`): its signed claim
-            # is kept in case we missed the first one.
-            if self._ev.is_certified(f, sender, c.epoch):
+            # The holder re-announcing its certificate (`_relay_cert`), or a relayed proof
+            # resting on it: certified here too (a restarted robot's view of it came from
+            # its state file, with no evidence), and its signed claim kept.
+            if self._ev.certify(f, sender, c, self._known[f].epoch):
                 self._ev.keep_claim(f, sender, c.epoch, raw)
             return False
         if not self._ev.certify(f, sender, c, self._known[f].epoch):

@@ -215,6 +215,9 @@ class NodeBase:
     def _reassert(self, f: str, epoch: int, now: float) -> None:
         raise NotImplementedError
 
+    def _learn_reassertion(self, f: str, new: Holder, now: float) -> None:
+        raise NotImplementedError
+
     def _verified_hold(self, f: str, epoch: int,
                        restored: Restored) -> tuple[str, int] | None:
         raise NotImplementedError

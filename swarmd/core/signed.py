@@ -80,6 +80,18 @@ class Signed(NodeBase):
         failed = self._ev.voided_by(f, new.robot, new.epoch)
         return new if failed is None else Holder(failed, new.epoch + 1)
 
+    def _learn_reassertion(self, f: str, new: Holder, now: float) -> None:
+        """Our view of f moves forward to a holder's reassertion (`_forward`). Unlike a
+        takeover learnt second-hand, it is a sign of life: the holder signed its refute
+        while holding f, so a suspicion of the takeover's holder we watched is moot. It
+        ends as a refuted one (rule 4), and the watch runs on for the holder (it fires
+        again after T_max if that one is silent)."""
+        self._learn_holder(f, new, now)
+        watch = self._watches.get(f)
+        if watch is not None and watch.suspecting and self._known[f] == new:
+            watch.heard(now)
+            self._emit(ev.Refute(subject=new.robot, function=f))
+
     def _reassert(self, f: str, epoch: int, now: float) -> None:
         """We hold f, and a takeover of our hold that our refutes void reached us: we
         hold f on at the reassertion's epoch (`_forward`), tell the robot, and heartbeat
@@ -176,11 +188,18 @@ class Signed(NodeBase):
         4), so it is no longer certified here — unless we were stalled, and then the
         takeover was right. Not over our own claim of f: its end settles it."""
         if claimant == self._robot_id:
+            # Our own claim, relayed back with its certificate as the proof of the
+            # reassertion that outranks it: it must verify here as anywhere (no act).
+            self._ev.certify(f, claimant, c, self._known[f].epoch)
             return
         self._on_claim(claimant, c, now, raw)
         new = Holder(claimant, c.epoch)
         if greater(new, self._known[f]) and self._ev.is_certified(f, claimant, c.epoch):
-            self._learn_holder(f, self._forward(f, new), now)
+            ahead = self._forward(f, new)
+            if ahead == new:
+                self._learn_holder(f, new, now)
+            else:
+                self._learn_reassertion(f, ahead, now)
 
     # ------------------------------------------------------------------ refutes
     # A holder's signed word that it was alive after a warning voids that warning
@@ -224,7 +243,7 @@ class Signed(NodeBase):
         known = self._known[f]
         ahead = self._forward(f, known)
         if ahead != known:
-            self._learn_holder(f, ahead, now)
+            self._learn_reassertion(f, ahead, now)
         # A refute of a claim (its own epoch, `_refute_claim`) proves the refuter's
         # reassertion one epoch above it, whatever entry our view holds now: a relayed
         # proof brings it to a robot whose view moved on without it (a rival at that
@@ -232,7 +251,7 @@ class Signed(NodeBase):
         mine = Holder(refuter.robot, refuter.epoch + 1)
         if refuter.epoch < EPOCH_MAX and greater(mine, self._known[f]) \
                 and self._ev.reasserted(f, mine.robot, mine.epoch) is not None:
-            self._learn_holder(f, mine, now)
+            self._learn_reassertion(f, mine, now)
 
     def _relay_refutes(self, f: str, now: float) -> None:
         """Someone acts on a takeover of f that refutes we hold void (an uncertified
