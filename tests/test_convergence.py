@@ -311,3 +311,28 @@ def test_a_stalled_holder_that_answers_out_of_its_buffer_does_not_pull_views_bac
     assert [(e["robot"], e["epoch"]) for e in res.events
             if e["event"] == "takeover"] == [(6, 1), (2, 2)]
     assert res.holders()["f2"] == [2]
+
+
+OVERLAPPING_CUTS = ("partition:9,7,15,1,6,11,8,12,13>2,3,4,5,10,14@14.95+1.92",
+                    "partition:9>1,2,3,4,5,6,7,8,10,11,12,13,14,15@13.36+2.58",
+                    "deaf:4:5@3.15+3.98", "crash:8@18.88")
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_overlapping_one_way_cuts_end_with_one_holder_and_one_view(auth: str) -> None:
+    """Robot 9 is heard by nobody for 2.6 s, then a group is cut one way while that lasts
+    (0 % loss, no attacker): standby 12 takes f9 over at epoch 1 and 14 takes it from 12
+    at epoch 2 on its side of the second cut. Before the slot table, robots 9 and 14
+    executed f9 from 14.0 s to the end of the run, the views split 9@0 against 14@2 for
+    good. Now every view of f9 is one entry at the end, and one robot executes f9."""
+    from pathlib import Path
+
+    from sim.shared.faults import parse_fault
+    from sim.virtual.simulator import run_virtual
+    from swarmd.config import load_swarm
+
+    cfg = load_swarm(Path(__file__).parent / "fixtures" / "chaos-overlapping-cuts.yaml")
+    res = run_virtual(cfg.to_plan(), cfg.params(), duration=30.9, seed=40140, auth=auth,
+                      faults=[parse_fault(s) for s in OVERLAPPING_CUTS])
+    assert [v.kind for v in res.violations] == []
+    assert len(res.holders()["f9"]) == 1

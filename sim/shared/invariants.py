@@ -44,8 +44,8 @@ Invariants (each violation names the time, robot and what went wrong):
 6. epochs come from takeovers: a robot fenced at an epoch that no takeover of its slot
    produced (`fenced_without_takeover`) was fenced by a forged or invented epoch, and
    its slot is orphaned (every robot now believes a holder that executes nothing); one
-   epoch above a takeover is allowed: the reassertion of the holder it replaced, whose
-   refute voided it (DESIGN "Convergence");
+   epoch above a takeover or a claim is allowed: the reassertion of the holder it
+   replaces, whose refute voided it (DESIGN "Convergence");
 7. nobody is muted (`muted`, virtual simulator: `VirtualSwarm` judges it from the
    nodes, see `sim.virtual.simulator`): a live, healthy robot whose current frames some
    robot that should hear them has not accepted for ten heartbeat periods;
@@ -189,6 +189,9 @@ class Checker:
     """Robots whose node has logged `started` (since their last crash or restart)."""
     epochs: set[tuple[str, int]] = field(default_factory=set)
     """(function, epoch) pairs some takeover produced (invariant 6)."""
+    claimed: set[tuple[str, int]] = field(default_factory=set)
+    """(function, epoch) pairs some claim named (invariant 6: a reassertion outranks
+    a claim refuted in its wait state as well as a takeover)."""
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
@@ -284,6 +287,8 @@ class Checker:
             self._fenced(t, r, rec)
         if name == "takeover":
             self._on_takeover(t, r, rec)
+        elif name == "claim":
+            self.claimed.add((str(rec["function"]), int(rec["epoch"])))
         elif name == "started":
             self.started.add(r)
             self.started_at.setdefault(r, []).append(t)
@@ -309,11 +314,12 @@ class Checker:
         epoch = int(rec["epoch"])
         for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
             del self.episodes[key]
-        if epoch and (f, epoch) not in self.epochs and (f, epoch - 1) not in self.epochs:
-            # (One epoch above a takeover is the reassertion of the holder it replaced,
-            # whose refute voided it, DESIGN "Convergence"; robots other than that holder
-            # may derive it, and be fenced by it, before the holder logs its `refute`.
-            # Any other epoch no takeover made is forged.)
+        if epoch and (f, epoch) not in self.epochs and (f, epoch - 1) not in self.epochs \
+                and (f, epoch - 1) not in self.claimed:
+            # (One epoch above a takeover, or above a claim, is the reassertion of the
+            # holder it would replace, whose refute voided it, DESIGN "Convergence";
+            # robots other than that holder may derive it, and be fenced by it, before
+            # the holder logs its `refute`. Any other epoch no takeover made is forged.)
             self.violations.append(Violation(
                 t, "fenced_without_takeover", r,
                 f"robot {r} fenced on {f} at epoch {epoch}, which no takeover produced: "

@@ -284,6 +284,15 @@ class EvidenceStore:
         self._evidence_relayed_at[f] = now
         return frames
 
+    def relay_due(self, f: str, now: float) -> bool:
+        """May this robot show another its view of f now? At most once per T_max per
+        slot, shared with `view_frames` (unsigned and shared-key modes relay a warning
+        instead of a certificate: `Hearing._older_beat`)."""
+        if now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
+            return False
+        self._evidence_relayed_at[f] = now
+        return True
+
     def _takeover_frames(self, f: str, holder: int, epoch: int) -> tuple[bytes, ...]:
         """The evidence against the robot `holder` replaced at `epoch`, then `holder`'s
         signed CLAIM (empty when no such takeover is certified here)."""

@@ -76,6 +76,15 @@ class Hearing(NodeBase):
             # whoever certified it shows the stale holder the evidence against it
             # (it fences itself, or refutes and keeps its slot everywhere).
             self._relay_view(f, now)
+        elif not self._ears.heard_lately(f, known.robot, known.epoch, now,
+                                         self._params.t_max) \
+                and self._ev.relay_due(f, now):
+            # Unsigned or shared key: a takeover it missed whose new holder is silent
+            # here too. Our warning about that holder carries the entry (DESIGN,
+            # "Convergence"): the stale holder and anyone else that missed it move
+            # forward (`_warned_newer`), the stale holder fences, and the slot's
+            # watchers take it from there. Once per T_max per slot.
+            self._send(wire.Warn(known.robot, hb.function, known.epoch))
 
     def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
@@ -193,8 +202,9 @@ class Hearing(NodeBase):
             self._relay_view(f, now)  # one that missed a takeover we certified
 
     def _warned_newer(self, f: str, sender: int, w: wire.Warn, now: float) -> None:
-        """Unsigned or shared-key mode: a witness of f (rule 3) warns about a holder whose
-        entry is greater than our view: it heard that holder's heartbeat, which we missed
+        """Unsigned or shared-key mode: a robot that may watch or hold f (a witness of
+        rule 3 by the plan, or a standby of f) warns about a holder whose entry is
+        greater than our view: it heard that holder's heartbeat, which we missed
         (a partition, a fade), and the holder may be dead since. Our view moves forward
         to it (DESIGN, "Convergence"), or our warnings would name an older holder than
         the other witnesses' and the slot's standby would never count a quorum; a hold
@@ -203,7 +213,7 @@ class Hearing(NodeBase):
         does (`_relay_view`)."""
         new = Holder(w.suspect, w.epoch)
         if w.suspect == sender or not greater(new, self._known[f]) \
-                or sender not in witnesses(self._plan, self._known, f):
+                or sender not in self._ev.may_watch(f, claimants=True):
             return
         self._learn_holder(f, new, now)
 

@@ -21,8 +21,13 @@ class Restart(NodeBase):
         restarted robot persisted (its own memory: what it had verified before it went
         down; its own hold is verified again, `_restore`)."""
         known = SlotTable((f, self._initial(f)) for f in self._plan.functions)
+        held = restored.held[0] if restored is not None and restored.held else None
         for f, (holder, epoch) in (restored.known.items() if restored is not None else ()):
-            if f in known:
+            # An entry naming ourselves for a slot we did not hold when we stopped (we
+            # left it, or were faulty) is no knowledge: nobody can be shown its proof,
+            # and a view naming us would keep us from counting the warnings about the
+            # slot's real holder. The plan's entry, or what we hear, stands instead.
+            if f in known and (holder != self._robot_id or f == held):
                 known.merge(f, Holder(holder, epoch))
         return known
 
