@@ -167,10 +167,10 @@ class Hearing(NodeBase):
             return  # about an older holder: stale
         # A warning at a newer epoch than we know means we missed a takeover (we were
         # partitioned, or lost its heartbeats) and the new holder may be dead already:
-        # count it, keyed by (suspect, epoch), without believing it into `known` (only
-        # a certificate does, per robot; `_warned_newer` in the other modes, when the
-        # holder we know is silent here too) — a single liar cannot reach the quorum,
-        # and the holder's heartbeat refutes it.
+        # count it, keyed by (suspect, epoch); per robot it does not move `known` (only
+        # a certificate does; in the other modes `_warned_newer` moved it forward
+        # above) — a single liar cannot reach the quorum, and the holder's heartbeat
+        # refutes it.
         # Rule 3: only the holders of the slots that watch f are witnesses; never the
         # suspect itself.
         if sender == w.suspect or sender not in witnesses(self._plan, self._known, f):
