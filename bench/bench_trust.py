@@ -5,7 +5,7 @@ and the 802.15.4 budget (DESIGN section 2, "Who may say what").
 
 1. Frame sizes per message in each mode (unsigned, shared key, per-robot), below 128
    functions, from the codec itself.
-2. Ed25519 with `cryptography` (the library `swarmd.identity` uses): signs and
+2. Ed25519 with `cryptography` (the library `swarmd.base.identity` uses): signs and
    verifies per second on this machine, and HMAC-SHA256 tag checks for comparison.
 3. configs/grid100.yaml (100 robots) in `sim.virtual`, per-robot mode with real
    Ed25519 keys, `--seconds` of virtual time with a crash in the middle: signature

@@ -275,7 +275,7 @@ def flight_section(cfg: SwarmConfig) -> Section | None:
     the ground, a slot at ground level); said here first, as notes, since real robots
     interpret their functions themselves."""
     try:
-        from swarmd.functions import flight_problems
+        from swarmd.base.functions import flight_problems
     except ImportError:  # a robot's install without the simulator
         return None
     problems = {name: flight_problems({name: cfg.function_spec(name)})

@@ -48,6 +48,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from enum import StrEnum
 from typing import Any
 
+from swarmd.base.notify import Notifier
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.drops import DropReason
@@ -56,7 +57,6 @@ from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
 from swarmd.metrics import Metrics
-from swarmd.notify import Notifier
 from swarmd.transport.base import Channel, Transport
 
 log = logging.getLogger(__name__)

@@ -11,10 +11,10 @@ import yaml
 from typer.testing import CliRunner, Result
 
 from swarmd import check as check_mod
+from swarmd.base.identity import write_identity
 from swarmd.check import Section, run_check
 from swarmd.cli import app
 from swarmd.config import SwarmConfig
-from swarmd.identity import write_identity
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 runner = CliRunner()

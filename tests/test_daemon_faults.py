@@ -21,10 +21,10 @@ from swarms import paper_text, unsigned_paper
 from test_runtime import GROUP, launch, robot_cfg, runtime_of, wait_until
 from test_start import listener
 
+from swarmd.base.eventlog import EventLog, EventLogError
 from swarmd.config import load_robot
 from swarmd.core import wire
 from swarmd.daemon import EXIT_FAILURE, Daemon, run_daemon
-from swarmd.eventlog import EventLog, EventLogError
 from swarmd.link.exec import ExecLink, run_command
 from swarmd.link.socket import SocketLink, SocketLinkError
 from swarmd.state import StateError, StateFile, StateWriteError, load, state_path

@@ -33,9 +33,7 @@ ONLY_IN: dict[str, str] = {"pydantic": "config"}
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "core": ("swarmd.core",),
-    "base": ("swarmd.files", "swarmd.keys", "swarmd.identity", "swarmd.functions",
-             "swarmd.logs", "swarmd.notify", "swarmd.eventlog", "swarmd.signals",
-             "swarmd.verify_budget"),
+    "base": ("swarmd.base",),
     "transport": ("swarmd.transport",),
     "link": ("swarmd.link",),
     "config": ("swarmd.config",),

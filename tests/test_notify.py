@@ -1,4 +1,4 @@
-"""swarmd.notify against real NOTIFY_SOCKET listeners (AF_UNIX datagram sockets)."""
+"""swarmd.base.notify against real NOTIFY_SOCKET listeners (AF_UNIX datagram sockets)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from swarms import unsigned_paper
 
-from swarmd.notify import Notifier
+from swarmd.base.notify import Notifier
 
 
 @pytest.fixture

@@ -132,9 +132,9 @@ def _channel(err: Console, config: Path | None, swarm: Path | None, group: str, 
 
 def _state(err: Console, swarm_cfg: SwarmConfig, keys: list[bytes]) -> MonitorState:
     """An empty view of the swarm, checking frames with `keys`."""
+    from swarmd.base.identity import Keyring
+    from swarmd.base.keys import KeyFileError
     from swarmd.config.auth import public_keys
-    from swarmd.identity import Keyring
-    from swarmd.keys import KeyFileError
     from swarmd.monitor import MonitorState
 
     # Per-robot auth: every robot's public keys, so the base station verifies the

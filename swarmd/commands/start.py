@@ -24,7 +24,7 @@ def _check_level(value: str) -> str:
 
 
 def _check_format(value: str | None) -> str | None:
-    from swarmd.logs import FORMATS
+    from swarmd.base.logs import FORMATS
 
     if value is not None and value.lower() not in FORMATS:
         raise typer.BadParameter(f"{value!r} is not one of {', '.join(FORMATS)}")
@@ -70,9 +70,9 @@ def _start(config: Path, log_level: str, log_format: str | None) -> None:
     import asyncio
     import logging
 
+    from swarmd.base.logs import LogFormat, default_format, setup_logging
     from swarmd.config import ConfigError, load_robot
     from swarmd.daemon import EXIT_CONFIG, run_daemon
-    from swarmd.logs import LogFormat, default_format, setup_logging
     from swarmd.revocation import EXIT_REVOKED, revoked_problem
 
     fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"
