@@ -35,11 +35,11 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import (
 
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import VirtualSwarm
-from swarmd import budget
 from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.auth import Identity
 from swarmd.core.params import radio
+from swarmd.services import budget
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = b"k" * 32

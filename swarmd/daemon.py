@@ -30,7 +30,6 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from swarmd import state as state_mod
 from swarmd.base import signals
 from swarmd.base.eventlog import EventLog
 from swarmd.base.identity import Ed25519Signer, Keyring
@@ -45,9 +44,10 @@ from swarmd.core.wire import seq_seed
 from swarmd.link.base import RobotLink
 from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
-from swarmd.metrics import Metrics, MetricsServer
-from swarmd.revocation import EXIT_REVOKED, revoked_in
-from swarmd.runtime import EventSink, ReceiveFilter, Runtime
+from swarmd.services import state as state_mod
+from swarmd.services.metrics import Metrics, MetricsServer
+from swarmd.services.revocation import EXIT_REVOKED, revoked_in
+from swarmd.services.runtime import EventSink, ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
 from swarmd.waiting import Waiting, describe_channel, report_waiting
@@ -388,7 +388,7 @@ class Daemon:
             "restart_needed_for": restart_needed})
 
     def _revoked(self) -> None:
-        """SIGHUP found this robot in the swarm file's `auth.revoked` (swarmd.revocation):
+        """SIGHUP found this robot in the swarm file's `auth.revoked` (swarmd.services.revocation):
         nobody accepts its frames any more and its slot is being taken over, so it stops
         acting: one log line, a `leave` (reason `revoked`) in its event log if it held a
         function, then `run_daemon` releases it through the link and exits."""

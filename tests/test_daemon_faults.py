@@ -27,7 +27,7 @@ from swarmd.core import wire
 from swarmd.daemon import EXIT_FAILURE, Daemon, run_daemon
 from swarmd.link.exec import ExecLink, run_command
 from swarmd.link.socket import SocketLink, SocketLinkError
-from swarmd.state import StateError, StateFile, StateWriteError, load, state_path
+from swarmd.services.state import StateError, StateFile, StateWriteError, load, state_path
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import UdpTransport
 

@@ -31,8 +31,8 @@ from swarmd.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
 from swarmd.link.socket import SocketLink
-from swarmd.runtime import Runtime
-from swarmd.state import state_path
+from swarmd.services.runtime import Runtime
+from swarmd.services.state import state_path
 from swarmd.transport.addresses import DEFAULT_GROUP
 from swarmd.transport.base import EventCallback, FrameCallback
 

@@ -75,7 +75,7 @@ from swarmd.core.roles import Health
 from swarmd.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
-from swarmd.runtime import Runtime
+from swarmd.services.runtime import Runtime
 
 _PR_SET_PDEATHSIG = 1
 PROBE_PERIOD = 0.1

@@ -76,7 +76,7 @@ def _import_launch(file: Path, output: Path | None, swarm_id: int, name: str | N
 def _convert(file: Path, swarm_id: int, name: str | None) -> str:
     """The swarm file's text converted from the launch file."""
     from swarmd.base.files import FileRefused
-    from swarmd.launch import LaunchError, import_launch_file
+    from swarmd.services.launch import LaunchError, import_launch_file
 
     try:
         return import_launch_file(file, swarm_id=swarm_id, name=name)
