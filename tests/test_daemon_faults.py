@@ -24,7 +24,7 @@ from test_start import listener
 from swarmd.base.eventlog import EventLog, EventLogError
 from swarmd.config import load_robot
 from swarmd.core import wire
-from swarmd.daemon import EXIT_FAILURE, Daemon, run_daemon
+from swarmd.daemon.daemon import EXIT_FAILURE, Daemon, run_daemon
 from swarmd.link.exec import ExecLink, run_command
 from swarmd.link.socket import SocketLink, SocketLinkError
 from swarmd.services.state import StateError, StateFile, StateWriteError, load, state_path

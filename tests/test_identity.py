@@ -15,7 +15,7 @@ import pytest
 from swarms import PAPER, identity_file, paper_text, signed_paper
 from typer.testing import CliRunner
 
-import swarmd.daemon as daemon_mod
+import swarmd.daemon.daemon as daemon_mod
 from sim.realtime.robotfiles import sign_for_run
 from swarmd.base.identity import (
     Ed25519Signer,

@@ -216,7 +216,7 @@ def test_switching_without_the_window_cuts_the_robot_off() -> None:
 
 # -- the daemon refuses a key others can read ------------------------------------------
 def test_swarmd_start_refuses_a_key_readable_by_others(tmp_path: Path) -> None:
-    pytest.importorskip("swarmd.daemon", reason="daemon runtime not in this tree")
+    pytest.importorskip("swarmd.daemon.daemon", reason="daemon runtime not in this tree")
     repo = Path(__file__).resolve().parent.parent
     swarm = (repo / "configs" / "paper.yaml").read_text()
     swarm, n = re.subn(r"(?m)^auth:.*$", "key_file: swarm.key", swarm)

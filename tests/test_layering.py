@@ -38,9 +38,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "link": ("swarmd.link",),
     "config": ("swarmd.config",),
     "services": ("swarmd.services",),
-    "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.monitor_ros2", "swarmd.check",
-               "swarmd.monitor_claims",
-               "swarmd.waiting"),
+    "daemon": ("swarmd.daemon",),
     "sim.shared": ("sim.shared",),
     "sim.virtual": ("sim.virtual",),
     "sim.physics": ("sim.physics",),
@@ -108,7 +106,7 @@ def imported_modules(path: Path, module: str | None = None) -> list[str]:
                 source = _sibling(path, package, node.module)
             else:
                 continue
-            # `from swarmd import daemon` imports a module, `from swarmd import
+            # `from swarmd.daemon import daemon` imports a module, `from swarmd import
             # __version__` the package itself.
             named = [f"{source}.{a.name}" for a in node.names]
             modules = [n for n in named if _is_module(n)]
@@ -203,7 +201,7 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
     # summary importing the real-time orchestrator, a transport importing the emulator.
     sample = tmp_path / "check.py"
     sample.write_text("def f():\n    from sim.physics.model import CRAFTS\n")
-    assert wrong_way("swarmd.check", imported_modules(sample, "swarmd.check")) == [
+    assert wrong_way("swarmd.daemon.check", imported_modules(sample, "swarmd.daemon.check")) == [
         "sim.physics.model (sim.physics)"]
     assert wrong_way("sim.shared.summary", ["sim.realtime.orchestrator"]) == [
         "sim.realtime.orchestrator (sim.realtime)"]
@@ -217,7 +215,7 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
         "swarmd.link.base (link)"]
     assert wrong_way("swarmd.config.robot", ["swarmd.services.runtime"]) == [
         "swarmd.services.runtime (services)"]
-    assert wrong_way("swarmd.monitor", ["pydantic"]) == ["pydantic (only config)"]
+    assert wrong_way("swarmd.daemon.monitor", ["pydantic"]) == ["pydantic (only config)"]
     assert wrong_way("swarmd.config.robot", ["pydantic", "swarmd.transport.media"]) == []
     # Benches, fuzzers and scripts sit on top: they import anything, nothing them.
     assert wrong_way("swarmd.cli", ["bench.grids"]) == ["bench.grids (tools)"]

@@ -15,7 +15,7 @@ import pytest
 from swarms import signed_paper
 
 from swarmd.config import load_robot, load_swarm
-from swarmd.daemon import Daemon, run_daemon
+from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.none import NoneLink
 from swarmd.services.revocation import EXIT_REVOKED, revoked_problem
 

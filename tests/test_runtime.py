@@ -21,13 +21,13 @@ from typing import Any
 import pytest
 from swarms import paper_text, unsigned_paper
 
-import swarmd.daemon as daemon_mod
+import swarmd.daemon.daemon as daemon_mod
 from swarmd.base.keys import generate_key
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node
 from swarmd.core.roles import Health, Role
-from swarmd.daemon import Daemon, run_daemon
+from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
 from swarmd.link.socket import SocketLink

@@ -1,7 +1,7 @@
 """One robot of the real-time `swarmd sim`: a real `swarmd start` daemon in its own process.
 
 The orchestrator (`orchestrator.py`) writes a robot file per robot (so each process runs
-exactly what `swarmd start --config` runs: `swarmd.daemon.run_daemon`) and starts this
+exactly what `swarmd start --config` runs: `swarmd.daemon.daemon.run_daemon`) and starts this
 module's `child_main` in a forkserver child. What the simulator adds around the daemon:
 
 - a receive filter (`sim/realtime/netfilter.py`): seeded loss and partitions, per receiver;
@@ -72,7 +72,7 @@ from swarmd.base.logs import setup_logging
 from swarmd.config import load_robot
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health
-from swarmd.daemon import Daemon, run_daemon
+from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
 from swarmd.services.runtime import Runtime

@@ -72,7 +72,7 @@ def _start(config: Path, log_level: str, log_format: str | None) -> None:
 
     from swarmd.base.logs import LogFormat, default_format, setup_logging
     from swarmd.config import ConfigError, load_robot
-    from swarmd.daemon import EXIT_CONFIG, run_daemon
+    from swarmd.daemon.daemon import EXIT_CONFIG, run_daemon
     from swarmd.services.revocation import EXIT_REVOKED, revoked_problem
 
     fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"

@@ -41,6 +41,7 @@ from swarmd.core.events import NAME_KEY, Alert, Leave, event_of
 from swarmd.core.node import Node
 from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
+from swarmd.daemon.waiting import Waiting, describe_channel, report_waiting
 from swarmd.link.base import RobotLink
 from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
@@ -50,7 +51,6 @@ from swarmd.services.revocation import EXIT_REVOKED, revoked_in
 from swarmd.services.runtime import EventSink, ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
-from swarmd.waiting import Waiting, describe_channel, report_waiting
 
 log = logging.getLogger("swarmd.daemon")
 
