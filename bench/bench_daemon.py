@@ -58,11 +58,11 @@ def swarm_file(root: Path, tmp: Path, auth: str) -> Path:
     text = (root / "configs" / "paper.yaml").read_text()
     lines = [AUTH[auth] if line.startswith("auth:") else line for line in text.splitlines()]
     if auth == "per-robot":
-        identity: Any = importlib.import_module("swarmd.identity")
+        identity: Any = importlib.import_module("swarmd.base.identity")
         for robot in range(1, 7):
             identity.write_identity(tmp / "keys", robot)
     elif auth == "shared":
-        importlib.import_module("swarmd.keys").generate_key(tmp / "swarm.key")
+        importlib.import_module("swarmd.base.keys").generate_key(tmp / "swarm.key")
     path = tmp / "paper.yaml"
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -97,7 +97,7 @@ def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
     env["PYTHONPATH"] = str(root)
     with tempfile.TemporaryDirectory() as tmp:
         swarm = swarm_file(root, Path(tmp), args.auth)
-        private_key_path: Any = importlib.import_module("swarmd.identity").private_key_path
+        private_key_path: Any = importlib.import_module("swarmd.base.identity").private_key_path
 
         def launch(robot: int) -> subprocess.Popen[str]:
             cfg = Path(tmp) / f"robot{robot}.yaml"

@@ -70,7 +70,7 @@ MUTANTS: dict[str, NodeFactory] = {"last-heard": LastHeardNode}
 
 
 def ed25519_identities(robots: Any) -> dict[int, Any]:
-    from swarmd.identity import throwaway_identities
+    from swarmd.base.identity import throwaway_identities
 
     return throwaway_identities(robots)
 

@@ -22,8 +22,8 @@ import time
 
 from sim.xbee_emu import Medium
 from sim.xbee_emu.swarm import RadioSwarm, paper_plan
-from swarmd.budget import budget_for, largest_swarm
 from swarmd.core.params import radio
+from swarmd.services.budget import budget_for, largest_swarm
 from swarmd.transport.base import Transport
 from swarmd.transport.xbee import XBeeTransport
 

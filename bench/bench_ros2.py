@@ -29,7 +29,7 @@ PAPER = ROOT / "configs" / "paper.yaml"
 
 async def _child(config: Path, seconds: float) -> dict[str, float]:
     from swarmd.config import load_robot
-    from swarmd.daemon import run_daemon
+    from swarmd.daemon.daemon import run_daemon
 
     cfg = load_robot(config)
     stop = asyncio.Event()

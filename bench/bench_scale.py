@@ -30,12 +30,12 @@ from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.p
 
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import run_virtual
-from swarmd.budget import channel_budget, largest_swarm
 from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.node import Node
 from swarmd.core.params import Params, udp
 from swarmd.core.plan import SwarmPlan
+from swarmd.services.budget import channel_budget, largest_swarm
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = b"b" * 32

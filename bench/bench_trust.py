@@ -5,7 +5,7 @@ and the 802.15.4 budget (DESIGN section 2, "Who may say what").
 
 1. Frame sizes per message in each mode (unsigned, shared key, per-robot), below 128
    functions, from the codec itself.
-2. Ed25519 with `cryptography` (the library `swarmd.identity` uses): signs and
+2. Ed25519 with `cryptography` (the library `swarmd.base.identity` uses): signs and
    verifies per second on this machine, and HMAC-SHA256 tag checks for comparison.
 3. configs/grid100.yaml (100 robots) in `sim.virtual`, per-robot mode with real
    Ed25519 keys, `--seconds` of virtual time with a crash in the middle: signature
@@ -35,11 +35,11 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import (
 
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import VirtualSwarm
-from swarmd import budget
 from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.auth import Identity
 from swarmd.core.params import radio
+from swarmd.services import budget
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = b"k" * 32

@@ -1,5 +1,5 @@
 """Signature checks under a flood of forged signed frames (DESIGN section 2, "Who can
-still do what"; swarmd/verify_budget.py).
+still do what"; swarmd/base/verify_budget.py).
 
 1. What one Ed25519 check costs on this machine (a good and a bad signature), and what
    the daemon's budget (`TOTAL_RATE` checks a second) costs at that price.
@@ -35,16 +35,16 @@ from sim.realtime.robotfiles import free_udp_port
 from sim.shared.invariants import check_events
 from sim.shared.summary import lateness_figures
 from sim.shared.summary import percentile as pct
+from swarmd.base.identity import Ed25519Signer, Keyring, generate_identity
 from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.auth import SIGNATURE_LEN
 from swarmd.core.chain import LINK_LEN
 from swarmd.core.roles import Role
-from swarmd.identity import Ed25519Signer, Keyring, generate_identity
 from swarmd.transport.udp import UdpTransport
 
 try:
-    from swarmd.verify_budget import TOTAL_RATE
+    from swarmd.base.verify_budget import TOTAL_RATE
 except ImportError:  # a tree from before the budget: measure it all the same
     TOTAL_RATE = 0.0
 

@@ -16,7 +16,7 @@ from typing import Any
 def main() -> None:
     out = sys.argv.pop(1)
     profile = cProfile.Profile(time.process_time)
-    from swarmd import notify
+    from swarmd.base import notify
 
     ready, stopping = notify.Notifier.ready, notify.Notifier.stopping
 

@@ -21,7 +21,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run as a script
 
-from swarmd import state
 from swarmd.config.errors import ConfigError, ConfigUnreadable
 from swarmd.config.source import parse_source
 from swarmd.config.swarm_rules import inspect_swarm
@@ -29,6 +28,7 @@ from swarmd.core import wire
 from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.plan import RobotPlan, SwarmPlan
 from swarmd.link.socket import SocketLink
+from swarmd.services import state
 
 KEY = bytes(range(32))
 

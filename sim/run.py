@@ -315,7 +315,7 @@ def check(options: SimOptions) -> _Checked:
                        f"{options.swarm} (robots: {', '.join(map(str, sorted(plan.robots)))})")
     if options.flies:
         from sim.physics.model import PRESETS
-        from swarmd.functions import flight_problems
+        from swarmd.base.functions import flight_problems
 
         chosen = options.chosen_craft()
         if chosen not in PRESETS:

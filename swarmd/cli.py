@@ -10,8 +10,8 @@ import sys
 
 if sys.argv[1:2] == ["start"]:
     # First of all, before the imports below take their time: a SIGHUP or SIGTERM
-    # while the daemon starts must not kill it (swarmd/signals.py).
-    from swarmd import signals
+    # while the daemon starts must not kill it (swarmd/base/signals.py).
+    from swarmd.base import signals
 
     signals.defer()
 

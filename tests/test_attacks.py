@@ -697,7 +697,7 @@ class _Channel:
 async def test_the_monitor_bounds_seqs_as_the_daemons_do(paper: Paper, mode: str) -> None:
     """Forged (or bit-flipped) frames far ahead, one per robot, then the robots' own
     heartbeats: every robot is live at the monitor, none silent, no false alert."""
-    from swarmd.monitor import MonitorState, listen
+    from swarmd.daemon.monitor import MonitorState, listen
 
     plan, params = paper
     key = bytes(32) if mode == "shared" else None
@@ -717,7 +717,7 @@ def test_the_monitor_shows_an_insiders_heartbeat_as_unverified(paper: Paper) -> 
     standby 6's own signed CLAIM for f2 with no certificate, and its anchor at epoch 1,
     supersede nobody either (the daemons are unmoved by them: so is the monitor); with
     the warnings of a quorum of f2's watchers (its certificate) they do."""
-    from swarmd.monitor import MonitorState
+    from swarmd.daemon.monitor import MonitorState
 
     plan, params = paper
     ids = fake_identities(plan.robots)

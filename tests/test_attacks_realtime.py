@@ -199,7 +199,7 @@ async def test_per_robot_a_revoked_robot_is_taken_over_on_real_daemons(
     from swarms import signed_paper
 
     from swarmd.config import load_robot
-    from swarmd.daemon import Daemon, run_daemon
+    from swarmd.daemon.daemon import Daemon, run_daemon
 
     swarm, _keys = signed_paper(tmp_path)
     port = udp_port

@@ -7,7 +7,9 @@ from pathlib import Path
 import pytest
 
 from sim.xbee_emu.swarm import paper_plan
-from swarmd.budget import (
+from swarmd.config import load_swarm
+from swarmd.core.params import radio, udp
+from swarmd.services.budget import (
     airtime,
     budget_for,
     channel_budget,
@@ -18,8 +20,6 @@ from swarmd.budget import (
     largest_swarm,
     warn_size,
 )
-from swarmd.config import load_swarm
-from swarmd.core.params import radio, udp
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -132,7 +132,7 @@ def test_per_robot_frames_on_digimesh_are_counted_in_fragments() -> None:
 def test_a_frame_that_cannot_be_split_is_warned(monkeypatch: pytest.MonkeyPatch) -> None:
     # No real medium refuses a swarmd frame (8 fragments of 64 - 6 B carry 464 B); a
     # 15 B payload (9 B per fragment) would need 9 fragments for an 80 B WARN.
-    from swarmd import budget
+    from swarmd.services import budget
 
     monkeypatch.setitem(budget.MAX_PAYLOAD, "serial", 15)
     b = budget_for(4, 2, 2, radio(), medium="serial", signed=True, per_robot=True)

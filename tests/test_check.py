@@ -10,11 +10,11 @@ import pytest
 import yaml
 from typer.testing import CliRunner, Result
 
-from swarmd import check as check_mod
-from swarmd.check import Section, run_check
+from swarmd.base.identity import write_identity
 from swarmd.cli import app
 from swarmd.config import SwarmConfig
-from swarmd.identity import write_identity
+from swarmd.daemon import check as check_mod
+from swarmd.daemon.check import Section, run_check
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 runner = CliRunner()

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 import yaml
 
+from swarmd.base.identity import write_identity
 from swarmd.config import (
     ConfigError,
     ConfigUnreadable,
@@ -28,7 +29,6 @@ from swarmd.config import (
     parse_swarm,
 )
 from swarmd.core.params import Params, radio, udp
-from swarmd.identity import write_identity
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 

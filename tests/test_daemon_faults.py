@@ -21,13 +21,13 @@ from swarms import paper_text, unsigned_paper
 from test_runtime import GROUP, launch, robot_cfg, runtime_of, wait_until
 from test_start import listener
 
+from swarmd.base.eventlog import EventLog, EventLogError
 from swarmd.config import load_robot
 from swarmd.core import wire
-from swarmd.daemon import EXIT_FAILURE, Daemon, run_daemon
-from swarmd.eventlog import EventLog, EventLogError
+from swarmd.daemon.daemon import EXIT_FAILURE, Daemon, run_daemon
 from swarmd.link.exec import ExecLink, run_command
 from swarmd.link.socket import SocketLink, SocketLinkError
-from swarmd.state import StateError, StateFile, StateWriteError, load, state_path
+from swarmd.services.state import StateError, StateFile, StateWriteError, load, state_path
 from swarmd.transport.base import TransportError
 from swarmd.transport.udp import UdpTransport
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from swarmd.identity import write_identity
+from swarmd.base.identity import write_identity
 
 REPO = Path(__file__).resolve().parent.parent
 DEPLOY = REPO / "deploy"

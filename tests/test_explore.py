@@ -13,8 +13,8 @@ import pytest
 
 from sim.virtual.explore import AUTH_MODES, explore, scripts
 from sim.virtual.explore_world import Choice, Script, World
+from swarmd.base.identity import throwaway_identities
 from swarmd.core.node import Node
-from swarmd.identity import throwaway_identities
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -16,8 +16,8 @@ from test_runtime import wait_until
 from test_serial_transport import raw_pty
 
 from sim.xbee_emu import Medium
+from swarmd.base.identity import throwaway_identities
 from swarmd.core import wire
-from swarmd.identity import throwaway_identities
 from swarmd.transport import fragment, framing
 from swarmd.transport.fragment import (
     HEADER_LEN,

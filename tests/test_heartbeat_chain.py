@@ -310,7 +310,7 @@ def test_a_peer_back_from_a_long_silence_gets_anchors(paper: Paper) -> None:
 
 class _Ring:
     """A keyring that accepts each robot's listed secrets (old and new during a
-    rotation), as `swarmd.identity.Keyring` does with several public keys."""
+    rotation), as `swarmd.base.identity.Keyring` does with several public keys."""
 
     def __init__(self, secrets: dict[int, list[bytes]]) -> None:
         self.secrets = secrets

@@ -1,4 +1,4 @@
-"""Per-robot identities (swarmd/identity.py): Ed25519 signer and keyring, key files,
+"""Per-robot identities (swarmd/base/identity.py): Ed25519 signer and keyring, key files,
 `swarmd keygen --robot / --swarm`, the swarm file's `auth:` and the robot file's
 `identity_file:`, the daemon's Identity and its SIGHUP reload (rotation, revocation)."""
 
@@ -15,12 +15,9 @@ import pytest
 from swarms import PAPER, identity_file, paper_text, signed_paper
 from typer.testing import CliRunner
 
-import swarmd.daemon as daemon_mod
+import swarmd.daemon.daemon as daemon_mod
 from sim.realtime.robotfiles import sign_for_run
-from swarmd.cli import app
-from swarmd.config import ConfigError, load_robot, load_swarm
-from swarmd.core.auth import SIGNATURE_LEN, Identity
-from swarmd.identity import (
+from swarmd.base.identity import (
     Ed25519Signer,
     IdentityFileError,
     Keyring,
@@ -31,7 +28,10 @@ from swarmd.identity import (
     throwaway_identities,
     write_identity,
 )
-from swarmd.keys import load_key
+from swarmd.base.keys import load_key
+from swarmd.cli import app
+from swarmd.config import ConfigError, load_robot, load_swarm
+from swarmd.core.auth import SIGNATURE_LEN, Identity
 
 runner = CliRunner()
 

@@ -1,4 +1,4 @@
-"""swarmd.keys and `swarmd keygen`: file modes, refusals, and the rotation window.
+"""swarmd.base.keys and `swarmd keygen`: file modes, refusals, and the rotation window.
 
 The rotation procedure tested here is the one docs/operations.md gives: (1) every
 robot accepts the new key, (2) every robot signs with the new key and still accepts
@@ -19,13 +19,13 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from swarmd.base.keys import KEY_LEN, KeyFileError, generate_key, load_key, load_keys, parse_key
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.events import Event
 from swarmd.core.node import Node
 from swarmd.core.params import udp
 from swarmd.core.plan import RobotPlan, SwarmPlan
-from swarmd.keys import KEY_LEN, KeyFileError, generate_key, load_key, load_keys, parse_key
 
 
 def _mode(path: Path) -> int:
@@ -216,7 +216,7 @@ def test_switching_without_the_window_cuts_the_robot_off() -> None:
 
 # -- the daemon refuses a key others can read ------------------------------------------
 def test_swarmd_start_refuses_a_key_readable_by_others(tmp_path: Path) -> None:
-    pytest.importorskip("swarmd.daemon", reason="daemon runtime not in this tree")
+    pytest.importorskip("swarmd.daemon.daemon", reason="daemon runtime not in this tree")
     repo = Path(__file__).resolve().parent.parent
     swarm = (repo / "configs" / "paper.yaml").read_text()
     swarm, n = re.subn(r"(?m)^auth:.*$", "key_file: swarm.key", swarm)

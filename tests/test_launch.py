@@ -9,7 +9,13 @@ from typer.testing import CliRunner
 
 from swarmd.cli import app
 from swarmd.config import load_swarm, parse_swarm
-from swarmd.launch import LaunchError, LaunchRobot, launch_to_swarm, parse_launch, swarm_yaml
+from swarmd.services.launch import (
+    LaunchError,
+    LaunchRobot,
+    launch_to_swarm,
+    parse_launch,
+    swarm_yaml,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "tests" / "fixtures" / "paper.launch"

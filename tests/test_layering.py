@@ -1,14 +1,23 @@
-"""DESIGN section 1: imports point one way, package by package.
+"""DESIGN section 1: imports point one way, room by room.
 
-    core  <-  base (files, keys, identity, functions, logs, notify, eventlog)
-          <-  transport, link  <-  config  <-  services (runtime, state, metrics, budget,
-    launch)  <-  daemon (daemon, monitor, check)  <-  simulators (sim.shared <- sim.virtual
-    / sim.physics / sim.xbee_emu <- sim.realtime <- sim.run)  <-  commands (swarmd.commands,
-    swarmd.cli)
+A room is a folder: each package under swarmd/ (`swarmd/base/` is the room "base") and
+under sim/ (`sim/shared/` is "sim.shared"), a module loose at sim/'s top (`sim/run.py` is
+"sim.run"), and bench/, fuzz/ and scripts/ together ("tools"). The one module loose at
+swarmd/'s top besides `__init__.py` is the console script's entry, `swarmd/cli.py`, which
+sits with the commands. The order of the rooms, and so which arrow may exist, is the
+decision written here (`MAY_IMPORT`); which module is in which room is read from the tree.
+
+    core  <-  base  <-  transport, link  <-  config  <-  services  <-  daemon
+          <-  simulators (sim.shared <- sim.virtual / sim.physics / sim.xbee_emu
+              <- sim.realtime <- sim.run)  <-  commands (swarmd/commands/, swarmd/cli.py)
+          <-  tools (bench/, fuzz/, scripts/)
 
 `swarmd/core` is sans-IO: no I/O module, no clock, no randomness, no pydantic, nothing
 else of the project. Only the config layer imports pydantic. Every import counts, also
 one inside a function (a lazy import is still a dependency of the module).
+
+`python tests/test_layering.py` prints the rooms, the arrows between them as the imports
+draw them, and the import circles.
 """
 
 from __future__ import annotations
@@ -31,29 +40,32 @@ config layer's validation library."""
 ONLY_IN: dict[str, str] = {"pydantic": "config"}
 """Outside libraries only one group may import (DESIGN section 2: config validates)."""
 
-GROUPS: dict[str, tuple[str, ...]] = {
-    "core": ("swarmd.core",),
-    "base": ("swarmd.files", "swarmd.keys", "swarmd.identity", "swarmd.functions",
-             "swarmd.logs", "swarmd.notify", "swarmd.eventlog", "swarmd.signals",
-             "swarmd.verify_budget"),
-    "transport": ("swarmd.transport",),
-    "link": ("swarmd.link",),
-    "config": ("swarmd.config",),
-    "services": ("swarmd.runtime", "swarmd.state", "swarmd.metrics", "swarmd.budget",
-                 "swarmd.launch", "swarmd.revocation"),
-    "daemon": ("swarmd.daemon", "swarmd.monitor", "swarmd.monitor_ros2", "swarmd.check",
-               "swarmd.monitor_claims",
-               "swarmd.waiting"),
-    "sim.shared": ("sim.shared",),
-    "sim.virtual": ("sim.virtual",),
-    "sim.physics": ("sim.physics",),
-    "sim.xbee_emu": ("sim.xbee_emu",),
-    "sim.realtime": ("sim.realtime",),
-    "sim.run": ("sim.run",),
-    "commands": ("swarmd.commands", "swarmd.cli"),
-    "tools": ("bench", "fuzz", "scripts"),
-}
-"""Every project module belongs to exactly one group (longest prefix wins)."""
+ENTRY = {"swarmd.cli": "commands"}
+"""The modules loose at swarmd/'s top, each with its room: only the console script's
+entry (pyproject's `[project.scripts]`, `python -m swarmd.cli`). Any other module lives in
+the folder of its layer."""
+
+TOOLS = ("bench", "fuzz", "scripts")
+"""Folders of scripts that sit above everything (the room "tools")."""
+
+
+def rooms(root: Path) -> dict[str, tuple[str, ...]]:
+    """Room -> the module prefixes it holds, read from the folders under `root`."""
+    out: dict[str, tuple[str, ...]] = {}
+    for top in ("swarmd", "sim"):
+        for entry in sorted((root / top).iterdir()):
+            if (entry / "__init__.py").exists() or (
+                    top == "sim" and entry.suffix == ".py" and entry.stem != "__init__"):
+                name = entry.stem if top == "swarmd" else f"sim.{entry.stem}"
+                out[name] = (f"{top}.{entry.stem}",)
+    for module, room in ENTRY.items():
+        out[room] = (*out.get(room, ()), module)
+    out["tools"] = TOOLS
+    return out
+
+
+GROUPS = rooms(ROOT)
+"""Every project module belongs to exactly one room (longest prefix wins)."""
 
 TOPS = ("swarmd", "sim", "bench", "fuzz", "scripts")
 """The folders whose modules the layering and the import circles cover (tests/ is not
@@ -77,11 +89,13 @@ MAY_IMPORT: dict[str, set[str]] = {
                                   "sim.realtime"},
     "sim.run": _BELOW_SIM | {"sim.shared", "sim.virtual", "sim.physics", "sim.xbee_emu",
                              "sim.realtime", "sim.run"},
-    "commands": set(GROUPS) - {"tools"},
-    "tools": set(GROUPS),
+    "commands": set(),
+    "tools": set(),
 }
-"""Which groups a group may import: its own and those below it, never one above or
+"""Which rooms a room may import: its own and those below it, never one above or
 beside it (a transport knows no link, a link no transport)."""
+MAY_IMPORT["commands"] = set(MAY_IMPORT) - {"tools"}
+MAY_IMPORT["tools"] = set(MAY_IMPORT)
 
 
 def module_name(path: Path) -> str:
@@ -111,7 +125,7 @@ def imported_modules(path: Path, module: str | None = None) -> list[str]:
                 source = _sibling(path, package, node.module)
             else:
                 continue
-            # `from swarmd import daemon` imports a module, `from swarmd import
+            # `from swarmd.daemon import daemon` imports a module, `from swarmd import
             # __version__` the package itself.
             named = [f"{source}.{a.name}" for a in node.names]
             modules = [n for n in named if _is_module(n)]
@@ -137,10 +151,11 @@ def _is_module(name: str) -> bool:
     return (path / "__init__.py").exists() or path.with_suffix(".py").exists()
 
 
-def group_of(module: str) -> str | None:
-    """The group of a project module; None for the bare package roots and outside modules."""
+def group_of(module: str, groups: dict[str, tuple[str, ...]] | None = None) -> str | None:
+    """The room of a project module (in `groups`, by default the tree's); None for the
+    bare package roots and outside modules."""
     best: tuple[int, str] | None = None
-    for group, prefixes in GROUPS.items():
+    for group, prefixes in (GROUPS if groups is None else groups).items():
         for prefix in prefixes:
             if (module == prefix or module.startswith(prefix + ".")) and (
                     best is None or len(prefix) > best[0]):
@@ -152,7 +167,7 @@ def wrong_way(module: str, imports: list[str]) -> list[str]:
     """The imports of `module` that point up or sideways (DESIGN section 1), or reach a
     library only another group may use (`ONLY_IN`)."""
     source = group_of(module)
-    assert source is not None, f"{module} belongs to no layer: add it to GROUPS"
+    assert source is not None, f"{module} belongs to no room: put it in the folder of its layer"
     bad = []
     for name in imports:
         top = name.split(".")[0]
@@ -206,7 +221,7 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
     # summary importing the real-time orchestrator, a transport importing the emulator.
     sample = tmp_path / "check.py"
     sample.write_text("def f():\n    from sim.physics.model import CRAFTS\n")
-    assert wrong_way("swarmd.check", imported_modules(sample, "swarmd.check")) == [
+    assert wrong_way("swarmd.daemon.check", imported_modules(sample, "swarmd.daemon.check")) == [
         "sim.physics.model (sim.physics)"]
     assert wrong_way("sim.shared.summary", ["sim.realtime.orchestrator"]) == [
         "sim.realtime.orchestrator (sim.realtime)"]
@@ -218,9 +233,9 @@ def test_checker_catches_an_import_the_wrong_way(tmp_path: Path) -> None:
     # runtime; pydantic stays in the config layer.
     assert wrong_way("swarmd.transport.udp", ["swarmd.link.base"]) == [
         "swarmd.link.base (link)"]
-    assert wrong_way("swarmd.config.robot", ["swarmd.runtime"]) == [
-        "swarmd.runtime (services)"]
-    assert wrong_way("swarmd.monitor", ["pydantic"]) == ["pydantic (only config)"]
+    assert wrong_way("swarmd.config.robot", ["swarmd.services.runtime"]) == [
+        "swarmd.services.runtime (services)"]
+    assert wrong_way("swarmd.daemon.monitor", ["pydantic"]) == ["pydantic (only config)"]
     assert wrong_way("swarmd.config.robot", ["pydantic", "swarmd.transport.media"]) == []
     # Benches, fuzzers and scripts sit on top: they import anything, nothing them.
     assert wrong_way("swarmd.cli", ["bench.grids"]) == ["bench.grids (tools)"]
@@ -316,6 +331,90 @@ def test_a_type_only_import_makes_a_circle(tmp_path: Path) -> None:
     assert circles(graph) == [["swarmd.a", "swarmd.b"]]
 
 
+def test_every_room_has_its_place_in_the_order() -> None:
+    # A new folder is a new room: which rooms it may import is a decision, written in
+    # MAY_IMPORT, not a default.
+    assert set(GROUPS) == set(MAY_IMPORT), (
+        f"rooms without a place in MAY_IMPORT: {sorted(set(GROUPS) - set(MAY_IMPORT))}; "
+        f"places without a folder: {sorted(set(MAY_IMPORT) - set(GROUPS))}")
+
+
+def test_the_top_of_swarmd_holds_only_the_entry_point() -> None:
+    loose = sorted(p.stem for p in (ROOT / "swarmd").glob("*.py"))
+    assert loose == sorted(["__init__", *(m.split(".")[-1] for m in ENTRY)]), (
+        f"swarmd/ holds {loose} at its top: a module lives in the folder of its layer "
+        "(DESIGN section 1)")
+    assert len(loose) <= 5
+
+
+def test_rooms_are_read_from_the_folders(tmp_path: Path) -> None:
+    for name in ("swarmd/core/__init__.py", "swarmd/gear/__init__.py", "swarmd/cli.py",
+                 "swarmd/__init__.py", "swarmd/notes/x.txt", "sim/__init__.py",
+                 "sim/shared/__init__.py", "sim/run.py"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("")
+    found = rooms(tmp_path)
+    assert found == {"core": ("swarmd.core",), "gear": ("swarmd.gear",),
+                     "commands": ("swarmd.cli",), "sim.shared": ("sim.shared",),
+                     "sim.run": ("sim.run",), "tools": TOOLS}
+    assert group_of("swarmd.gear.box", found) == "gear"
+    assert group_of("swarmd.cli", found) == "commands"
+
+
+def arrows(graph: dict[str, set[str]],
+           groups: dict[str, tuple[str, ...]] | None = None) -> dict[tuple[str, str], int]:
+    """(room, room it imports) -> how many module-to-module imports draw that arrow;
+    imports inside one room are no arrow."""
+    out: dict[tuple[str, str], int] = {}
+    for module, imported in graph.items():
+        source = group_of(module, groups)
+        for name in imported:
+            target = group_of(name, groups)
+            if source and target and target != source:
+                out[source, target] = out.get((source, target), 0) + 1
+    return out
+
+
+def layout_map(paths: list[Path] | None = None,
+               groups: dict[str, tuple[str, ...]] | None = None) -> str:
+    """The rooms with their module counts, the arrows the imports draw between them and
+    the import circles, as text (`python tests/test_layering.py` prints it)."""
+    groups = GROUPS if groups is None else groups
+    graph = import_graph(PROJECT_FILES if paths is None else paths)
+    count: dict[str, int] = {}
+    for module in graph:
+        room = group_of(module, groups)
+        if room:
+            count[room] = count.get(room, 0) + 1
+    drawn = arrows(graph, groups)
+    order = [r for r in MAY_IMPORT if r in groups] + [r for r in groups if r not in MAY_IMPORT]
+    lines = [f"rooms: {len(groups)} (bottom first)"]
+    lines += [f"  {room:<13}{count.get(room, 0):>3} modules  {', '.join(groups[room])}"
+              for room in order]
+    lines.append(f"arrows: {len(drawn)} (room -> room it imports: module imports)")
+    for room in order:
+        targets = sorted((t, n) for (s, t), n in drawn.items() if s == room)
+        if targets:
+            lines.append(f"  {room:<13}-> " + ", ".join(f"{t} {n}" for t, n in targets))
+    found = circles(graph)
+    lines.append(f"circles: {len(found)}")
+    lines += ["  " + " <-> ".join(c) for c in found]
+    top = sorted(p.name for p in (ROOT / "swarmd").glob("*.py"))
+    lines.append(f"top of swarmd/: {len(top)} modules ({', '.join(top)})")
+    return "\n".join(lines)
+
+
+def test_the_map_shows_rooms_arrows_and_circles() -> None:
+    text = layout_map()
+    assert f"rooms: {len(GROUPS)} (bottom first)" in text
+    assert "  base         -> core" in text
+    assert "circles: 0" in text
+    assert "top of swarmd/: 2 modules (__init__.py, cli.py)" in text
+    assert arrows({"swarmd.base.x": {"swarmd.core.y", "swarmd.base.z"},
+                   "swarmd.daemon.d": {"swarmd.core.y"}}) == {
+        ("base", "core"): 1, ("daemon", "core"): 1}
+
+
 SIZE_LIMITS = (40, 600)
 """Code lines of one function, and of one module, in swarmd/ and sim/ (DESIGN section 1:
 a module a newcomer reads in one sitting; a function that does one thing). Only code
@@ -329,7 +428,7 @@ SIZE_EXEMPT: dict[str, str] = {
     "sim/xbee_emu/medium.py:Medium.__init__":
         "the medium's fields in one table: the radios, the air's bookkeeping, the "
         "thread's selector and wake pipe, the figures; no logic beyond one argument check",
-    "swarmd/metrics.py:Metrics.__init__":
+    "swarmd/services/metrics.py:Metrics.__init__":
         "the daemon's metric declarations in one table, each with the help text a "
         "Prometheus user reads; split, a metric's name is hunted in helper methods",
 }
@@ -431,3 +530,7 @@ def test_the_size_check_knows_methods_and_exemptions(tmp_path: Path) -> None:
     long.write_text("class C:\n    def m(self) -> None:\n" + "        x = 1\n" * 41)
     assert oversized([long]) == [f"{long}:C.m 42"]
     assert oversized([long], {f"{long}:C.m": "a table that reads best whole"}) == []
+
+
+if __name__ == "__main__":
+    print(layout_map())

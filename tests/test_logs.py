@@ -10,8 +10,8 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
+from swarmd.base.logs import JsonFormatter, TextFormatter, default_format, setup_logging
 from swarmd.cli import app
-from swarmd.logs import JsonFormatter, TextFormatter, default_format, setup_logging
 
 ROOT = Path(__file__).resolve().parent.parent
 

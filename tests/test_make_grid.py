@@ -8,8 +8,8 @@ from types import ModuleType
 
 import pytest
 
-from swarmd.check import run_check
 from swarmd.config import load_swarm
+from swarmd.daemon.check import run_check
 
 ROOT = Path(__file__).resolve().parent.parent
 

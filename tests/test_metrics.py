@@ -1,4 +1,4 @@
-"""swarmd.metrics: what the runtime records, scraped over real HTTP from loopback."""
+"""swarmd.services.metrics: what the runtime records, scraped over real HTTP from loopback."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from swarmd.core import events as ev
 from swarmd.core.actions import Assign, Broadcast
 from swarmd.core.node import Snapshot
 from swarmd.core.roles import Health, Role
-from swarmd.metrics import Metrics, MetricsError, MetricsServer, check_loopback
+from swarmd.services.metrics import Metrics, MetricsError, MetricsServer, check_loopback
 
 
 def _samples(text: str) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:

@@ -1,4 +1,4 @@
-"""swarmd.monitor: the passive base-station view, on virtual time, plus the CLI once."""
+"""swarmd.daemon.monitor: the passive base-station view, on virtual time, plus the CLI once."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from swarmd.config import load_swarm
 from swarmd.core import params, wire
 from swarmd.core.plan import RobotPlan, SwarmPlan
 from swarmd.core.roles import Health, Role
-from swarmd.monitor import MonitorState
+from swarmd.daemon.monitor import MonitorState
 from swarmd.transport.addresses import DEFAULT_GROUP
 
 PAPER = Path(__file__).resolve().parent.parent / "configs" / "paper.yaml"
@@ -285,8 +285,8 @@ def test_the_base_station_never_shows_ok_a_function_its_holder_does_not_execute(
     """`swarmd monitor --ros2` in the daemons' words: robot 1 heard as a standby (it
     left f1 and nobody took it) is not "held by robot 1"; a silent holder is STALE
     "not heard", as the daemons say it."""
+    from swarmd.daemon.monitor_ros2 import monitor_statuses
     from swarmd.link.ros2_status import OK, STALE, WARN
-    from swarmd.monitor_ros2 import monitor_statuses
 
     state = MonitorState(paper_plan(), params.udp())
     tx = Sender()

@@ -17,7 +17,7 @@ from sim.xbee_emu import Medium
 from sim.xbee_emu.radio import EmulatedRadio, Transmit
 from sim.xbee_emu.swarm import RadioSwarm, paper_plan
 from swarmd.core.params import radio
-from swarmd.monitor import MonitorState, listen
+from swarmd.daemon.monitor import MonitorState, listen
 from swarmd.transport.base import Transport
 from swarmd.transport.xbee import XBeeTransport
 

@@ -1,4 +1,4 @@
-"""swarmd.notify against real NOTIFY_SOCKET listeners (AF_UNIX datagram sockets)."""
+"""swarmd.base.notify against real NOTIFY_SOCKET listeners (AF_UNIX datagram sockets)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from swarms import unsigned_paper
 
-from swarmd.notify import Notifier
+from swarmd.base.notify import Notifier
 
 
 @pytest.fixture
@@ -128,7 +128,7 @@ def _robot_dir(tmp_path: Path, metrics_port: int, udp_port: int) -> Path:
 def test_swarmd_start_speaks_sd_notify(
     listener: tuple[socket.socket, str], tmp_path: Path, udp_port: int
 ) -> None:
-    pytest.importorskip("swarmd.daemon", reason="daemon runtime not in this tree")
+    pytest.importorskip("swarmd.daemon.daemon", reason="daemon runtime not in this tree")
     httpx = pytest.importorskip("httpx")
     if not (REPO / "configs" / "paper.yaml").exists():
         pytest.skip("configs/paper.yaml not in the tree")

@@ -1,4 +1,4 @@
-"""Function specs and their setpoints, without physics (swarmd/functions.py)."""
+"""Function specs and their setpoints, without physics (swarmd/base/functions.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from swarmd.functions import (
+from swarmd.base.functions import (
     FunctionSpecError,
     PatrolFlight,
     PatrolSpec,

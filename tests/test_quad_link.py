@@ -17,8 +17,8 @@ import pytest
 
 from sim.physics.link import QuadLink, default_home, read_stats
 from sim.physics.robot import Mode, QuadRobot, load_trajectory
+from swarmd.base.functions import PatrolFlight
 from swarmd.core.roles import Health
-from swarmd.functions import PatrolFlight
 from swarmd.link.base import RobotLink
 
 

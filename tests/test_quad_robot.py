@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from sim.physics.robot import Mode, QuadRobot, load_trajectory, trajectory_of
+from swarmd.base.functions import PatrolFlight, PatrolSpec, next_waypoint, parse_function
 from swarmd.core.roles import Health
-from swarmd.functions import PatrolFlight, PatrolSpec, next_waypoint, parse_function
 
 SLOT = {"kind": "slot", "position": [1.0, 1.0, 1.5]}
 PATROL = {"kind": "patrol", "speed": 1.0,

@@ -245,7 +245,7 @@ async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
 ) -> None:
     # Robot 3's process is stopped (SIGSTOP) as soon as it is spawned, before it can load
     # its file and say ready. (A FIFO as robot file no longer hangs a robot: it is
-    # refused at once, swarmd.files.) The orchestrator's SIGKILL ends a stopped process.
+    # refused at once, swarmd.base.files.) The orchestrator's SIGKILL ends a stopped process.
     spawn = Orchestrator._spawn
 
     def spawn_stopped(self: Orchestrator, robot: int, t0: float | None) -> Any:

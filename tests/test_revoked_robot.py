@@ -1,4 +1,4 @@
-"""A robot that learns its own key is revoked stops acting (swarmd.revocation;
+"""A robot that learns its own key is revoked stops acting (swarmd.services.revocation;
 docs/operations.md, "Revoking a robot"), on real daemons over UDP on loopback.
 
 Before: robot 2 refused the reload (`config not reloaded ... robot 2 is revoked`) and
@@ -15,9 +15,9 @@ import pytest
 from swarms import signed_paper
 
 from swarmd.config import load_robot, load_swarm
-from swarmd.daemon import Daemon, run_daemon
+from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.none import NoneLink
-from swarmd.revocation import EXIT_REVOKED, revoked_problem
+from swarmd.services.revocation import EXIT_REVOKED, revoked_problem
 
 pytestmark = pytest.mark.slow
 

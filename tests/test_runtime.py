@@ -21,18 +21,18 @@ from typing import Any
 import pytest
 from swarms import paper_text, unsigned_paper
 
-import swarmd.daemon as daemon_mod
+import swarmd.daemon.daemon as daemon_mod
+from swarmd.base.keys import generate_key
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
 from swarmd.core.node import Node
 from swarmd.core.roles import Health, Role
-from swarmd.daemon import Daemon, run_daemon
-from swarmd.keys import generate_key
+from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
 from swarmd.link.socket import SocketLink
-from swarmd.runtime import Runtime
-from swarmd.state import state_path
+from swarmd.services.runtime import Runtime
+from swarmd.services.state import state_path
 from swarmd.transport.addresses import DEFAULT_GROUP
 from swarmd.transport.base import EventCallback, FrameCallback
 

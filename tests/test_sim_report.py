@@ -21,7 +21,7 @@ from test_event_contract import check_records
 
 from sim.physics.render import gl_available
 from swarmd.config import load_swarm
-from swarmd.state import state_path
+from swarmd.services.state import state_path
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"

@@ -1,5 +1,5 @@
 """SIGHUP and SIGTERM at any moment of `swarmd start`'s life, start-up included
-(swarmd/signals.py). Real processes: the seam is the process's signal disposition.
+(swarmd/base/signals.py). Real processes: the seam is the process's signal disposition.
 
 Before: a SIGHUP before the event loop's handlers were installed ran the default action
 and the daemon died of it (a reload under load killed a starting robot)."""

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from swarmd import state
 from swarmd.core.node import Restored, Snapshot
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health, Role
 from swarmd.core.wire import SEQ_MAX
+from swarmd.services import state
 
 
 def snap(role: Role, function: str | None, epoch: int, seq: int) -> Snapshot:
@@ -184,7 +184,7 @@ def test_state_seq_reservation_never_passes_the_wire_maximum(tmp_path: Path) -> 
 def test_peer_sequences_and_certificate_survive_a_restart(tmp_path: Path) -> None:
     # What a robot knows of its peers' sequences, and the signed frames that certify
     # what it held, come back after a restart (a replayed old frame stays old).
-    from swarmd.state import PersistedState, load, save
+    from swarmd.services.state import PersistedState, load, save
 
     path = tmp_path / "s.json"
     state = PersistedState(robot=2, swarm=9, known={"f2": (2, 3)}, held=("f2", 3),
@@ -203,7 +203,7 @@ def test_peer_sequences_and_certificate_survive_a_restart(tmp_path: Path) -> Non
 def test_out_of_range_peer_sequences_make_the_file_unusable(tmp_path: Path) -> None:
     import json
 
-    from swarmd.state import StateError, load
+    from swarmd.services.state import StateError, load
 
     path = tmp_path / "s.json"
     path.write_text(json.dumps({"robot": 2, "swarm": 9, "known": {}, "held": None,

@@ -1,4 +1,4 @@
-"""Signature checks are bounded (swarmd/verify_budget.py, DESIGN "Who can still do
+"""Signature checks are bounded (swarmd/base/verify_budget.py, DESIGN "Who can still do
 what"): cheap checks first (a played-back signed frame costs no signature check), then
 a per-sender and a total budget of checks a second, so a flood of forged signed frames
 cannot take a daemon's CPU; its figures on real daemons: bench/bench_verify_flood.py."""
@@ -8,11 +8,11 @@ from __future__ import annotations
 from harness import signed_beat
 
 from sim.shared.fakeid import fake_identities
+from swarmd.base.identity import Keyring, generate_identity
+from swarmd.base.verify_budget import VerifyBudget
 from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.identity import Keyring, generate_identity
-from swarmd.verify_budget import VerifyBudget
 
 Paper = tuple[SwarmPlan, Params]
 
@@ -40,7 +40,7 @@ def test_a_keyring_with_a_budget_checks_no_more_than_it() -> None:
     priv, pub = generate_identity()
     clock = _Clock()
     ring = Keyring({1: pub}, budget=VerifyBudget(clock=clock))
-    from swarmd.identity import Ed25519Signer
+    from swarmd.base.identity import Ed25519Signer
 
     data = b"frame"
     good = Ed25519Signer(1, priv).sign(data)

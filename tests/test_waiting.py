@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from swarmd import waiting
 from swarmd.config import load_swarm
-from swarmd.waiting import Waiting, describe_channel, report_waiting
+from swarmd.daemon import waiting
+from swarmd.daemon.waiting import Waiting, describe_channel, report_waiting
 
 PLAN = load_swarm(Path(__file__).resolve().parent.parent / "configs" / "paper.yaml").to_plan()
 

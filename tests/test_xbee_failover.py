@@ -67,7 +67,7 @@ async def test_per_robot_swarm_fails_over_on_digimesh_in_fragments(tmp_path: Pat
     # Per-robot signed WARN / CLAIM (80 B) and CERT (92 B) exceed DigiMesh's 73 B: they
     # cross the emulated radios in 2 fragments each (transport/fragment.py) and the core
     # verifies each robot's own signature on the reassembled frames.
-    from swarmd.identity import throwaway_identities
+    from swarmd.base.identity import throwaway_identities
 
     with Medium(6, protocol="digimesh", api_mode=2, directory=tmp_path) as medium:
         transports: dict[int, XBeeTransport] = {

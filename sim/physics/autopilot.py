@@ -66,8 +66,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sim.physics.autopilot_core import AutopilotCore
 from sim.physics.link import QuadLink
 from sim.physics.point import PointLink
+from swarmd.base.functions import Vec3
 from swarmd.core.roles import Health
-from swarmd.functions import Vec3
 from swarmd.link.base import HealthCallback
 from swarmd.link.mavlink import MavlinkLink
 from swarmd.link.mavlink_modes import Flavour

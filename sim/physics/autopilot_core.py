@@ -30,7 +30,7 @@ from sim.physics.mavlink_defs import (
     command_int,
 )
 from sim.physics.robot import Mode
-from swarmd.functions import Vec3
+from swarmd.base.functions import Vec3
 from swarmd.link.mavlink_modes import mode_name
 from swarmd.link.mavlink_pilot import geodetic_offset
 

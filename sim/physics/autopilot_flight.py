@@ -22,7 +22,7 @@ from sim.physics.autopilot_state import AutopilotState
 from sim.physics.mavlink_defs import ACCEPTED, TEMPORARILY_REJECTED
 from sim.physics.point import PointRobot
 from sim.physics.robot import Mode, QuadRobot
-from swarmd.functions import Vec3
+from swarmd.base.functions import Vec3
 from swarmd.link.mavlink_modes import Flavour
 
 log = logging.getLogger("swarmd.sim.autopilot")

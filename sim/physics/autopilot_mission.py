@@ -27,7 +27,7 @@ from typing import Any
 
 from sim.physics.autopilot_nav import APM_ALT_RADIUS, Leg, Param, Speeds, rtl_legs
 from sim.physics.mavlink_defs import FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT
-from swarmd.functions import Vec3
+from swarmd.base.functions import Vec3
 from swarmd.link.mavlink_modes import Flavour
 from swarmd.link.mavlink_pilot import geodetic_offset
 

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sim.physics.point import SPEED_XY, SPEED_Z
-from swarmd.functions import Setpoint, Vec3
+from swarmd.base.functions import Setpoint, Vec3
 from swarmd.link.mavlink_modes import Flavour
 
 Param = Callable[[str], float]

@@ -49,8 +49,8 @@ from sim.physics.mavlink_defs import (
 )
 from sim.physics.point import PointRobot
 from sim.physics.robot import Mode, QuadRobot
+from swarmd.base.functions import Vec3
 from swarmd.core.roles import Health
-from swarmd.functions import Vec3
 from swarmd.link.mavlink_modes import Flavour, custom_mode
 
 _LANDED_STATE = {Mode.PARKED: 1, Mode.CRASHED: 1, Mode.FLYING: 2, Mode.TAKEOFF: 3,

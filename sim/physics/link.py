@@ -34,8 +34,8 @@ from typing import IO, Any
 
 from sim.physics.model import Preset, Vec3, preset, x2
 from sim.physics.robot import Mode, QuadRobot, last_state
+from swarmd.base.functions import FunctionSpecError, parse_function
 from swarmd.core.roles import Health
-from swarmd.functions import FunctionSpecError, parse_function
 from swarmd.link.base import HealthCallback
 
 log = logging.getLogger("swarmd.sim.physics")

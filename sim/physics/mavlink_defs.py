@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from swarmd.functions import Vec3
+from swarmd.base.functions import Vec3
 from swarmd.link.mavlink_modes import Flavour
 from swarmd.link.mavlink_pilot import EARTH_RADIUS
 

@@ -16,8 +16,8 @@ import math
 
 from sim.physics.model import GRAVITY, Vec3
 from sim.physics.robot import LAND_SPEED, TAKEOFF_HEIGHT, Mode
+from swarmd.base.functions import Flight
 from swarmd.core.roles import Health
-from swarmd.functions import Flight
 from swarmd.link.base import HealthCallback
 
 STEP = 0.02

@@ -29,13 +29,13 @@ from numpy.typing import NDArray
 
 from sim.physics.controller import Command, SE3Controller
 from sim.physics.model import GRAVITY, PHYSICS_DT, Preset, Vec3, quad_xml, x2
-from swarmd.core.roles import Health
-from swarmd.functions import (
+from swarmd.base.functions import (
     Flight,
     FunctionSpec,
     flight_for,
     parse_function,
 )
+from swarmd.core.roles import Health
 
 Array = NDArray[np.float64]
 

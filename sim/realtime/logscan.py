@@ -1,5 +1,5 @@
 """What a robot's log says, for a problem report: each robot process writes the daemon's
-JSON log lines (swarmd.logs) to `<run>/logs/robotN.log`; a robot that fails to start, dies
+JSON log lines (swarmd.base.logs) to `<run>/logs/robotN.log`; a robot that fails to start, dies
 or logs errors is reported with the lines that explain it."""
 
 from __future__ import annotations

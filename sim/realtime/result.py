@@ -34,7 +34,7 @@ class RealtimeResult:
     wakes: int = 0
     """Wake-ups of every robot's lateness probe (the late ones and the others)."""
     log_errors: list[str] = field(default_factory=list)
-    """Per robot whose log has error lines (swarmd.logs JSON, level error): how many and
+    """Per robot whose log has error lines (swarmd.base.logs JSON, level error): how many and
     the first one. A daemon logs an error for what it survives (a link that raised, a
     node bug): the run went on, but a summary must not pass over it."""
     interrupted: str | None = None

@@ -1,7 +1,7 @@
 """One robot of the real-time `swarmd sim`: a real `swarmd start` daemon in its own process.
 
 The orchestrator (`orchestrator.py`) writes a robot file per robot (so each process runs
-exactly what `swarmd start --config` runs: `swarmd.daemon.run_daemon`) and starts this
+exactly what `swarmd start --config` runs: `swarmd.daemon.daemon.run_daemon`) and starts this
 module's `child_main` in a forkserver child. What the simulator adds around the daemon:
 
 - a receive filter (`sim/realtime/netfilter.py`): seeded loss and partitions, per receiver;
@@ -68,14 +68,14 @@ from sim.shared.faults import FaultKind
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.liar import liar_warnings
 from sim.shared.summary import counted_drops
+from swarmd.base.logs import setup_logging
 from swarmd.config import load_robot
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health
-from swarmd.daemon import Daemon, run_daemon
+from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
-from swarmd.logs import setup_logging
-from swarmd.runtime import Runtime
+from swarmd.services.runtime import Runtime
 
 _PR_SET_PDEATHSIG = 1
 PROBE_PERIOD = 0.1
@@ -500,7 +500,7 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
     """Forkserver entry: run one robot until killed, told to leave, or orphaned."""
     _die_with_parent()
     _redirect_output(spec.log_path)
-    # The daemon's warnings and errors as JSON lines (swarmd.logs), with their fields
+    # The daemon's warnings and errors as JSON lines (swarmd.base.logs), with their fields
     # (`error`, `error_type`): the orchestrator quotes them when a robot fails.
     setup_logging("WARNING")
     signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -100,10 +100,10 @@ def sign_for_run(run_dir: Path, swarm_path: Path) -> tuple[Path, dict[int, Path]
     Ed25519 keys (the default, also for a swarm that says nothing about signing), or a
     throwaway swarm key for `auth: {mode: shared}`. Revocations are dropped: every
     simulated robot must be able to start."""
+    from swarmd.base.identity import private_key_path, write_identity
+    from swarmd.base.keys import generate_key
     from swarmd.config import load_swarm
     from swarmd.config.source import read_source
-    from swarmd.identity import private_key_path, write_identity
-    from swarmd.keys import generate_key
 
     cfg = load_swarm(swarm_path)
     if cfg.auth_mode == "none" and cfg.auth_explicit:

@@ -2,7 +2,7 @@
 
 The one writer both simulators' logs go through (`--events FILE`, `--report DIR`'s
 events.jsonl, the real-time orchestrator's `events_path`), in the format the daemon's
-own event log uses (swarmd.eventlog: compact separators), so the same tools read both.
+own event log uses (swarmd.base.eventlog: compact separators), so the same tools read both.
 """
 
 from __future__ import annotations

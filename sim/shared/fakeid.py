@@ -1,6 +1,6 @@
 """Throwaway per-robot identities for the simulators and tests, stdlib only.
 
-A stand-in for `swarmd.identity`'s Ed25519 keys with the same interface
+A stand-in for `swarmd.base.identity`'s Ed25519 keys with the same interface
 (`swarmd.core.auth.Signer` / `Verifier`): each robot's "signature" is an HMAC-SHA512
 (64 bytes, the size of an Ed25519 signature, so frame sizes are the real ones) under a
 secret of that robot's own. Robot R's key signs only as R, which is all the protocol

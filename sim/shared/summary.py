@@ -30,7 +30,7 @@ from sim.shared.invariants import Violation, check_events
 from swarmd.core.events import Alert, Event, Leave, Started, Suspect, Takeover, event_of
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.runtime import QUIET_DROPS
+from swarmd.services.runtime import QUIET_DROPS
 
 _REPLACEABLE = (FaultKind.CRASH, FaultKind.RESTART, FaultKind.PAUSE, FaultKind.LEAVE,
                 FaultKind.UNHEALTHY, FaultKind.MOTOR, FaultKind.COLLIDE)
@@ -86,7 +86,7 @@ class Summary:
     drops: dict[int, dict[str, int]] = field(default_factory=dict)
     """robot -> frames its core dropped, by reason (DESIGN section 2: every frame
     refused is a counted drop), summed over its processes; reasons logged by the daemon
-    only (`swarmd.runtime.QUIET_DROPS` left out: its own echo, other robots' traffic)."""
+    only (`swarmd.services.runtime.QUIET_DROPS` left out: its own echo, other robots' traffic)."""
 
     @property
     def ok(self) -> bool:

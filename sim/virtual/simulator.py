@@ -462,7 +462,7 @@ class VirtualSwarm:
             case FaultKind.LEAVE, _:
                 if node is not None and r.alive:
                     self._call(rid, _OP_STOP, None)
-                    # What the daemon writes on a graceful stop (swarmd.state): a robot
+                    # What the daemon writes on a graceful stop (swarmd.services.state): a robot
                     # that left and comes back starts above its last seq, or every peer
                     # drops its frames as replays (it would be muted).
                     self._persist(r, node, left=True)

@@ -49,7 +49,7 @@ from sim.xbee_emu.radio import (
     Reply,
     Transmit,
 )
-from swarmd.budget import airtime
+from swarmd.services.budget import airtime
 
 DEFAULT_DIR = "/tmp/swarmd-xbee"
 REPLY_DELAY = 0.002

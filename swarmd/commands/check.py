@@ -33,7 +33,7 @@ def register(app: typer.Typer) -> None:
 
         from rich.console import Console
 
-        from swarmd.check import render, run_check
+        from swarmd.daemon.check import render, run_check
 
         report = run_check(file)
         if json_out:

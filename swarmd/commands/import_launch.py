@@ -50,7 +50,7 @@ def register(app: typer.Typer) -> None:
 
 def _import_launch(file: Path, output: Path | None, swarm_id: int, name: str | None) -> None:
     """`swarmd import-launch`: convert, validate, write; raises typer.Exit on failure."""
-    from swarmd.files import output_problem
+    from swarmd.base.files import output_problem
 
     # The output path is checked before anything runs: a FIFO would block the write
     # forever, a device or a directory is never a swarm file.
@@ -75,8 +75,8 @@ def _import_launch(file: Path, output: Path | None, swarm_id: int, name: str | N
 
 def _convert(file: Path, swarm_id: int, name: str | None) -> str:
     """The swarm file's text converted from the launch file."""
-    from swarmd.files import FileRefused
-    from swarmd.launch import LaunchError, import_launch_file
+    from swarmd.base.files import FileRefused
+    from swarmd.services.launch import LaunchError, import_launch_file
 
     try:
         return import_launch_file(file, swarm_id=swarm_id, name=name)

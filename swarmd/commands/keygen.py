@@ -71,7 +71,7 @@ def keygen(path: PathArg, robot: RobotOpt = None, swarm: SwarmOpt = None,
 def _keygen(path: Path, robot: int | None, swarm: Path | None, force: bool,
             hex_format: bool) -> None:
     """`swarmd keygen`: one robot's key pair, a whole swarm's, or a shared key."""
-    from swarmd.keys import KeyFileError
+    from swarmd.base.keys import KeyFileError
 
     if robot is not None and swarm is not None:
         raise _fail("give --robot or --swarm, not both")
@@ -89,7 +89,7 @@ def _keygen(path: Path, robot: int | None, swarm: Path | None, force: bool,
 
 
 def _shared_key(path: Path, force: bool, hex_format: bool) -> None:
-    from swarmd.keys import generate_key
+    from swarmd.base.keys import generate_key
 
     generate_key(path, force=force, hex_format=hex_format)
     typer.echo(
@@ -100,7 +100,7 @@ def _shared_key(path: Path, force: bool, hex_format: bool) -> None:
 
 
 def _one_robot(directory: Path, robot: int, force: bool) -> None:
-    from swarmd.identity import write_identity
+    from swarmd.base.identity import write_identity
 
     key, pub = write_identity(directory, robot, force=force)
     typer.echo(f"wrote {key} (private, mode 0600: robot {robot} only, its identity_file) "
@@ -108,10 +108,10 @@ def _one_robot(directory: Path, robot: int, force: bool) -> None:
 
 
 def _whole_swarm(directory: Path, swarm: Path, force: bool) -> None:
+    from swarmd.base.identity import check_writable, write_identity
     from swarmd.config import ConfigError
     from swarmd.config.source import read_source
     from swarmd.config.swarm_rules import inspect_swarm
-    from swarmd.identity import check_writable, write_identity
 
     try:
         cfg, problems = inspect_swarm(read_source(swarm))

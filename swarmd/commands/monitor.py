@@ -21,8 +21,8 @@ if TYPE_CHECKING:
     from rich.console import Console
 
     from swarmd.config import SwarmConfig
-    from swarmd.monitor import MonitorState
-    from swarmd.monitor_ros2 import MonitorPublisher
+    from swarmd.daemon.monitor import MonitorState
+    from swarmd.daemon.monitor_ros2 import MonitorPublisher
     from swarmd.transport.base import Transport
 
 # Each option's declaration (flag, range, help) as a type of its own, so the signature
@@ -109,7 +109,7 @@ def _channel(err: Console, config: Path | None, swarm: Path | None, group: str, 
     Exits 2 on an unusable file, 1 on a transport that cannot be made."""
     from swarmd.config import ConfigError, ConfigUnreadable, load_swarm
     from swarmd.config.base_station import load_base_station
-    from swarmd.daemon import make_transport
+    from swarmd.daemon.daemon import make_transport
     from swarmd.transport.base import TransportError
     from swarmd.transport.udp import UdpTransport
 
@@ -132,10 +132,10 @@ def _channel(err: Console, config: Path | None, swarm: Path | None, group: str, 
 
 def _state(err: Console, swarm_cfg: SwarmConfig, keys: list[bytes]) -> MonitorState:
     """An empty view of the swarm, checking frames with `keys`."""
+    from swarmd.base.identity import Keyring
+    from swarmd.base.keys import KeyFileError
     from swarmd.config.auth import public_keys
-    from swarmd.identity import Keyring
-    from swarmd.keys import KeyFileError
-    from swarmd.monitor import MonitorState
+    from swarmd.daemon.monitor import MonitorState
 
     # Per-robot auth: every robot's public keys, so the base station verifies the
     # signed WARN, CLAIM and LEAVE frames it listens to (it signs nothing itself).
@@ -152,8 +152,8 @@ def _state(err: Console, swarm_cfg: SwarmConfig, keys: list[bytes]) -> MonitorSt
 def _ros2_publisher(err: Console, state: MonitorState,
                     swarm_cfg: SwarmConfig) -> MonitorPublisher:
     """`state` published on ROS 2 /diagnostics from now on; exits 2 without rclpy."""
+    from swarmd.daemon.monitor_ros2 import MonitorPublisher
     from swarmd.link.ros2_node import Ros2Unavailable, require_rclpy
-    from swarmd.monitor_ros2 import MonitorPublisher
 
     try:
         require_rclpy("swarmd monitor --ros2")
@@ -172,7 +172,7 @@ def _listen(err: Console, state: MonitorState, transport: Transport, duration: f
     stopped either way."""
     import asyncio
 
-    from swarmd.monitor import listen
+    from swarmd.daemon.monitor import listen
     from swarmd.transport.base import TransportError
 
     try:
@@ -199,7 +199,7 @@ async def _listen_live(state: MonitorState, transport: Transport, duration: floa
     from rich.console import Console
     from rich.live import Live
 
-    from swarmd.monitor import listen
+    from swarmd.daemon.monitor import listen
 
     loop = asyncio.get_running_loop()
     with Live(state.table(loop.time()), console=Console(), refresh_per_second=4) as live:

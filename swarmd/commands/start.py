@@ -4,7 +4,7 @@ Logs one JSON object a line on stdout (journald), or readable lines on a termina
 (`--log-format`), appends the event log if configured,
 stops cleanly on SIGTERM / SIGINT (LEAVE when it held a function and handover_on_stop),
 reloads on SIGHUP. Exit codes: 0 clean stop, 1 start-up failure, 2 unusable config,
-3 this robot's key is revoked (swarmd.revocation; not restarted by the unit).
+3 this robot's key is revoked (swarmd.services.revocation; not restarted by the unit).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ def _check_level(value: str) -> str:
 
 
 def _check_format(value: str | None) -> str | None:
-    from swarmd.logs import FORMATS
+    from swarmd.base.logs import FORMATS
 
     if value is not None and value.lower() not in FORMATS:
         raise typer.BadParameter(f"{value!r} is not one of {', '.join(FORMATS)}")
@@ -70,10 +70,10 @@ def _start(config: Path, log_level: str, log_format: str | None) -> None:
     import asyncio
     import logging
 
+    from swarmd.base.logs import LogFormat, default_format, setup_logging
     from swarmd.config import ConfigError, load_robot
-    from swarmd.daemon import EXIT_CONFIG, run_daemon
-    from swarmd.logs import LogFormat, default_format, setup_logging
-    from swarmd.revocation import EXIT_REVOKED, revoked_problem
+    from swarmd.daemon.daemon import EXIT_CONFIG, run_daemon
+    from swarmd.services.revocation import EXIT_REVOKED, revoked_problem
 
     fmt: LogFormat = "text" if (log_format or default_format()) == "text" else "json"
     setup_logging(log_level, fmt=fmt)

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from swarmd.base.identity import IdentityFileError, public_key_path, read_public_keys
+from swarmd.base.keys import KeyFileError, load_key
 from swarmd.config.errors import Loc
 from swarmd.config.swarm import NoAuth, PerRobotAuth, SwarmConfig
-from swarmd.identity import IdentityFileError, public_key_path, read_public_keys
-from swarmd.keys import KeyFileError, load_key
 
 
 @dataclass(frozen=True, slots=True)

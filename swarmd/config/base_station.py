@@ -40,7 +40,7 @@ class BaseStation:
 def load_base_station(path: str | Path) -> BaseStation:
     """A base station file, or a robot file (its swarm, transport and keys are used).
     Raises ConfigUnreadable or ConfigError, like `load_robot`."""
-    from swarmd.keys import KeyFileError, load_key
+    from swarmd.base.keys import KeyFileError, load_key
 
     src = read_source(path)
     if isinstance(src.data, dict) and "robot" in src.data:

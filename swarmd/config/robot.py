@@ -25,13 +25,13 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictInt, field_validator
 
+from swarmd.base.identity import IdentityFileError, public_key_of, read_private_key
+from swarmd.base.keys import KeyFileError, load_key
 from swarmd.config.auth import auth_issues, public_keys
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, format_loc
 from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.config.swarm import RobotEntry, SwarmConfig
 from swarmd.config.swarm_rules import load_swarm
-from swarmd.identity import IdentityFileError, public_key_of, read_private_key
-from swarmd.keys import KeyFileError, load_key
 from swarmd.transport.addresses import interface_address, multicast_group
 from swarmd.transport.fragment import MIN_LIMIT
 from swarmd.transport.media import SERIAL_MAX_PAYLOAD
@@ -260,7 +260,7 @@ class RobotFile(_Model):
 
 @dataclass(frozen=True)
 class IdentityMaterial:
-    """Per-robot auth as read from the files: what `swarmd.identity` builds the
+    """Per-robot auth as read from the files: what `swarmd.base.identity` builds the
     node's `Identity` from (the daemon keeps signer and keyring to reload on SIGHUP)."""
 
     private_key: bytes

@@ -5,7 +5,7 @@ PyYAML's `safe_load` silently keeps the last of two equal keys; in a swarm file 
 would drop a function or a robot without a word, so duplicates are reported here.
 
 Hostile or broken files get one line, never a hang, a crash or a memory blow-up: only a
-regular file of at most `MAX_FILE_BYTES` is read (`swarmd.files`); before the nodes are
+regular file of at most `MAX_FILE_BYTES` is read (`swarmd.base.files`); before the nodes are
 composed, one pass over libyaml's parser events (iterative, safe at any depth) refuses
 nesting deeper than `MAX_DEPTH` (libyaml's composer recurses in C and segfaults near
 30,000 nested `[`) and aliases that would add more than `MAX_ALIAS_NODES` nodes when
@@ -25,8 +25,8 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from swarmd.base.files import FileRefused, read_regular_file
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Loc, Problem, format_loc
-from swarmd.files import FileRefused, read_regular_file
 
 MAX_FILE_BYTES = 8 * 1024 * 1024
 """A 255-function swarm with 5,000 standbys is about 0.35 MB; 8 MiB is room to spare."""

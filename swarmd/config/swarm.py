@@ -34,10 +34,10 @@ from pydantic import (
     field_validator,
 )
 
+from swarmd.base.keys import load_key
 from swarmd.config.errors import ConfigError, Problem
 from swarmd.core.params import PRESETS, Params
 from swarmd.core.plan import PlanError, RobotPlan, SwarmPlan
-from swarmd.keys import load_key
 
 FUNCTION_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]{0,31}$")
 """Function names are free text on the config side only (the wire carries the slot
@@ -111,7 +111,7 @@ Vec3 = tuple[float, float, float]
 # unsigned without saying so: `swarmd check` warns, `swarmd start` refuses it. Per-robot
 # mode: `keys_dir` (relative to the swarm file) holds `robot-<id>.pub` for every robot of
 # the swarm not in `revoked`; each robot file's `identity_file` names that robot's
-# private key (`swarmd.identity` has the file formats). What the section's values mean
+# private key (`swarmd.base.identity` has the file formats). What the section's values mean
 # on disk (keys that exist, robots that are in the swarm) is checked in `auth.py`.
 
 AuthMode = Literal["none", "shared", "per-robot"]

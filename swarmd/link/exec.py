@@ -53,7 +53,7 @@ async def run_command(cmd: Command, env: Mapping[str, str], timeout: float) -> i
     status. Raises `OSError` if it cannot start, and `TimeoutError` once a command that
     overran `timeout` has been killed and reaped: a hung command must not stay behind
     (nor keep the robot healthy, DESIGN rule 7). The exec link and the alert hook
-    (swarmd/daemon.py) both run their commands through it."""
+    (swarmd/daemon/daemon.py) both run their commands through it."""
     full_env = {**os.environ, **env}
     # stdout to our stderr (fd 2): our stdout carries only the JSON log (module doc).
     if isinstance(cmd, str):

@@ -13,7 +13,7 @@ Flying (paper Fig. 4's output: the task):
   stream, and leaves it when the stream falls below 2 Hz), mode OFFBOARD, arm; the first
   setpoint is straight above where the craft stands, at `takeoff_altitude`.
 - Then the function: a slot's position, or the patrol loop resumed at the failed
-  holder's next waypoint (`swarmd.functions.PatrolFlight`), on the swarm's clock `t0`.
+  holder's next waypoint (`swarmd.base.functions.PatrolFlight`), on the swarm's clock `t0`.
 - `release`: mode `hold`, `land` or `rtl` as configured; the stream stops.
 
 Every command waits for its COMMAND_ACK; unanswered ones are sent again every
@@ -38,8 +38,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from swarmd.core.roles import Health
-from swarmd.functions import (
+from swarmd.base.functions import (
     FunctionSpecError,
     PatrolFlight,
     SlotFlight,
@@ -47,6 +46,7 @@ from swarmd.functions import (
     flight_for,
     parse_function,
 )
+from swarmd.core.roles import Health
 from swarmd.link.mavlink_health import (
     MAV_AUTOPILOT_INVALID,
     MAV_TYPE_GCS,

@@ -28,7 +28,9 @@ import os
 import socket
 from collections.abc import Mapping
 
-log = logging.getLogger(__name__)
+# The name an operator filters the JSON logs on ("logger", docs/daemon.md): it names the
+# component, not the file, so it stays when the module moves between folders.
+log = logging.getLogger("swarmd.notify")
 
 
 class Notifier:

@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 from swarmd.core.roles import Role
+from swarmd.daemon.monitor import MonitorState
 from swarmd.link.ros2_status import ERROR, OK, STALE, WARN, Status, status_prefix, to_message
-from swarmd.monitor import MonitorState
 
 HARDWARE_ID = "base_station"
 REPUBLISH = 1.0

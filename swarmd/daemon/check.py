@@ -1,7 +1,7 @@
 """`swarmd check`: validate a swarm (or robot) file and report what it will do.
 
 The report is a list of sections, each built from a validated `SwarmConfig` by a
-function in `SECTIONS`. A new concern (the channel budget of `swarmd/budget.py`) is
+function in `SECTIONS`. A new concern (the channel budget of `swarmd/services/budget.py`) is
 one more builder appended there; rendering as rich tables and as JSON is shared.
 
 Exit codes (DESIGN.md section 3, `swarmd check`): 0 when usable (warnings allowed),
@@ -27,7 +27,7 @@ from swarmd.config.swarm_rules import inspect_swarm
 from swarmd.core.params import Params, ParamsError
 
 if TYPE_CHECKING:
-    from swarmd.budget import Budget  # budget_section imports it only when it runs
+    from swarmd.services.budget import Budget  # budget_section imports it only when it runs
 
 EXIT_OK = 0
 """Usable: no errors, warnings allowed (docs/config.md, `swarmd check`)."""
@@ -179,7 +179,7 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
 def budget_section(cfg: SwarmConfig) -> Section | None:
     """Channel budget on every medium swarmd speaks: frames and
     bytes per second on the air, airtime at 250 kbps, whether a heartbeat fits."""
-    from swarmd.budget import MEDIA, channel_budget
+    from swarmd.services.budget import MEDIA, channel_budget
 
     params = _params(cfg)
     if params is None:
@@ -275,7 +275,7 @@ def flight_section(cfg: SwarmConfig) -> Section | None:
     the ground, a slot at ground level); said here first, as notes, since real robots
     interpret their functions themselves."""
     try:
-        from swarmd.functions import flight_problems
+        from swarmd.base.functions import flight_problems
     except ImportError:  # a robot's install without the simulator
         return None
     problems = {name: flight_problems({name: cfg.function_spec(name)})

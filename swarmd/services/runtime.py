@@ -48,6 +48,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from enum import StrEnum
 from typing import Any
 
+from swarmd.base.notify import Notifier
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.drops import DropReason
@@ -55,18 +56,19 @@ from swarmd.core.events import Event, Started
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
-from swarmd.metrics import Metrics
-from swarmd.notify import Notifier
+from swarmd.services.metrics import Metrics
 from swarmd.transport.base import Channel, Transport
 
-log = logging.getLogger(__name__)
+# The name an operator filters the JSON logs on ("logger", docs/daemon.md): it names the
+# component, not the file, so it stays when the module moves between folders.
+log = logging.getLogger("swarmd.runtime")
 
 ReceiveFilter = Callable[[bytes, float], bool]
 """(frame, loop time) -> False to drop the frame (the simulator's loss and partitions)."""
 EventSink = Callable[[dict[str, Any]], None]
 """Receives each event-log record (`Event.record(t, robot)`)."""
 StateWriter = Callable[[Snapshot], int]
-"""Persists a snapshot (see swarmd/state.py); called on role / function / epoch change
+"""Persists a snapshot (see swarmd/services/state.py); called on role / function / epoch change
 and when the sequence number nears the reservation; returns the sequence number at which
 the next write is due however nothing else changed."""
 
@@ -165,7 +167,7 @@ class Runtime:
 
     def _init_persistence(self, state_writer: StateWriter | None,
                           persist_after: float) -> None:
-        """When and what state the runtime writes (swarmd/state.py)."""
+        """When and what state the runtime writes (swarmd/services/state.py)."""
         self.state_writer = state_writer
         self.persist_after = persist_after
         """loop time before which node-driven state is not written: a restarted holder
@@ -174,7 +176,7 @@ class Runtime:
         self._last_persisted: tuple[Any, ...] | None = None
         self.seq_write_at = 0
         """Reaching this sequence number forces a state write (the reservation in the
-        state file must stay ahead of every seq sent; swarmd/state.py)."""
+        state file must stay ahead of every seq sent; swarmd/services/state.py)."""
 
     def _init_reports(self) -> None:
         """What was last logged or notified, so a report is made once per change."""

@@ -46,12 +46,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from swarmd.base.files import FileRefused, read_regular_file
 from swarmd.core.limits import restored_problems
 from swarmd.core.node import Restored, Snapshot
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Role
 from swarmd.core.wire import SEQ_MAX
-from swarmd.files import FileRefused, read_regular_file
 
 FORMAT_VERSION = 1
 

@@ -10,7 +10,7 @@ Files (written by `swarmd keygen --robot N DIR` / `--swarm SWARM.yaml DIR`):
 
 - ``robot-N.key``: the private key, 64 hex digits and a newline (32 raw bytes are
   accepted too), mode 0600, owned by the daemon's user. Refused if the group or others
-  may access it, as the swarm key is (`swarmd.keys`).
+  may access it, as the swarm key is (`swarmd.base.keys`).
 - ``robot-N.pub``: the public key, 64 hex digits a line. More than one line means every
   key listed is accepted for robot N: the window of a key rotation
   (docs/operations.md, "Rotating a robot's key"). ``#`` starts a comment.
@@ -40,10 +40,10 @@ from cryptography.hazmat.primitives.serialization import (
     PublicFormat,
 )
 
+from swarmd.base.files import FileRefused, file_kind, read_regular_file, write_atomic
+from swarmd.base.keys import KeyFileError, read_private_file
+from swarmd.base.verify_budget import VerifyBudget
 from swarmd.core.auth import PUBLIC_KEY_LEN, SIGNATURE_LEN, Identity
-from swarmd.files import FileRefused, file_kind, read_regular_file, write_atomic
-from swarmd.keys import KeyFileError, read_private_file
-from swarmd.verify_budget import VerifyBudget
 
 __all__ = [
     "PRIVATE_KEY_LEN",

@@ -30,27 +30,27 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from swarmd import signals
-from swarmd import state as state_mod
+from swarmd.base import signals
+from swarmd.base.eventlog import EventLog
+from swarmd.base.identity import Ed25519Signer, Keyring
+from swarmd.base.notify import Notifier
+from swarmd.base.verify_budget import VerifyBudget
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
 from swarmd.core.events import NAME_KEY, Alert, Leave, event_of
 from swarmd.core.node import Node
 from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
-from swarmd.eventlog import EventLog
-from swarmd.identity import Ed25519Signer, Keyring
+from swarmd.daemon.waiting import Waiting, describe_channel, report_waiting
 from swarmd.link.base import RobotLink
 from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
-from swarmd.metrics import Metrics, MetricsServer
-from swarmd.notify import Notifier
-from swarmd.revocation import EXIT_REVOKED, revoked_in
-from swarmd.runtime import EventSink, ReceiveFilter, Runtime
+from swarmd.services import state as state_mod
+from swarmd.services.metrics import Metrics, MetricsServer
+from swarmd.services.revocation import EXIT_REVOKED, revoked_in
+from swarmd.services.runtime import EventSink, ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
-from swarmd.verify_budget import VerifyBudget
-from swarmd.waiting import Waiting, describe_channel, report_waiting
 
 log = logging.getLogger("swarmd.daemon")
 
@@ -388,7 +388,7 @@ class Daemon:
             "restart_needed_for": restart_needed})
 
     def _revoked(self) -> None:
-        """SIGHUP found this robot in the swarm file's `auth.revoked` (swarmd.revocation):
+        """SIGHUP found this robot in the swarm file's `auth.revoked` (swarmd.services.revocation):
         nobody accepts its frames any more and its slot is being taken over, so it stops
         acting: one log line, a `leave` (reason `revoked`) in its event log if it held a
         function, then `run_daemon` releases it through the link and exits."""
@@ -514,7 +514,7 @@ async def _lifecycle(daemon: Daemon, stop: asyncio.Event,
 def _install_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event,
                      daemon: Daemon) -> list[signal.Signals]:
     """SIGTERM and SIGINT set `stop`, SIGHUP reloads: the signals handled, to remove.
-    What arrived before, while `swarmd start` was starting (swarmd/signals.py), is acted
+    What arrived before, while `swarmd start` was starting (swarmd/base/signals.py), is acted
     on now: a stop stops the daemon as soon as it has started, a reload reloads it."""
     installed: list[signal.Signals] = []
     for sig in (signal.SIGTERM, signal.SIGINT):

@@ -13,7 +13,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import IO, Any
 
-log = logging.getLogger(__name__)
+# The name an operator filters the JSON logs on ("logger", docs/daemon.md): it names the
+# component, not the file, so it stays when the module moves between folders.
+log = logging.getLogger("swarmd.eventlog")
 
 
 class EventLogError(OSError):

@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from swarmd.files import read_regular_file
+from swarmd.base.files import read_regular_file
 
 SLOT_RADIUS = 2.0
 """m. Radius of the circle the imported formation slots are placed on."""
@@ -238,7 +238,7 @@ def import_launch_file(
     path: Path, *, swarm_id: int = 1543, name: str | None = None
 ) -> str:
     """Read a launch file and return the swarm YAML. Raises LaunchError, OSError
-    (`swarmd.files.FileRefused` for a FIFO, device or directory, or above 8 MiB),
+    (`swarmd.base.files.FileRefused` for a FIFO, device or directory, or above 8 MiB),
     UnicodeDecodeError."""
     text = read_regular_file(path, MAX_LAUNCH_BYTES).decode("utf-8")
     robots = parse_launch(text, str(path))

@@ -30,7 +30,7 @@ muted for good that shows `silent` with false alerts. What the monitor cannot ve
 shows as such: in per-robot mode a heartbeat is signed by no robot (the swarm key, or
 nothing), so a heartbeat at a newer epoch (or of another robot at the plan's epoch 0) is
 believed only from the robot whose CLAIM for that slot and epoch was heard *with its
-certificate*, judged exactly as a daemon judges it (`swarmd.monitor_claims`: a signed
+certificate*, judged exactly as a daemon judges it (`swarmd.daemon.monitor_claims`: a signed
 CLAIM alone, which any insider can make for a slot it covers, vouches for nothing).
 Any other is shown with the status `unverified` and moves nobody: no `superseded`, no
 split brain. A monitor started after a takeover has not heard its claim, so the new
@@ -56,7 +56,7 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
-from swarmd.monitor_claims import MonitorClaims
+from swarmd.daemon.monitor_claims import MonitorClaims
 from swarmd.transport.base import Channel, Transport
 
 

@@ -28,8 +28,8 @@ import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from swarmd.base.files import file_kind, write_atomic
 from swarmd.core.wire import KEY_LEN
-from swarmd.files import file_kind, write_atomic
 
 __all__ = ["KEY_LEN", "KeyFileError", "generate_key", "load_key", "load_keys", "parse_key"]
 
