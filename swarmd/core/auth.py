@@ -2,7 +2,7 @@
 
 The core stays stdlib-only and sans-IO: it never imports a crypto library. In per-robot
 mode a `Node` is given an `Identity`: a `Signer` holding this robot's own key and a
-`Verifier` holding every robot's public key. `swarmd.identity` implements both with
+`Verifier` holding every robot's public key. `swarmd.base.identity` implements both with
 Ed25519; tests and simulators may use any object with the same shape.
 """
 

@@ -131,7 +131,7 @@ def udp() -> Params:
 def radio() -> Params:
     """XBee / SiK radios at 250 kbps: heartbeats are rationed (see `swarmd check`).
 
-    Tuned on the channel budget (swarmd/budget.py): a signed heartbeat costs 2.4 ms of
+    Tuned on the channel budget (swarmd/services/budget.py): a signed heartbeat costs 2.4 ms of
     802.15.4 airtime, so 30% of the channel carries about 123 heartbeats a second.
     Actives at 1/0.6 s and standbys at 1/8 s fit 107 robots of the paper's shape (2/3
     active), and a 100-robot grid of 60 actives and 40 standbys (configs/grid100-radio.yaml)

@@ -47,7 +47,7 @@ WINDOW = 64
 may bring a frame this many frames late and it still counts)."""
 JUMP = 1 << 23
 """How far ahead of its wall clock an honest sender's counter may be: eight times the
-daemon's sequence reservation (`swarmd.state.SEQ_RESERVE`, 10^6), because each restart
+daemon's sequence reservation (`swarmd.services.state.SEQ_RESERVE`, 10^6), because each restart
 that sends nothing before the next (a crash loop under systemd) resumes at the last
 reservation, up to 10^6 above the last seq."""
 RATE = 100_000

@@ -51,7 +51,7 @@ VERSION = 1
 TAG_LEN = 8
 KEY_LEN = 32
 """bytes. A swarm key's size (HMAC takes any length; a fixed size catches a wrong key
-file). `swarmd.keys` reads and writes keys of this size; `Node.set_keys` checks it."""
+file). `swarmd.base.keys` reads and writes keys of this size; `Node.set_keys` checks it."""
 HEADER = struct.Struct(">BHH6s")
 HEADER_LEN = HEADER.size  # 11
 SEQ_MAX = (1 << 48) - 1
