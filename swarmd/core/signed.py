@@ -72,9 +72,10 @@ class Signed(NodeBase):
 
     def _forward(self, f: str, new: Holder) -> Holder:
         """The entry the signed frames held here make of `new`: itself, or, per robot,
-        when the robot it replaced refuted the warnings that backed it (rule 4), that
-        robot's reassertion at the next epoch (`EvidenceStore.reasserted`): a voided
-        takeover is outranked, never undone (`slots.py`; DESIGN, "Convergence")."""
+        when the robot it replaced signed a REFUTE of that claim (rule 4,
+        `_refute_claim`), that robot's reassertion at the next epoch
+        (`EvidenceStore.voided_by`): a voided takeover is outranked, never undone
+        (`slots.py`; DESIGN, "Convergence")."""
         if self._identity is None or new.epoch >= EPOCH_MAX:
             return new
         failed = self._ev.voided_by(f, new.robot, new.epoch)
@@ -179,14 +180,14 @@ class Signed(NodeBase):
     def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
                           now: float) -> None:
         """A signed CLAIM relayed inside a CERT (`_relay_view`): heard as a claim (rule
-        10 bounds what a repeat does), and, if the evidence here certifies it and it is
-        newer than our view of f, our view rises to it (`_learn_holder`) — as far as a
-        heartbeat of its claimant would have moved it, since a robot relays only the
-        takeover its own view holds. Holding f at an older epoch, we fence (rule 2), as
-        that heartbeat would have fenced us: had the takeover been of our hold at our
-        epoch, the evidence against us came first in the relay and we refuted it (rule
-        4), so it is no longer certified here — unless we were stalled, and then the
-        takeover was right. Not over our own claim of f: its end settles it."""
+        10 bounds what a repeat does), and, if the evidence here certifies it and its
+        entry is greater than our view of f, our view moves forward to it
+        (`_learn_holder`) — as far as a heartbeat of its claimant would have moved it,
+        since a robot relays only the entry its own view holds. Holding f below it, we
+        fence (rule 2), as that heartbeat would have fenced us — unless the claim
+        replaces our own live hold: then we refute it (`Hearing._on_claim`) and the
+        entry we move to is our reassertion (`_forward`), unless we were stalled, and
+        then the takeover was right. Our own claim relayed back acts on nothing here."""
         if claimant == self._robot_id:
             # Our own claim, relayed back with its certificate as the proof of the
             # reassertion that outranks it: it must verify here as anywhere (no act).
