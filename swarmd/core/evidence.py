@@ -278,19 +278,24 @@ class EvidenceStore:
             frames = self._takeover_frames(f, voided, epoch - 1) + refutes
         else:
             frames = self._takeover_frames(f, holder, epoch)
-        gap = self._params.t_max if every is None else every
-        if not frames or now - self._evidence_relayed_at.get(f, -1e18) < gap:
+        if not frames or not self._due(self._evidence_relayed_at, f, now, every):
             return ()
-        self._evidence_relayed_at[f] = now
         return frames
 
     def relay_due(self, f: str, now: float) -> bool:
         """May this robot show another its view of f now? At most once per T_max per
         slot, shared with `view_frames` (unsigned and shared-key modes relay a warning
         instead of a certificate: `Hearing._older_beat`)."""
-        if now - self._evidence_relayed_at.get(f, -1e18) < self._params.t_max:
+        return self._due(self._evidence_relayed_at, f, now)
+
+    def _due(self, stamps: dict[str, float], f: str, now: float,
+             every: float | None = None) -> bool:
+        """One relay of f at most per `every` (default T_max), timed by `stamps`: True,
+        and the time stamped, if one is due now."""
+        gap = self._params.t_max if every is None else every
+        if now - stamps.get(f, -1e18) < gap:
             return False
-        self._evidence_relayed_at[f] = now
+        stamps[f] = now
         return True
 
     def _takeover_frames(self, f: str, holder: int, epoch: int) -> tuple[bytes, ...]:
@@ -319,10 +324,8 @@ class EvidenceStore:
         """(failed, frames) of our hold of f to relay now, at most once per `every`
         (default T_max)."""
         mine = self._mine.get(f)
-        gap = self._params.t_max if every is None else every
-        if mine is None or now - self._relayed_at.get(f, -1e18) < gap:
+        if mine is None or not self._due(self._relayed_at, f, now, every):
             return None
-        self._relayed_at[f] = now
         # The latest unrefuted warnings, not those of the moment we took over: a holder
         # may have refuted those since, while later ones still back our hold.
         fresh = self.cert_frames(f, mine[0], self._mine_epoch.get(f, -1))
@@ -387,10 +390,8 @@ class EvidenceStore:
         still acts on a claim they void; at most once per `every` (default T_max; empty
         otherwise)."""
         got = self._refutes.get(f, {}).get((holder, epoch))
-        gap = self._params.t_max if every is None else every
-        if not got or now - self._refutes_relayed_at.get(f, -1e18) < gap:
+        if not got or not self._due(self._refutes_relayed_at, f, now, every):
             return ()
-        self._refutes_relayed_at[f] = now
         return tuple(raw for _, raw in got.values())
 
 

@@ -141,8 +141,7 @@ class Hearing(NodeBase):
         claim = self._claim
         if claim is not None and claim.function == f:
             if epoch >= claim.epoch:
-                self._emit(ev.Backoff(subject=claim.failed, function=f, winner=sender))
-                self._to(Trigger.SUPERSEDED, Standby())
+                self._back_off(sender)
             elif sender == claim.failed:
                 self._emit(ev.Refute(subject=sender, function=f))
                 self._to(Trigger.REFUTED, Standby())
@@ -231,8 +230,7 @@ class Hearing(NodeBase):
             self._fence(new.epoch, now)
         claim = self._claim
         if claim is not None and claim.function == f and new.epoch >= claim.epoch:
-            self._emit(ev.Backoff(subject=claim.failed, function=f, winner=new.robot))
-            self._to(Trigger.SUPERSEDED, Standby())
+            self._back_off(new.robot)
         watch = self._watches.get(f)
         if watch is not None:
             watch.claim_heard(now)
@@ -295,8 +293,7 @@ class Hearing(NodeBase):
             # knows more than we do.
             mine = self._claim.epoch
             if c.epoch > mine or (c.epoch == mine and sender < self._robot_id):
-                self._emit(ev.Backoff(subject=self._claim.failed, function=f, winner=sender))
-                self._to(Trigger.BACKOFF, Standby())
+                self._back_off(sender, Trigger.BACKOFF)
             return
         if self._role == Role.ACTIVE and f == self._function:
             if c.failed == self._robot_id and c.epoch > self._epoch:

@@ -78,9 +78,7 @@ class Moves(NodeBase):
         if greater(self._known[c.function], Holder(self._robot_id, c.epoch)):
             # The slot moved past our claim during the hold: a greater entry is never
             # lowered (`slots.py`), so ours would be fenced at once.
-            self._emit(ev.Backoff(subject=c.failed, function=c.function,
-                                  winner=self._known[c.function].robot))
-            self._to(Trigger.SUPERSEDED, Standby())
+            self._back_off(self._known[c.function].robot)
             return
         if self._identity is not None:
             self._ev.took_over(c.function, c.failed, c.old_epoch, c.epoch)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping
 
+from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.auth import Identity, Signer, Verifier
@@ -30,7 +31,7 @@ from swarmd.core.rejoin import Rejoin
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
 from swarmd.core.slots import SlotTable
-from swarmd.core.state import NO_WATCHES, Active, Claiming, Rejoining, RoleState
+from swarmd.core.state import NO_WATCHES, Active, Claiming, Rejoining, RoleState, Standby
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import Ears
@@ -117,6 +118,14 @@ class NodeBase:
             raise TransitionError(f"{trigger.name} leads {self._state.role.name} to "
                                   f"{role.name}, not {state.role.name}")
         self._state = state
+
+    def _back_off(self, winner: int, trigger: Trigger = Trigger.SUPERSEDED) -> None:
+        """Our claim ends in the wait state: `winner` holds or claims the slot at its
+        epoch or higher (the paper's lowest id, or a greater entry)."""
+        c = self._claim
+        assert c is not None
+        self._emit(ev.Backoff(subject=c.failed, function=c.function, winner=winner))
+        self._to(trigger, Standby())
 
     # ------------------------------------------------------------------ plumbing
     def _send(self, msg: wire.Message, *, evidence: bool = False) -> bytes:
