@@ -82,9 +82,14 @@ async def test_per_robot_swarm_fails_over_on_digimesh_in_fragments(tmp_path: Pat
         try:
             await _standby_6_hears_f2(swarm)
             await swarm.kill(2)
-            takeover = await swarm.wait_for(lambda e: e["event"] == "takeover", 10)
+            # Wait for f2's takeover by name: this swarm signs and reassembles on one
+            # event loop with T_max shrunk to 0.4 s, so on a loaded machine a late
+            # heartbeat can get a live holder suspected and fenced (rule 2), which is
+            # the protocol working; the claim here is f2's failover in fragments.
+            takeover = await swarm.wait_for(
+                lambda e: e["event"] == "takeover" and e["function"] == "f2", 10)
             assert takeover is not None, swarm.events
-            assert (takeover["robot"], takeover["function"], takeover["replaced"]) == (6, "f2", 2)
+            assert (takeover["robot"], takeover["replaced"]) == (6, 2)
             assert transports[1].counters["fragmented"] > 0  # f2's watchers warned in pieces
             assert transports[6].counters["fragmented"] > 0  # the claim and its CERTs
             oversize = [c for c in swarm.channel if c.fields.get("reason") == "oversize"]
