@@ -283,19 +283,35 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     assert listener.late["/swarmd/paper/robot6/swarmd/goal_pose"][:1] == [("map", 0.0, 2.0, 1.5)]
     assert listener.late["/swarmd/paper/robot1/swarmd/function"][:1] == ["f1"]
     # The swarm on /diagnostics: f2's holder goes 2 -> 6, as robots 1, 3 and 6 show it.
+    # A publisher the listener discovered only after the crash (DDS discovery on a loaded
+    # machine takes seconds) could not have been seen showing 2: then 6 alone.
     for publisher in ("robot1", "robot3", "robot6"):
-        assert listener.holders("f2", publisher) == ["2", "6"], publisher
+        first = min(t for t, name, hw, _, _ in listener.statuses
+                    if name == "swarmd/paper/f2" and hw == publisher)
+        shown = listener.holders("f2", publisher)
+        if first - result.t0 < crash:
+            assert shown == ["2", "6"], publisher
+        else:
+            assert shown in (["2", "6"], ["6"]), (publisher, shown)
     # The base station shows it too. It is a process started once the run's files
     # exist: on a loaded machine its interpreter, rclpy and DDS discovery took past the
-    # crash (4 s), so it may have heard 6 only; what it shows must end with 6 and hold
-    # nothing else.
-    assert listener.holders("f2", "base_station") in (["2", "6"], ["6"])
+    # crash (4 s). Up before the crash, it shows 2 then 6. Up later, it may have missed
+    # 6's claim and certificate: per robot it then keeps the plan's holder and shows 6
+    # `unverified` (swarmd/daemon/monitor.py), never another robot.
+    base = listener.holders("f2", "base_station")
+    first_base = min(t for t, name, hw, _, _ in listener.statuses
+                     if name == "swarmd/paper/f2" and hw == "base_station")
+    if first_base - result.t0 < crash:
+        assert base == ["2", "6"], base
+    else:
+        assert base in (["2", "6"], ["6"], ["2"]), base
     first_6 = min(t for t, name, _, _, v in listener.statuses
                   if name == "swarmd/paper/f2" and v["holder"] == "6")
     assert first_6 - result.t0 >= crash
-    levels = {lv for _, name, hw, lv, _ in listener.statuses
-              if name == "swarmd/paper/f2" and hw == "robot1"}
-    assert {OK, WARN} <= levels  # suspected before the takeover
+    heard_1 = [(t, lv) for t, name, hw, lv, _ in listener.statuses
+               if name == "swarmd/paper/f2" and hw == "robot1"]
+    if min(t for t, _ in heard_1) - result.t0 < crash:  # discovered in time to see it
+        assert {OK, WARN} <= {lv for _, lv in heard_1}  # suspected before the takeover
     own = [v for _, name, _, _, v in listener.statuses if name == "swarmd/paper/robot6"]
     assert own and own[-1]["role"] == "active" and own[-1]["function"] == "f2"
 

@@ -16,10 +16,13 @@ from swarmd.core.params import radio
 from swarmd.transport.base import Transport
 from swarmd.transport.xbee import XBeeTransport
 
-# radio() shapes the protocol; times shrunk 5x so the test takes a second or two.
-FAST = dict(heartbeat_interval=0.1, standby_heartbeat_interval=0.3, t_max=0.4,
-            warn_interval=0.1, vote_window=0.6, claim_hold=0.2, startup_grace=1.0,
-            standby_timeout=1.0, alert_after=3.0, rejoin_hold=0.5)
+# radio() shapes the protocol; times shrunk 2.5x so the test takes a few seconds. Not
+# further: the six robots sign, fragment and reassemble on this one event loop, and on a
+# loaded machine a T_max of 0.4 s got live holders suspected (rule 2 then fences them,
+# the protocol working, but not what these tests are about).
+FAST = dict(heartbeat_interval=0.2, standby_heartbeat_interval=0.6, t_max=0.8,
+            warn_interval=0.2, vote_window=1.2, claim_hold=0.4, startup_grace=2.0,
+            standby_timeout=2.0, alert_after=6.0, rejoin_hold=1.2)
 
 
 async def _standby_6_hears_f2(swarm: RadioSwarm) -> None:
@@ -58,7 +61,10 @@ async def test_paper_swarm_fails_over_across_emulated_radios(
             assert wrong == []  # nobody else took anything over
             voters = {e["from"] for e in swarm.events
                       if e["event"] == "vote" and e["robot"] == 6 and e["function"] == "f2"}
-            assert voters == {1, 3}  # f2's ring neighbours, distinct witnesses (rule 3)
+            # Distinct witnesses (rule 3): f2's ring neighbours 1 and 3, and standby 6
+            # itself only beside a live watcher's warning (rule 9, when 6 heard neither
+            # watcher for T_max: a stalled loop on a loaded machine).
+            assert len(voters) >= 2 and voters <= {1, 3, 6} and voters & {1, 3}, voters
         finally:
             await swarm.close()
 
