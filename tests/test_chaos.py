@@ -1,5 +1,6 @@
-"""bench/bench_chaos.py in CI: a few hundred random swarms (up to 12 robots, so that it
-is fast) and schedules of every fault kind, judged by sim.shared.invariants.
+"""bench/bench_chaos.py in CI: a sample of random swarms (up to 12 robots, so that it is
+fast) and schedules of every fault kind, judged by sim.shared.invariants. The sample
+keeps the suite within its time; the bench runs the thousands (docs/testing.md).
 
 No kind of violation may occur, `no_takeover_correlated` included (a slot not taken
 over while a neighbour failed with it: DESIGN rule 9 covers it)."""
@@ -16,7 +17,7 @@ import pytest
 from sim.shared.faults import parse_fault
 
 ROOT = Path(__file__).resolve().parent.parent
-SEEDS = 300
+SEEDS = 100
 
 
 def _bench() -> ModuleType:
@@ -61,7 +62,7 @@ def test_dense_chaos_converges_in_every_auth_mode(auth: str) -> None:
     """`--dense` (4-8 faults within 1.5 s, mostly on neighbours) in each mode: a rule
     proven unsigned is not proven signed, nor the other way round."""
     bench = _bench()
-    seeds = [*range(120), *DENSE_FOUND]
+    seeds = [*range(40), *DENSE_FOUND]
     found = bench.chaos(seeds, max_robots=12, verbose=False, dense=True, auth=auth)
     hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
     assert hits == {}, hits
