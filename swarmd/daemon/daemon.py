@@ -37,7 +37,7 @@ from swarmd.base.notify import Notifier
 from swarmd.base.verify_budget import VerifyBudget
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
-from swarmd.core.events import NAME_KEY, Alert, Leave, event_of
+from swarmd.core.events import NAME_KEY, Alert, Leave, LeaveCause, event_of
 from swarmd.core.node import Node
 from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
@@ -403,7 +403,7 @@ class Daemon:
                       "swarm_file": self.running_cfg.swarm.source,
                       "exit_status": EXIT_REVOKED})
         if held is not None:
-            self.on_event(Leave(function=held, reason="revoked").record(
+            self.on_event(Leave(function=held, reason=LeaveCause.REVOKED).record(
                 round(time.time() - self.time_origin, 6), self.robot_id))
 
     def _reload_keys(self, new: RobotConfig) -> tuple[bytes, ...] | None:

@@ -52,7 +52,7 @@ from swarmd.base.notify import Notifier
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.drops import DropReason
-from swarmd.core.events import Event, Started
+from swarmd.core.events import Event, RoleName, Started
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
@@ -326,7 +326,7 @@ class Runtime:
                 case Event() as event:
                     changed = True
                     self._event(event)
-                    if isinstance(event, Started) and event.role != "active":
+                    if isinstance(event, Started) and event.role is not RoleName.ACTIVE:
                         self._release_at_start()
         if self.metrics is not None and actions:
             self.metrics.observe_actions(actions)
