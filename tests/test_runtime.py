@@ -452,9 +452,9 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
     daemon._alert_hook = ["sh", "-c", f'echo "$SWARMD_ROBOT $SWARMD_FUNCTION '
                                       f'$SWARMD_REASON" > {out}; exit 3']
     daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
-                     "reason": "no standby"})
+                     "reason": "no standby left"})
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
-    assert out.read_text() == "1 f2 no standby\n"
+    assert out.read_text() == "1 f2 no standby left\n"
     monkeypatch.setattr(daemon_mod, "ALERT_HOOK_TIMEOUT", 0.2)
     daemon._alert_hook = f"echo $$ > {out}; exec sleep 30"
     daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
