@@ -113,7 +113,7 @@ async def test_udp_interface_not_on_this_host_names_the_field(udp_port: int) -> 
     # TEST-NET-1 (RFC 5737) is on no interface here; the join fails before any send.
     transport = UdpTransport(interface="192.0.2.1", port=udp_port)
     with pytest.raises(TransportError, match=r"transport\.interface"):
-        await transport.start(lambda data: None, lambda name, fields: None)
+        await transport.start(lambda data: None, lambda event: None)
 
 
 async def test_socket_link_parent_that_cannot_be_made_is_a_link_error(tmp_path: Path) -> None:

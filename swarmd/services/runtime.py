@@ -57,7 +57,14 @@ from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
 from swarmd.services.metrics import Metrics
-from swarmd.transport.base import Channel, Transport
+from swarmd.transport.base import (
+    ChannelError,
+    ChannelEvent,
+    ChannelUp,
+    SendError,
+    Transport,
+    describe,
+)
 
 # The name an operator filters the JSON logs on ("logger", docs/daemon.md): it names the
 # component, not the file, so it stays when the module moves between folders.
@@ -545,21 +552,21 @@ class Runtime:
         self._check_state()
 
     # ---------------------------------------------------------------- channel events
-    def _on_transport_event(self, name: Channel, fields: Mapping[str, Any]) -> None:
+    def _on_transport_event(self, event: ChannelEvent) -> None:
         """A channel condition (radio up or down, a send error): counted and logged to
         the daemon's own log, not the event log, whose names are a contract (DESIGN
         section 3, `swarmd.core.events`). The protocol itself notices a dead channel through
         missing heartbeats, as the paper's robots would."""
         now = self.loop.time()
-        failed = name != Channel.UP
-        if name in (Channel.SEND_ERROR, Channel.ERROR):
+        name = event.condition
+        if isinstance(event, SendError | ChannelError):
             self._counters["transport_errors"] += 1
             last = self._reported.get(name)
             if last is not None and now - last < _RATE_LIMIT_S:
                 return  # counted; reported at most once a second
             self._reported[name] = now
-        log.log(logging.WARNING if failed else logging.INFO, "channel: %s", name,
-                extra={"channel": name, "fields": dict(fields)})
+        level = logging.INFO if isinstance(event, ChannelUp) else logging.WARNING
+        log.log(level, "channel: %s", name, extra={"channel": name, "fields": describe(event)})
 
     # ---------------------------------------------------------------- persistence
     def _check_state(self, *, force: bool = False) -> None:
