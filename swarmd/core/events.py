@@ -49,13 +49,15 @@ class RoleName(StrEnum):
 
 
 class LeaveCause(StrEnum):
-    """Why a robot left its function (`leave`'s `reason`): the wire's `LeaveReason` a
-    LEAVE frame carries, by name, and the one only the daemon logs."""
+    """Why a robot left its function (`leave`'s `reason`): each `LeaveReason` a LEAVE
+    frame can carry, by name, and the one only the daemon logs."""
 
     SHUTDOWN = "shutdown"
     """A graceful stop with handover (`handover_on_stop`)."""
     FAULT = "fault"
     """The robot reported itself faulty (DESIGN rule 7)."""
+    FENCED = "fenced"
+    """It learnt its slot was taken over (DESIGN rule 2; the node logs `fenced`)."""
     REVOKED = "revoked"
     """Its key was revoked (docs/operations.md): it sends no LEAVE, nobody would believe
     it, so this one is in its own event log only."""
