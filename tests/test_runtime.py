@@ -25,6 +25,7 @@ import swarmd.daemon.daemon as daemon_mod
 from swarmd.base.keys import generate_key
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
+from swarmd.core.events import Alert, AlertCause
 from swarmd.core.node import Node
 from swarmd.core.roles import Health, Role
 from swarmd.daemon.daemon import Daemon, run_daemon
@@ -451,14 +452,12 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
     daemon = Daemon(robot_cfg(tmp_path, 1, udp_port))
     daemon._alert_hook = ["sh", "-c", f'echo "$SWARMD_ROBOT $SWARMD_FUNCTION '
                                       f'$SWARMD_REASON" > {out}; exit 3']
-    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
-                     "reason": "no standby left"})
+    daemon.on_event(0.0, Alert("f2", AlertCause.NO_STANDBY))
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
     assert out.read_text() == "1 f2 no standby left\n"
     monkeypatch.setattr(daemon_mod, "ALERT_HOOK_TIMEOUT", 0.2)
     daemon._alert_hook = f"echo $$ > {out}; exec sleep 30"
-    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
-                     "reason": "no claim"})
+    daemon.on_event(0.0, Alert("f2", AlertCause.NO_CLAIM))
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
     pid = int(out.read_text())
     with pytest.raises(ProcessLookupError):

@@ -37,7 +37,7 @@ from swarmd.base.notify import Notifier
 from swarmd.base.verify_budget import VerifyBudget
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
-from swarmd.core.events import NAME_KEY, Alert, Leave, LeaveCause, event_of
+from swarmd.core.events import NAME_KEY, Alert, Event, Leave, LeaveCause
 from swarmd.core.node import Node
 from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
@@ -48,7 +48,7 @@ from swarmd.link.factory import make_link
 from swarmd.services import state as state_mod
 from swarmd.services.metrics import Metrics, MetricsServer
 from swarmd.services.revocation import EXIT_REVOKED, revoked_in
-from swarmd.services.runtime import EventSink, ReceiveFilter, Runtime
+from swarmd.services.runtime import ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
 
@@ -66,6 +66,10 @@ start never heartbeats, so READY goes out anyway after this long (it is running)
 ALERT_HOOK_TIMEOUT = 30.0
 """s. An alert hook still running after this is killed (a page or a mail takes
 seconds; a hung one must not pile up, one per alert)."""
+
+RecordSink = Callable[[dict[str, Any]], None]
+"""Receives each event-log record as written (`Event.record(t, robot)`, DESIGN
+section 3): the simulator's and the tests' copy of the event log."""
 
 
 def make_transport(cfg: Any) -> Transport:
@@ -128,7 +132,7 @@ class Daemon:
         transport: Transport | None = None,
         link: RobotLink | None = None,
         receive_filter: ReceiveFilter | None = None,
-        event_sink: EventSink | None = None,
+        event_sink: RecordSink | None = None,
         time_origin: float = 0.0,
         config_path: Path | None = None,
         notifier: Notifier | None = None,
@@ -168,8 +172,8 @@ class Daemon:
         self.event_log: EventLog | None = None
         self.runtime: Runtime | None = None
         self._waiting: asyncio.Task[None] | None = None
-        self._link_events: Callable[[dict[str, Any]], None] | None = None
-        """A link that shows the swarm (ros2) gets every event record too."""
+        self._link_events: Callable[[Event], None] | None = None
+        """A link that shows the swarm (ros2) gets every event too."""
         self.signer: Ed25519Signer | None = None
         self.keyring: Keyring | None = None
         """Per-robot auth: this robot's key and every robot's public keys, the objects
@@ -195,29 +199,28 @@ class Daemon:
         return self._function_specs.get(function, {})
 
     # ---------------------------------------------------------------- events
-    def on_event(self, record: dict[str, Any]) -> None:
-        """Every event-log record: file, injected sink, stdout log, alert hook."""
+    def on_event(self, t: float, event: Event) -> None:
+        """Every event, at `t` s since the time origin: as a record to the event log
+        and the injected sink (where it is written out), typed to the link, the stdout
+        log and the alert hook."""
+        record = event.record(t, self.robot_id)
         if self.event_log is not None:
             self.event_log.write(record)
         if self.extra_sink is not None:
             self.extra_sink(record)
         if self._link_events is not None:
-            self._link_events(record)
-        event = event_of(record)
-        name = None if event is None else event.name
-        fields = dict(record) if event is None else event.fields()
-        log.info("event %s", name, extra={NAME_KEY: name, "fields": fields})
+            self._link_events(event)
+        log.info("event %s", event.name, extra={NAME_KEY: event.name, "fields": event.fields()})
         if isinstance(event, Alert) and self._alert_hook:
-            self._run_hook(record)
+            self._run_hook(event)
 
-    def _run_hook(self, record: Mapping[str, Any]) -> None:
+    def _run_hook(self, alert: Alert) -> None:
         """DESIGN rule 8: an alert (no standby left) runs the configured hook, in the
         background, with the alert in its environment."""
         hook = self._alert_hook
         assert hook is not None
-        env = {"SWARMD_ROBOT": str(self.robot_id),
-               "SWARMD_FUNCTION": str(record.get("function", "")),
-               "SWARMD_REASON": str(record.get("reason", ""))}
+        env = {"SWARMD_ROBOT": str(self.robot_id), "SWARMD_FUNCTION": alert.function,
+               "SWARMD_REASON": alert.reason}
 
         async def run() -> None:
             try:
@@ -325,7 +328,7 @@ class Daemon:
 
     def _watch(self, link: RobotLink, runtime: Runtime) -> None:
         # A link that publishes the swarm's view (ros2) reads the node only through its
-        # snapshot and the event records (DESIGN section 3), on this loop.
+        # snapshot and its typed events (DESIGN section 3), on this loop.
         watch = getattr(link, "watch", None)
         if watch is not None:
             self._link_events = watch(runtime.snapshot, self.cfg)
@@ -403,8 +406,8 @@ class Daemon:
                       "swarm_file": self.running_cfg.swarm.source,
                       "exit_status": EXIT_REVOKED})
         if held is not None:
-            self.on_event(Leave(function=held, reason=LeaveCause.REVOKED).record(
-                round(time.time() - self.time_origin, 6), self.robot_id))
+            self.on_event(round(time.time() - self.time_origin, 6),
+                          Leave(function=held, reason=LeaveCause.REVOKED))
 
     def _reload_keys(self, new: RobotConfig) -> tuple[bytes, ...] | None:
         """SIGHUP: the new config's keys, given to the node; None when refused (the
@@ -463,7 +466,7 @@ async def run_daemon(
     transport: Transport | None = None,
     link: RobotLink | None = None,
     receive_filter: ReceiveFilter | None = None,
-    event_sink: EventSink | None = None,
+    event_sink: RecordSink | None = None,
     stop_event: asyncio.Event | None = None,
     on_ready: Callable[[Daemon], None] | None = None,
     time_origin: float = 0.0,

@@ -72,8 +72,9 @@ log = logging.getLogger("swarmd.runtime")
 
 ReceiveFilter = Callable[[bytes, float], bool]
 """(frame, loop time) -> False to drop the frame (the simulator's loss and partitions)."""
-EventSink = Callable[[dict[str, Any]], None]
-"""Receives each event-log record (`Event.record(t, robot)`)."""
+EventSink = Callable[[float, Event], None]
+"""Receives each event the node emits, as the typed object it is, with its time `t`
+(s since the time origin): the sink turns it into a record where it writes one out."""
 StateWriter = Callable[[Snapshot], int]
 """Persists a snapshot (see swarmd/services/state.py); called on role / function / epoch change
 and when the sequence number nears the reservation; returns the sequence number at which
@@ -383,14 +384,10 @@ class Runtime:
             log.exception("robot link assign failed", extra={"function": function})
 
     def _event(self, event: Event) -> None:
-        record = event.record(round(self.wall_clock() - self.time_origin, 6), self.robot_id)
-        self._emit_record(record)
-
-    def _emit_record(self, record: dict[str, Any]) -> None:
         if self.event_sink is None:
             return
         try:
-            self.event_sink(record)
+            self.event_sink(round(self.wall_clock() - self.time_origin, 6), event)
         except Exception:
             self._counters["sink_errors"] += 1
             log.exception("event sink failed")
