@@ -91,8 +91,9 @@ class Running:
 
 
 async def launch(cfg: RobotConfig, *, link: RobotLink | None = None,
-                 keep: list[bytes] | None = None) -> Running:
-    """Run a daemon as a task until ready; `keep` collects every frame it receives."""
+                 keep: list[bytes] | None = None, config_path: Path | None = None) -> Running:
+    """Run a daemon as a task until ready; `keep` collects every frame it receives;
+    `config_path` is the file a `reload` (SIGHUP) reads."""
     stop = asyncio.Event()
     holder: list[Running] = []
 
@@ -111,7 +112,8 @@ async def launch(cfg: RobotConfig, *, link: RobotLink | None = None,
         holder[0].daemon = d
 
     task = asyncio.create_task(run_daemon(cfg, link=link, event_sink=sink, stop_event=stop,
-                                          receive_filter=heard, on_ready=ready))
+                                          receive_filter=heard, on_ready=ready,
+                                          config_path=config_path))
     holder.append(Running(cfg.robot, task, stop))
     await wait_until(lambda: holder[0].daemon is not None or task.done(), 5.0, "ready")
     assert not task.done(), f"daemon exited with {task.result()}"
@@ -404,13 +406,12 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path, udp_p
 
     write(old, [])
     frames: list[bytes] = []
-    a = await launch(load_robot(robot), keep=frames)
+    a = await launch(load_robot(robot), keep=frames, config_path=robot)
     assert a.daemon is not None
     daemon, rt = a.daemon, runtime_of(a)
 
     def keys() -> tuple[bytes, ...]:
         return rt.keys()
-    daemon.config_path = robot
 
     async def signs_with(key: bytes) -> None:
         # Our own heartbeats come back over multicast loopback.
