@@ -45,7 +45,6 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -286,6 +285,7 @@ async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None, lo
     from sim.realtime.summary import summarize_realtime
     from sim.shared.faults import parse_fault
     from swarmd.config import load_swarm
+    from swarmd.transport.base import ChannelEvent
     from swarmd.transport.udp import UdpTransport
 
     cfg = load_swarm(path)
@@ -293,7 +293,7 @@ async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None, lo
     heard: list[tuple[float, int]] = []
     listener = UdpTransport(group="239.255.77.7", port=port, interface="127.0.0.1")
 
-    def on_event(_name: str, _fields: Mapping[str, Any]) -> None:
+    def on_event(_event: ChannelEvent) -> None:
         pass
 
     await listener.start(lambda data: heard.append((time.time(), len(data))), on_event)

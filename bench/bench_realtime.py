@@ -152,7 +152,7 @@ async def bench_scale(n: int, seconds: float) -> dict[str, Any]:
                 arrivals.setdefault(frame.sender, []).append((now, frame.msg.role))
 
         listener = UdpTransport(port=port)
-        await listener.start(on_frame, lambda name, fields: None)
+        await listener.start(on_frame, lambda event: None)
         cpu: dict[str, float] = {}
 
         async def sample() -> None:

@@ -151,7 +151,7 @@ async def bench_flood(rate: float, flood_s: float, settle: float = 4.0) -> dict[
             arrivals.setdefault(frame.sender, []).append((loop.time(), frame.msg.role))
 
     listener = UdpTransport(port=port)
-    await listener.start(on_frame, lambda name, fields: None)
+    await listener.start(on_frame, lambda event: None)
     sent = [0]
     flood_window: list[float] = []
 

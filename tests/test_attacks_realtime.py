@@ -224,7 +224,7 @@ async def test_per_robot_a_revoked_robot_is_taken_over_on_real_daemons(
                         f"identity_file: keys/robot-{r}.key\n"
                         f"transport: {{kind: udp, port: {port}}}\n")
         tasks.append(asyncio.create_task(run_daemon(
-            load_robot(path), event_sink=events.append, stop_event=stop,
+            load_robot(path), event_sink=events.append, stop_event=stop, config_path=path,
             on_ready=lambda d, r=r: daemons.__setitem__(r, d))))  # type: ignore[misc]
     params = load_swarm(swarm).params()
 
@@ -243,7 +243,6 @@ async def test_per_robot_a_revoked_robot_is_taken_over_on_real_daemons(
             "{mode: per-robot, keys_dir: keys, revoked: [2]}"))
         for r, d in daemons.items():
             if r != 2:
-                d.config_path = tmp_path / f"robot{r}.yaml"
                 d.reload()
         revoked_at = time.monotonic()
         await until(lambda: any(e["event"] == "takeover" for e in events), 20.0,

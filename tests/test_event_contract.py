@@ -20,8 +20,25 @@ import yaml
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import VirtualResult, run_virtual
 from swarmd.config import load_swarm
+from swarmd.core import wire
 from swarmd.core.errors import EventRecordError
-from swarmd.core.events import EVENTS, Event, Fault, Refute, Stopped, Takeover, Vote, event_of
+from swarmd.core.events import (
+    EVENTS,
+    Alert,
+    AlertCause,
+    Event,
+    Fault,
+    Leave,
+    LeaveCause,
+    Refute,
+    RoleName,
+    Started,
+    Stopped,
+    Takeover,
+    Vote,
+    event_of,
+)
+from swarmd.core.roles import Role
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -123,3 +140,37 @@ def test_a_record_that_is_no_event_is_refused_clearly() -> None:
         Takeover.from_record({"event": "stopped"})
     assert event_of({"event": "nope"}) is None
     assert event_of({"event": "stopped", "t": 0.0}) == Stopped()
+
+
+def test_roles_and_reasons_are_enums_written_as_their_names() -> None:
+    # The wire carries a role and a LEAVE's reason as enums; the log spells them by name.
+    assert [n.value for n in RoleName] == [r.name.lower() for r in Role]
+    assert {r.name.lower() for r in wire.LeaveReason} <= {c.value for c in LeaveCause}
+    records = [Started(RoleName.ACTIVE, "f1").record(0.0, 1),
+               Leave("f2", LeaveCause.FAULT).record(1.0, 2),
+               Alert("f3", AlertCause.NO_STANDBY).record(2.0, 6)]
+    # A StrEnum: the JSON is the plain name, byte for byte.
+    assert json.dumps(records) == (
+        '[{"t": 0.0, "robot": 1, "event": "started", "role": "active", "function": "f1"}, '
+        '{"t": 1.0, "robot": 2, "event": "leave", "function": "f2", "reason": "fault"}, '
+        '{"t": 2.0, "robot": 6, "event": "alert", "function": "f3", '
+        '"reason": "no standby left"}]')
+    # Read back from JSON (plain strings), each is its enum member again.
+    read = [Event.from_record(r) for r in json.loads(json.dumps(records))]
+    assert read == [Started(RoleName.ACTIVE, "f1"), Leave("f2", LeaveCause.FAULT),
+                    Alert("f3", AlertCause.NO_STANDBY)]
+    assert [type(getattr(e, f)) for e, f in zip(read, ("role", "reason", "reason"),
+                                                 strict=True)] == [
+        RoleName, LeaveCause, AlertCause]
+
+
+def test_a_role_or_reason_no_enum_names_is_no_event() -> None:
+    with pytest.raises(EventRecordError, match="'leave' record: 'faulty' is not a valid"):
+        Event.from_record({"event": "leave", "function": "f2", "reason": "faulty"})
+    assert event_of({"event": "alert", "function": "f2", "reason": "no standby"}) is None
+    assert event_of({"event": "started", "role": "leader", "function": None}) is None
+    # How `Role` prints a role, and the paper's name for a standby (Fig. 5), read as it.
+    for spelling, role in (("ACTIVE", RoleName.ACTIVE), ("Role.STANDBY", RoleName.STANDBY),
+                           ("inactive", RoleName.STANDBY)):
+        assert event_of({"event": "started", "role": spelling, "function": None}) == \
+            Started(role, None)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +18,7 @@ from sim.xbee_emu import Medium
 from swarmd.base.identity import throwaway_identities
 from swarmd.core import wire
 from swarmd.transport import fragment, framing
+from swarmd.transport.base import ChannelEvent, SendError
 from swarmd.transport.fragment import (
     HEADER_LEN,
     MAX_FRAGMENTS,
@@ -201,13 +201,13 @@ def test_garbage_never_raises_and_memory_stays_bounded(
 class Sink:
     def __init__(self) -> None:
         self.frames: list[bytes] = []
-        self.events: list[tuple[str, dict[str, Any]]] = []
+        self.events: list[ChannelEvent] = []
 
     def frame(self, data: bytes) -> None:
         self.frames.append(data)
 
-    def event(self, name: str, fields: Mapping[str, Any]) -> None:
-        self.events.append((name, dict(fields)))
+    def event(self, event: ChannelEvent) -> None:
+        self.events.append(event)
 
 
 async def test_signed_frames_cross_a_digimesh_medium(tmp_path: Path) -> None:
@@ -231,7 +231,7 @@ async def test_signed_frames_cross_a_digimesh_medium(tmp_path: Path) -> None:
             await wait_until(lambda: tx.counters["delivered"] == 7,  # 2 + 2 + 2 + 1
                              10.0, "seven deliveries")
             assert tx.counters["fragmented"] == 3
-            assert not [e for e in a.events if e[0] == "send_error"]
+            assert not [e for e in a.events if isinstance(e, SendError)]
         finally:
             await tx.close()
             await rx.close()

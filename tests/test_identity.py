@@ -302,11 +302,10 @@ async def test_daemon_gives_the_node_its_identity_and_sighup_reloads_it(
         return real_node(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(daemon_mod, "Node", spy)
-    running = await launch(load_robot(robot))
+    running = await launch(load_robot(robot), config_path=robot)
     try:
         d = running.daemon
         assert d is not None and d.keyring is not None and d.signer is not None
-        d.config_path = robot
         (identity,) = given
         assert isinstance(identity, Identity)
         assert identity.signer is d.signer and identity.verifier is d.keyring

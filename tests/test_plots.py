@@ -22,13 +22,13 @@ EVENTS: list[dict[str, Any]] = [
     {"t": 0.0, "robot": 2, "event": "started", "role": "active", "function": "f2"},
     {"t": 0.0, "robot": 6, "event": "started", "role": "standby", "function": None},
     {"t": 5.0, "robot": 2, "event": "fault", "kind": "motor"},
-    {"t": 5.1, "robot": 2, "event": "leave", "function": "f2", "reason": "faulty"},
+    {"t": 5.1, "robot": 2, "event": "leave", "function": "f2", "reason": "fault"},
     {"t": 5.2, "robot": 1, "event": "suspect", "subject": 2, "function": "f2"},
     {"t": 5.3, "robot": 6, "event": "claim", "subject": 2, "function": "f2", "epoch": 1},
     {"t": 5.8, "robot": 6, "event": "takeover", "function": "f2", "epoch": 1, "replaced": 2},
     {"t": 7.0, "robot": 1, "event": "fenced", "function": "f1", "epoch": 2},
     {"t": 9.0, "robot": 0, "event": "fault", "kind": "partition"},
-    {"t": 9.5, "robot": 6, "event": "alert", "function": "f3", "reason": "no standby"},
+    {"t": 9.5, "robot": 6, "event": "alert", "function": "f3", "reason": "no standby left"},
 ]
 
 

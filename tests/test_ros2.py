@@ -26,6 +26,7 @@ from sim.realtime.orchestrator import run_realtime_async
 from sim.run import SimError, SimOptions
 from sim.shared.faults import parse_fault
 from swarmd.config import load_swarm
+from swarmd.core.events import Alert, AlertCause
 from swarmd.core.records import Holder, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.ros2_health import HealthFold
@@ -79,7 +80,7 @@ def test_swarm_statuses_name_the_holder_and_say_ok_warn_error_stale() -> None:
     by_name = {s.name: s for s in view.statuses(_snap(suspects={"f2": 2}), 10.7)}
     assert by_name["swarmd/paper/f2"].level == WARN
     assert by_name["swarmd/paper/f4"].level == STALE  # 4 not heard for 0.7 s > t_max
-    view.on_event({"event": "alert", "function": "f4", "reason": "no standby left"})
+    view.on_event(Alert("f4", AlertCause.NO_STANDBY))
     assert {s.name: s.level for s in view.statuses(_snap(), 10.2)}["swarmd/paper/f4"] == ERROR
     # A new holder answers the alert.
     after = _snap(known={"f1": Holder(1, 0), "f2": Holder(2, 0), "f4": Holder(5, 1)},

@@ -25,6 +25,7 @@ import swarmd.daemon.daemon as daemon_mod
 from swarmd.base.keys import generate_key
 from swarmd.config import RobotConfig, load_robot, parse_robot
 from swarmd.core import wire
+from swarmd.core.events import Alert, AlertCause
 from swarmd.core.node import Node
 from swarmd.core.roles import Health, Role
 from swarmd.daemon.daemon import Daemon, run_daemon
@@ -90,8 +91,9 @@ class Running:
 
 
 async def launch(cfg: RobotConfig, *, link: RobotLink | None = None,
-                 keep: list[bytes] | None = None) -> Running:
-    """Run a daemon as a task until ready; `keep` collects every frame it receives."""
+                 keep: list[bytes] | None = None, config_path: Path | None = None) -> Running:
+    """Run a daemon as a task until ready; `keep` collects every frame it receives;
+    `config_path` is the file a `reload` (SIGHUP) reads."""
     stop = asyncio.Event()
     holder: list[Running] = []
 
@@ -110,7 +112,8 @@ async def launch(cfg: RobotConfig, *, link: RobotLink | None = None,
         holder[0].daemon = d
 
     task = asyncio.create_task(run_daemon(cfg, link=link, event_sink=sink, stop_event=stop,
-                                          receive_filter=heard, on_ready=ready))
+                                          receive_filter=heard, on_ready=ready,
+                                          config_path=config_path))
     holder.append(Running(cfg.robot, task, stop))
     await wait_until(lambda: holder[0].daemon is not None or task.done(), 5.0, "ready")
     assert not task.done(), f"daemon exited with {task.result()}"
@@ -403,13 +406,12 @@ async def test_sighup_rotates_the_keys_of_the_running_node(tmp_path: Path, udp_p
 
     write(old, [])
     frames: list[bytes] = []
-    a = await launch(load_robot(robot), keep=frames)
+    a = await launch(load_robot(robot), keep=frames, config_path=robot)
     assert a.daemon is not None
     daemon, rt = a.daemon, runtime_of(a)
 
     def keys() -> tuple[bytes, ...]:
         return rt.keys()
-    daemon.config_path = robot
 
     async def signs_with(key: bytes) -> None:
         # Our own heartbeats come back over multicast loopback.
@@ -451,14 +453,12 @@ async def test_alert_hook_runs_with_the_alert_and_a_hung_one_is_killed(
     daemon = Daemon(robot_cfg(tmp_path, 1, udp_port))
     daemon._alert_hook = ["sh", "-c", f'echo "$SWARMD_ROBOT $SWARMD_FUNCTION '
                                       f'$SWARMD_REASON" > {out}; exit 3']
-    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
-                     "reason": "no standby"})
+    daemon.on_event(0.0, Alert("f2", AlertCause.NO_STANDBY))
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
-    assert out.read_text() == "1 f2 no standby\n"
+    assert out.read_text() == "1 f2 no standby left\n"
     monkeypatch.setattr(daemon_mod, "ALERT_HOOK_TIMEOUT", 0.2)
     daemon._alert_hook = f"echo $$ > {out}; exec sleep 30"
-    daemon.on_event({"t": 0.0, "robot": 1, "event": "alert", "function": "f2",
-                     "reason": "no claim"})
+    daemon.on_event(0.0, Alert("f2", AlertCause.NO_CLAIM))
     await asyncio.wait_for(asyncio.gather(*daemon._hook_tasks), 10.0)
     pid = int(out.read_text())
     with pytest.raises(ProcessLookupError):

@@ -7,11 +7,11 @@ import contextlib
 import os
 import random
 import tty
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from swarmd.transport import framing
+from swarmd.transport.base import ChannelEvent
 from swarmd.transport.serial import SerialTransport
 
 
@@ -23,8 +23,8 @@ class Sink:
     def frame(self, data: bytes) -> None:
         self.frames.append(data)
 
-    def event(self, name: str, fields: Mapping[str, Any]) -> None:
-        self.events.append(name)
+    def event(self, event: ChannelEvent) -> None:
+        self.events.append(event.condition)
 
 
 def raw_pty(link: Path) -> tuple[int, int]:
@@ -113,7 +113,7 @@ async def test_lost_port_is_reported_and_reopened(tmp_path: Path) -> None:
         link.unlink()
         await _until(lambda: "transport_down" in sink.events)
         tr.send(b"x")
-        assert tr.counters["send_error:radio down"] == 1
+        assert tr.counters["send_error:down"] == 1
         master, slave = raw_pty(link)
         await _until(lambda: sink.events.count("transport_up") == 2)
         os.write(master, framing.encode(b"back"))

@@ -3,30 +3,30 @@
 from __future__ import annotations
 
 import asyncio
+import errno
 import socket
-from collections.abc import Mapping
 from typing import Any
 
 import pytest
 from pydantic import ValidationError
 
 from swarmd.config.robot import UdpTransportConfig
-from swarmd.transport.base import TransportError
-from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport
+from swarmd.transport.base import ChannelEvent, SendError, SendFailure, TransportError
+from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport, UdpUp
 
 
 class Sink:
     def __init__(self) -> None:
         self.frames: list[bytes] = []
-        self.events: list[tuple[str, Mapping[str, Any]]] = []
+        self.events: list[ChannelEvent] = []
         self.got = asyncio.Event()
 
     def frame(self, data: bytes) -> None:
         self.frames.append(data)
         self.got.set()
 
-    def event(self, name: str, fields: Mapping[str, Any]) -> None:
-        self.events.append((name, fields))
+    def event(self, event: ChannelEvent) -> None:
+        self.events.append(event)
 
 
 async def test_udp_two_transports_exchange_frames_on_loopback(udp_port: int) -> None:
@@ -43,8 +43,7 @@ async def test_udp_two_transports_exchange_frames_on_loopback(udp_port: int) -> 
         await asyncio.wait_for(sa.got.wait(), 2.0)
         assert sa.frames == [b"\x11hello"]
         assert a.counters["sent"] == 1 and b.counters["received"] == 1
-        assert ("transport_up", {"kind": "udp", "group": a.group, "port": port,
-                                 "interface": "127.0.0.1"}) in sa.events
+        assert UdpUp(a.group, port, "127.0.0.1") in sa.events
     finally:
         await a.close()
         await b.close()
@@ -92,11 +91,51 @@ async def test_udp_send_errors_are_counted_not_raised(udp_port: int) -> None:
     try:
         t.send(b"x" * (MAX_PAYLOAD + 1))
         assert t.counters["send_errors"] == 2
-        assert [n for n, _ in sink.events].count("send_error") == 1  # only after start
+        # Only after start; counted by a bounded class, the size beside it.
+        assert [e for e in sink.events if isinstance(e, SendError)] == [
+            SendError("udp", SendFailure.OVERSIZE, "oversize", size=MAX_PAYLOAD + 1,
+                      limit=MAX_PAYLOAD)]
+        assert t.send_reasons == {"send_error:not_open": 1, "send_error:oversize": 1}
     finally:
         await t.close()
     t.send(b"after close")
     assert t.counters["send_errors"] == 3
+
+
+class _Refusing:
+    """A socket whose every send fails with the next of `errors` (what a host without
+    a route, with a full buffer or a firewall rule answers)."""
+
+    def __init__(self, errors: list[OSError]) -> None:
+        self.errors = errors
+
+    def sendto(self, data: bytes, address: tuple[str, int]) -> int:
+        raise self.errors.pop(0)
+
+
+async def test_udp_os_errors_are_counted_by_a_few_classes(udp_port: int) -> None:
+    # Keyed by the error's words, every new errno or address would be a new counter;
+    # keyed by its class they stay a fixed set, the words go to the log.
+    t = UdpTransport(port=udp_port)
+    sink = Sink()
+    await t.start(sink.frame, sink.event)
+    errors = [OSError(errno.ENETUNREACH, "Network is unreachable"),
+              OSError(errno.EHOSTUNREACH, "No route to host"),
+              OSError(errno.ENOBUFS, "No buffer space available"),
+              PermissionError(errno.EPERM, "Operation not permitted")]
+    sock = t._sock
+    t._sock = _Refusing(list(errors))  # type: ignore[assignment]
+    try:
+        for _ in errors:
+            t.send(b"frame")
+    finally:
+        t._sock = sock
+        await t.close()
+    assert t.send_reasons == {"send_error:unreachable": 2, "send_error:no_buffer": 1,
+                              "send_error:permission": 1}
+    assert [(e.reason, e.detail) for e in sink.events if isinstance(e, SendError)] == [
+        (SendFailure.UNREACHABLE, str(errors[0])), (SendFailure.UNREACHABLE, str(errors[1])),
+        (SendFailure.NO_BUFFER, str(errors[2])), (SendFailure.PERMISSION, str(errors[3]))]
 
 
 @pytest.mark.parametrize(

@@ -13,7 +13,7 @@ import pytest
 from sim.xbee_emu import Medium
 from sim.xbee_emu.swarm import RadioSwarm, paper_plan
 from swarmd.core.params import radio
-from swarmd.transport.base import Transport
+from swarmd.transport.base import SendError, SendFailure, Transport
 from swarmd.transport.xbee import XBeeTransport
 
 # radio() shapes the protocol; times shrunk 2.5x so the test takes a few seconds. Not
@@ -98,7 +98,8 @@ async def test_per_robot_swarm_fails_over_on_digimesh_in_fragments(tmp_path: Pat
             assert (takeover["robot"], takeover["replaced"]) == (6, 2)
             assert transports[1].counters["fragmented"] > 0  # f2's watchers warned in pieces
             assert transports[6].counters["fragmented"] > 0  # the claim and its CERTs
-            oversize = [c for c in swarm.channel if c.fields.get("reason") == "oversize"]
+            oversize = [c for c in swarm.channel if isinstance(c.event, SendError)
+                        and c.event.reason is SendFailure.OVERSIZE]
             assert oversize == []
             drops = {k: v for t in transports.values() for k, v in t.counters.items()
                      if k.startswith("fragment_drop:")}

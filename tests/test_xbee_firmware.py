@@ -418,6 +418,7 @@ async def test_daemon_reports_a_failed_transmit_status_and_goes_on(
     # gives one `send_error` naming it, and the transport stays up.
     from test_xbee_transport import Sink
 
+    from swarmd.transport.base import SendError, SendFailure
     from swarmd.transport.xbee import XBeeTransport
 
     with Medium(2, protocol="zigbee", directory=tmp_path) as medium:
@@ -432,9 +433,10 @@ async def test_daemon_reports_a_failed_transmit_status_and_goes_on(
         try:
             ours.send(b"heartbeat")
             await sink.until(lambda: "send_error" in sink.names())
-            error = dict(sink.events)["send_error"]
-            assert error["status"] == (code if code != 0x99 else 0xFF)
-            assert error["reason"] != ""
+            error = sink.last(SendError)
+            assert error.status == (code if code != 0x99 else 0xFF)
+            assert error.reason is SendFailure.REFUSED and error.detail != ""
+            assert ours.counters["send_error:refused"] == 1  # one counter, whatever the code
             assert ours.up
             radio.status_frame = honest  # type: ignore[method-assign]
             ours.send(b"next")

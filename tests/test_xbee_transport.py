@@ -9,17 +9,18 @@ import os
 import subprocess
 import sys
 import threading
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 
 from sim.xbee_emu import Medium
+from swarmd.transport.base import ChannelDown, ChannelEvent, SendError, SendFailure
 from swarmd.transport.xbee import RadioMismatch, XBeeTransport
 from swarmd.transport.xbee_device import DeviceThread
 
 NASTY = bytes([0x7E, 0x7D, 0x11, 0x13]) * 25
+E = TypeVar("E", bound=ChannelEvent)
 
 
 class Sink:
@@ -27,19 +28,23 @@ class Sink:
 
     def __init__(self) -> None:
         self.frames: list[bytes] = []
-        self.events: list[tuple[str, dict[str, Any]]] = []
+        self.events: list[ChannelEvent] = []
         self.changed = asyncio.Event()
 
     def frame(self, data: bytes) -> None:
         self.frames.append(data)
         self.changed.set()
 
-    def event(self, name: str, fields: Mapping[str, Any]) -> None:
-        self.events.append((name, dict(fields)))
+    def event(self, event: ChannelEvent) -> None:
+        self.events.append(event)
         self.changed.set()
 
     def names(self) -> list[str]:
-        return [n for n, _ in self.events]
+        return [e.condition for e in self.events]
+
+    def last(self, kind: type[E]) -> E:
+        """The latest event of class `kind` (the test waited for one)."""
+        return [e for e in self.events if isinstance(e, kind)][-1]
 
     async def until(self, cond: Any, timeout: float = 5.0) -> None:
         async def loop() -> None:
@@ -96,13 +101,13 @@ async def test_oversize_and_in_flight_bound(tmp_path: Path) -> None:
         await tr.start(sink.frame, sink.event)
         try:
             tr.send(b"x" * 537)  # more than 8 fragments of 73 - 6 B (fragment.py)
-            assert ("send_error", {"kind": "xbee", "reason": "oversize", "size": 537,
-                                   "limit": 73}) in sink.events
+            assert SendError("xbee", SendFailure.OVERSIZE, "oversize", size=537,
+                             limit=73) in sink.events
             for i in range(10):
                 tr.send(bytes([i]) * 10)
                 assert len(tr._window.in_flight) <= 2
             # 2 in flight, 3 queued (the newest), 5 dropped oldest-first.
-            assert tr.counters["send_error:queue full"] == 5
+            assert tr.counters["send_error:no_buffer"] == 5
             await sink.until(lambda: tr.counters["delivered"] == 5)
         finally:
             await tr.close()
@@ -144,7 +149,7 @@ async def test_missing_radio_at_start_keeps_running_and_retries(tmp_path: Path) 
         try:
             assert sink.names() == ["transport_down"]
             tr.send(b"x")
-            assert tr.counters["send_error:radio down"] == 1
+            assert tr.counters["send_error:down"] == 1
             medium.replug(1)
             await sink.until(lambda: "transport_up" in sink.names())
             assert tr.up
@@ -182,8 +187,7 @@ async def test_hung_up_port_is_reported_without_a_log_flood(
             emulator_killed(medium, 2)
             await sink.until(lambda: "transport_down" in sink.names())
             assert not tr.up
-            down = dict(sink.events)["transport_down"]
-            assert "hung up" in down["reason"]
+            assert "hung up" in sink.last(ChannelDown).reason
             assert not [r for r in caplog.records if r.name == "digi.xbee.reader"]
             medium.replug(2)  # a new emulator on the same path
             await sink.until(lambda: sink.names().count("transport_up") == 2)
@@ -201,8 +205,7 @@ async def test_hung_up_port_is_noticed_by_the_watchdog_alone(
         try:
             emulator_killed(medium, 1)
             await sink.until(lambda: "transport_down" in sink.names())
-            assert "hung up (radio or emulator gone?)" in dict(sink.events)[
-                "transport_down"]["reason"]
+            assert "hung up (radio or emulator gone?)" in sink.last(ChannelDown).reason
         finally:
             await asyncio.wait_for(tr.close(), 5)
 

@@ -25,6 +25,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from swarmd.core.events import Event
 from swarmd.core.roles import Health
 from swarmd.link.base import HealthCallback, RobotLink
 from swarmd.link.ros2 import DIAGNOSTICS, latched_qos
@@ -147,8 +148,7 @@ class SimRos2Link:
         self.stack = RobotStack(cfg.robot, cfg.link, fly=self._fly, stop=self._land,
                                 record=record)
 
-    def watch(self, snapshot: Callable[[], Any], cfg: Any) -> Callable[[Mapping[str, Any]],
-                                                                        None]:
+    def watch(self, snapshot: Callable[[], Any], cfg: Any) -> Callable[[Event], None]:
         return self.link.watch(snapshot, cfg)
 
     def _fly(self, function: str, goal: Any) -> None:

@@ -1,8 +1,10 @@
-"""What the virtual simulator's clock has queued: one typed entry per kind of happening.
+"""What the virtual simulator's clock has queued: one typed entry per kind of happening,
+and what a robot's node is handed: one typed input per node entry point.
 
 `VirtualSwarm` keeps a heap of `(t, n, entry)`: `n` is a counter, so entries at one
 instant run in the order they were queued (a run stays a pure function of its seed),
-and the entry never needs comparing.
+and the entry never needs comparing. A `Tick`, `Deliver` or `DeliverRaw` popped off it
+goes to the node as it is; `Stop`, `Report` and `Say` come from faults.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from swarmd.core import wire
+from swarmd.core.roles import Health
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,6 +72,33 @@ class Forge:
     round: int
 
 
-Entry = Tick | Deliver | DeliverRaw | Boot | FaultPhase | Lie | Forge
+@dataclass(frozen=True, slots=True)
+class Stop:
+    """Robot `robot` stops gracefully, handing its function over (`leave:R@T`)."""
 
-__all__ = ["Boot", "Deliver", "DeliverRaw", "Entry", "FaultPhase", "Forge", "Lie", "Tick"]
+    robot: int
+
+
+@dataclass(frozen=True, slots=True)
+class Report:
+    """Robot `robot` reports its `health` to its node (`unhealthy:R@T`, `motor:R@T`)."""
+
+    robot: int
+    health: Health
+
+
+@dataclass(frozen=True, slots=True)
+class Say:
+    """Robot `robot`'s node broadcasts `msg` as its own (the liar's false warnings)."""
+
+    robot: int
+    msg: wire.Message
+
+
+Entry = Tick | Deliver | DeliverRaw | Boot | FaultPhase | Lie | Forge
+"""What the heap holds."""
+Input = Tick | Deliver | DeliverRaw | Stop | Report | Say
+"""What `VirtualSwarm` hands a node: each kind is one of its entry points."""
+
+__all__ = ["Boot", "Deliver", "DeliverRaw", "Entry", "FaultPhase", "Forge", "Input", "Lie",
+           "Report", "Say", "Stop", "Tick"]

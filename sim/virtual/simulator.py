@@ -20,7 +20,7 @@ import itertools
 import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, assert_never
 
 from sim.shared.channel import LOSS_MODELS, GilbertElliott, LinkCut
 from sim.shared.fakeid import fake_identities
@@ -28,7 +28,20 @@ from sim.shared.faults import Fault, FaultKind, fault_record
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.invariants import Checker, Violation
 from sim.shared.liar import liar_warnings
-from sim.virtual.agenda import Boot, Deliver, DeliverRaw, Entry, FaultPhase, Forge, Lie, Tick
+from sim.virtual.agenda import (
+    Boot,
+    Deliver,
+    DeliverRaw,
+    Entry,
+    FaultPhase,
+    Forge,
+    Input,
+    Lie,
+    Report,
+    Say,
+    Stop,
+    Tick,
+)
 from sim.virtual.judge import muted, views
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
@@ -42,7 +55,6 @@ from swarmd.core.roles import Health, Role
 AUTH_MODES = ("none", "shared", "per-robot")
 """`none`: unsigned; `shared`: one swarm key (HMAC); `per-robot`: each robot its own
 key for WARN, CLAIM and LEAVE, the swarm key on heartbeats (DESIGN section 2)."""
-_OP_TICK, _OP_RECEIVE, _OP_HEALTH, _OP_STOP, _OP_SEND, _OP_RAW = range(6)
 
 
 @dataclass(frozen=True, slots=True)
@@ -251,7 +263,7 @@ class VirtualSwarm:
                 if gen != r.timer_gen or not r.alive or r.paused or r.node is None:
                     return
                 r.timer_at = None
-                self._call(rid, _OP_TICK, None)
+                self._call(entry)
             case Deliver(rid, frame):
                 r = self.robots[rid]
                 if not r.alive or r.node is None:
@@ -261,7 +273,7 @@ class VirtualSwarm:
                         r.buffered.append(frame)
                     return
                 self.deliveries += 1
-                self._call(rid, _OP_RECEIVE, frame)
+                self._call(entry)
             case Boot(rid):
                 self._boot(rid)
             case FaultPhase(index, phase):
@@ -270,11 +282,11 @@ class VirtualSwarm:
                 self._lie(rid)
             case Forge(rid, attack, round_):
                 self._forge(rid, attack, round_)
-            case DeliverRaw(rid, data):
+            case DeliverRaw(rid, _):
                 r = self.robots[rid]
                 if r.alive and r.node is not None and not r.paused:
                     self.deliveries += 1
-                    self._call(rid, _OP_RAW, data)
+                    self._call(entry)
 
     def _final_states(self) -> tuple[dict[int, tuple[str, str | None, int]],
                                      dict[int, dict[str, int]]]:
@@ -301,24 +313,29 @@ class VirtualSwarm:
         audience changes then)."""
         return self._changed.get(rid, 0.0)
 
-    def _call(self, rid: int, op: int, arg: Any) -> None:
+    def _call(self, given: Input) -> None:
+        """Hand `given` to its robot's node now, then carry out what the node asks."""
+        rid = given.robot
         r = self.robots[rid]
         node = r.node
         assert node is not None
         now = self.now
         try:
-            if op == _OP_TICK:
-                actions = node.tick(now)
-            elif op == _OP_RECEIVE:
-                actions = node.receive_frame(arg, now)
-            elif op == _OP_HEALTH:
-                actions = node.robot_health(arg, now)
-            elif op == _OP_STOP:
-                actions = node.stop(now, handover=True)
-            elif op == _OP_RAW:
-                actions = node.receive(arg, now)
-            else:
-                actions = node.send_message(arg, now)
+            match given:
+                case Tick():
+                    actions = node.tick(now)
+                case Deliver(_, frame):
+                    actions = node.receive_frame(frame, now)
+                case DeliverRaw(_, data):
+                    actions = node.receive(data, now)
+                case Report(_, health):
+                    actions = node.robot_health(health, now)
+                case Stop():
+                    actions = node.stop(now, handover=True)
+                case Say(_, msg):
+                    actions = node.send_message(msg, now)
+                case _:
+                    assert_never(given)
         except Exception as exc:  # the invariant "no node raises on any input"
             self.checker.raised(self.now, rid, exc)
             r.alive = False
@@ -461,7 +478,7 @@ class VirtualSwarm:
                 self._unpause(rid, r)
             case FaultKind.LEAVE, _:
                 if node is not None and r.alive:
-                    self._call(rid, _OP_STOP, None)
+                    self._call(Stop(rid))
                     # What the daemon writes on a graceful stop (swarmd.services.state): a robot
                     # that left and comes back starts above its last seq, or every peer
                     # drops its frames as replays (it would be muted).
@@ -469,7 +486,7 @@ class VirtualSwarm:
                 r.alive = False
             case FaultKind.UNHEALTHY | FaultKind.MOTOR, _:
                 if node is not None and r.alive:
-                    self._call(rid, _OP_HEALTH, Health.FAULTY)
+                    self._call(Report(rid, Health.FAULTY))
             case FaultKind.LIAR, _:
                 self._push(t, Lie(rid))
             case FaultKind.FORGE, _:
@@ -481,9 +498,9 @@ class VirtualSwarm:
         frames, r.buffered = r.buffered, []
         for frame in frames:
             if r.alive and r.node is not None:
-                self._call(rid, _OP_RECEIVE, frame)
+                self._call(Deliver(rid, frame))
         if r.alive and r.node is not None:
-            self._call(rid, _OP_TICK, None)
+            self._call(Tick(rid, r.timer_gen))  # now, not a queued timer: no generation check
 
     def _kill(self, r: _Robot) -> None:
         """A crash: the node's persisted state is kept (DESIGN rule 2), the rest is gone."""
@@ -542,7 +559,7 @@ class VirtualSwarm:
         if not r.alive or r.paused or r.node is None:
             return
         for msg in liar_warnings(self.plan, r.node.snapshot()):
-            self._call(rid, _OP_SEND, msg)
+            self._call(Say(rid, msg))
         self._push(self.now + self.params.warn_interval, Lie(rid))
 
 

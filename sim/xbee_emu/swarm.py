@@ -24,7 +24,7 @@ from swarmd.core.events import Event, Fault
 from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.transport.base import Channel, Transport
+from swarmd.transport.base import ChannelEvent, Transport
 
 Record = dict[str, Any]
 
@@ -35,8 +35,7 @@ class ChannelRecord:
 
     t: float
     robot: int
-    condition: Channel
-    fields: dict[str, Any]
+    event: ChannelEvent
 
 
 class _Robot:
@@ -76,9 +75,8 @@ class _Robot:
         if self.alive:
             self.execute(self.node.receive(data, self.swarm.loop.time()))
 
-    def on_event(self, condition: Channel, fields: Mapping[str, Any]) -> None:
-        self.swarm.channel.append(
-            ChannelRecord(self.swarm.elapsed(), self.robot_id, condition, dict(fields)))
+    def on_event(self, event: ChannelEvent) -> None:
+        self.swarm.channel.append(ChannelRecord(self.swarm.elapsed(), self.robot_id, event))
 
 
 class RadioSwarm:

@@ -21,13 +21,15 @@ class CoreError(Exception):
 
 
 class CodecError(CoreError, ValueError):
-    """A frame that cannot be decoded or verified. `reason` names the drop counter: a
-    `DropReason` (a plain name given by the codec is checked against it here, so an
-    unknown one is a bug found at the raise, not a new counter)."""
+    """A frame that cannot be decoded or verified. `reason` is the drop counter it goes
+    to (DESIGN section 2: every refused frame is a counted drop), typed so that the
+    codec can name no counter that does not exist; `detail` says what was wrong, for a
+    log or a test."""
 
-    def __init__(self, reason: DropReason | str, detail: str) -> None:
-        self.reason = DropReason(reason)
-        super().__init__(f"{self.reason}: {detail}")
+    def __init__(self, reason: DropReason, detail: str) -> None:
+        self.reason = reason
+        self.detail = detail
+        super().__init__(f"{reason}: {detail}")
 
 
 class EventRecordError(CoreError, ValueError):

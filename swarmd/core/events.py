@@ -14,14 +14,62 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any, ClassVar
 
 from swarmd.core.errors import EventRecordError
+from swarmd.core.roles import Role
 
 NAME_KEY = "event"
 """The key of a record's kind: the event log's one name-keyed field (DESIGN section 3).
 The daemon's own log and its metrics name an event under the same key; readers that
 need only a record's name ask `name_of`."""
+
+
+class RoleName(StrEnum):
+    """A role as the event log spells it: `Role`'s name (the wire's role field) in lower
+    case. A `StrEnum`, so a record is written as it always was (`"role": "active"`)."""
+
+    ACTIVE = "active"
+    STANDBY = "standby"
+    CLAIMING = "claiming"
+    FENCED = "fenced"
+    REJOINING = "rejoining"
+
+    @classmethod
+    def of(cls, role: Role) -> RoleName:
+        return cls[role.name]
+
+    @classmethod
+    def _missing_(cls, value: object) -> RoleName | None:
+        # Logs spell a role as `Role` prints it too (`ACTIVE`, `Role.ACTIVE`), and the
+        # paper calls a standby *inactive* (Fig. 5): each reads as the role it names.
+        name = str(value).upper().removeprefix("ROLE.")
+        return cls.STANDBY if name == "INACTIVE" else cls.__members__.get(name)
+
+
+class LeaveCause(StrEnum):
+    """Why a robot left its function (`leave`'s `reason`): each `LeaveReason` a LEAVE
+    frame can carry, by name, and the one only the daemon logs."""
+
+    SHUTDOWN = "shutdown"
+    """A graceful stop with handover (`handover_on_stop`)."""
+    FAULT = "fault"
+    """The robot reported itself faulty (DESIGN rule 7)."""
+    FENCED = "fenced"
+    """It learnt its slot was taken over (DESIGN rule 2; the node logs `fenced`)."""
+    REVOKED = "revoked"
+    """Its key was revoked (docs/operations.md): it sends no LEAVE, nobody would believe
+    it, so this one is in its own event log only."""
+
+
+class AlertCause(StrEnum):
+    """Why nobody took a function over (`alert`'s `reason`, DESIGN rule 8)."""
+
+    NO_CLAIM = "no claim"
+    """Warnings went out for `alert_after` and no standby claimed."""
+    NO_STANDBY = "no standby left"
+    """No standby that could take it over is alive."""
 
 
 class Event:
@@ -55,7 +103,10 @@ class Event:
                    and _field(kind, attr).default is dataclasses.MISSING]
         if missing:
             raise EventRecordError(f"{name!r} record without {', '.join(missing)}")
-        return kind(**{attr: record[key] for attr, key in _keys(kind) if key in record})
+        try:
+            return kind(**{attr: record[key] for attr, key in _keys(kind) if key in record})
+        except ValueError as exc:  # a field its enum has no member for
+            raise EventRecordError(f"{name!r} record: {exc}") from None
 
     @classmethod
     def contract(cls) -> tuple[str, ...]:
@@ -82,12 +133,16 @@ def _field(cls: type[Event], attr: str) -> dataclasses.Field[Any]:
 
 @dataclass(frozen=True, slots=True)
 class Started(Event):
-    """The node runs: as `role` ("active" / "standby"), holding `function` or None; after
+    """The node runs: as `role` (active or standby), holding `function` or None; after
     a rejoin hold (DESIGN rule 2 across a reboot), the hold's outcome."""
 
     name: ClassVar[str] = "started"
-    role: str
+    role: RoleName
     function: str | None
+
+    def __post_init__(self) -> None:
+        # A record read back holds the plain name: the enum checks and types it.
+        object.__setattr__(self, "role", RoleName(self.role))
 
 
 @dataclass(frozen=True, slots=True)
@@ -179,12 +234,15 @@ class Refute(Event):
 
 @dataclass(frozen=True, slots=True)
 class Leave(Event):
-    """This robot stops executing `function` and tells the swarm (`reason`: "fault",
-    DESIGN rule 7, or "shutdown", a graceful stop with handover)."""
+    """This robot stops executing `function` and tells the swarm (`reason`: fault,
+    DESIGN rule 7, or shutdown, a graceful stop with handover; `LeaveCause`)."""
 
     name: ClassVar[str] = "leave"
     function: str
-    reason: str
+    reason: LeaveCause
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "reason", LeaveCause(self.reason))
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,7 +251,10 @@ class Alert(Event):
 
     name: ClassVar[str] = "alert"
     function: str
-    reason: str
+    reason: AlertCause
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "reason", AlertCause(self.reason))
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,7 +309,7 @@ EVENTS[Fault.name] = Fault
 
 
 __all__ = [
-    "CORE_EVENTS", "EVENTS", "NAME_KEY", "Alert", "Backoff", "Claim", "Event", "Fault",
-    "Fenced", "Leave", "Refute", "Started", "Stopped", "Suspect", "Takeover", "Vote", "Warn",
-    "event_of", "name_of",
+    "CORE_EVENTS", "EVENTS", "NAME_KEY", "Alert", "AlertCause", "Backoff", "Claim", "Event",
+    "Fault", "Fenced", "Leave", "LeaveCause", "Refute", "RoleName", "Started", "Stopped",
+    "Suspect", "Takeover", "Vote", "Warn", "event_of", "name_of",
 ]

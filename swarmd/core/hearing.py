@@ -348,7 +348,7 @@ class Hearing(NodeBase):
             watch.claim_heard(now)
             if not self._ears.live_standby(f, sender, now):
                 watch.mark_alerted()
-                self._emit(ev.Alert(function=f, reason="no standby left"))
+                self._emit(ev.Alert(function=f, reason=ev.AlertCause.NO_STANDBY))
         if f in self._covers and self._standing_by():
             self._start_claim(f, sender, epoch, now, trigger=Trigger.LEAVE_HEARD)
 

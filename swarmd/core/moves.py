@@ -25,7 +25,7 @@ class Moves(NodeBase):
         self._started = True
         if self._rejoin is not None:
             return  # `started` tells the outcome once the rejoin hold is over
-        self._emit(ev.Started(role=self._role.name.lower(), function=self._function))
+        self._emit(ev.Started(role=ev.RoleName.of(self._role), function=self._function))
         if self._role == Role.ACTIVE and self._function is not None:
             self._pending.append(Assign(self._function, self._epoch))
 
@@ -108,9 +108,9 @@ class Moves(NodeBase):
         assert rejoin is not None
         if not rejoin.resumes(self._known[rejoin.function]):
             self._to(Trigger.OUTDATED, Standby())
-            self._emit(ev.Started(role="standby", function=None))
+            self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
             return
-        self._emit(ev.Started(role="active", function=rejoin.function))
+        self._emit(ev.Started(role=ev.RoleName.ACTIVE, function=rejoin.function))
         self._become_holder(Trigger.REJOIN, rejoin.function, rejoin.epoch, now)
 
     def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
@@ -119,7 +119,7 @@ class Moves(NodeBase):
         assert self._rejoin is not None
         if self._rejoin.superseded(self._known[f], seen_epoch):
             self._to(Trigger.OUTDATED, Standby())
-            self._emit(ev.Started(role="standby", function=None))
+            self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
 
     # ------------------------------------------------------------------ watchdogs
     def _watch_neighbours(self, now: float) -> None:
@@ -141,14 +141,14 @@ class Moves(NodeBase):
             # stall of our own over the hold). `fire` marked the episode alerted, so an
             # alert not logged here never comes: the warning would end in nothing (rule
             # 8; the paper's property that every warning ends somewhere).
-            self._emit(ev.Alert(function=g, reason="no claim"))
+            self._emit(ev.Alert(function=g, reason=ev.AlertCause.NO_CLAIM))
         elif (not fired.first and not watch.alerted and watch.since is not None
               and now - watch.since >= self._params.t_max
               and not self._ears.live_standby(g, subject, now)):
             # Rule 8, without waiting for alert_after: nobody can take over. Not on the
             # first fire: one more T_max of silence first, so loss alone rarely alerts.
             watch.mark_alerted()
-            self._emit(ev.Alert(function=g, reason="no standby left"))
+            self._emit(ev.Alert(function=g, reason=ev.AlertCause.NO_STANDBY))
         self._send(wire.Warn(subject, self._plan.slot(g), epoch))
 
     # ------------------------------------------------------------------ heartbeats

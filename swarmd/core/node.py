@@ -265,13 +265,13 @@ class Node(Hearing, Moves, Signed, Restart):
         if health == Health.FAULTY:
             if self._role == Role.ACTIVE and self._function is not None:
                 f = self._function
-                self._emit(ev.Leave(function=f, reason="fault"))
+                self._emit(ev.Leave(function=f, reason=ev.LeaveCause.FAULT))
                 self._send(wire.Leave(self._plan.slot(f), self._epoch, wire.LeaveReason.FAULT),
                            evidence=True)
                 self._pending.append(Release(f))
             if self._rejoin is not None and self._started:
                 # A faulty robot resumes nothing: it is a standby now.
-                self._emit(ev.Started(role="standby", function=None))
+                self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
             state = self._state
             self._to(Trigger.FAULT, state if isinstance(state, Fenced) else Standby())
             self._clear_votes()
@@ -287,7 +287,7 @@ class Node(Hearing, Moves, Signed, Restart):
             return self._drain()
         if self._role == Role.ACTIVE and self._function is not None:
             if handover:
-                self._emit(ev.Leave(function=self._function, reason="shutdown"))
+                self._emit(ev.Leave(function=self._function, reason=ev.LeaveCause.SHUTDOWN))
                 self._send(wire.Leave(self._plan.slot(self._function), self._epoch,
                                       wire.LeaveReason.SHUTDOWN), evidence=True)
             self._pending.append(Release(self._function))

@@ -27,7 +27,8 @@ Layout (big-endian)::
   seeding is the runtime's job (`seq_seed`).
 - tag: HMAC-SHA256 over everything before it, truncated to 8 bytes (MAVLink 2 uses 6).
 
-`decode` raises only `CodecError` (with a machine-readable `reason`) on any input;
+`decode` raises only `CodecError` on any input, its `reason` the drop counter's
+`DropReason` (DESIGN section 2: every refused frame is a counted drop);
 `peek` reads sender, type and slot without verifying anything (the receiver's early
 drop of frames about slots it does not care about: DESIGN section 2, "What a robot
 hears") and returns None on anything it cannot read.
@@ -45,6 +46,7 @@ from typing import NamedTuple
 
 from swarmd.core.auth import SIGNATURE_LEN, Signer, Verifier
 from swarmd.core.chain import LINK_LEN
+from swarmd.core.drops import DropReason
 from swarmd.core.errors import CodecError as CodecError
 
 VERSION = 1
@@ -292,19 +294,20 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     `chain.py`), and a CERT what it relays, about its slot. Without one a CERT is
     rejected."""
     if len(data) < HEADER_LEN + 1:
-        raise CodecError("malformed", f"{len(data)} bytes is shorter than any frame")
+        raise CodecError(DropReason.MALFORMED, f"{len(data)} bytes is shorter than any frame")
     first, swarm_id, sender, seq_bytes = HEADER.unpack_from(data)
     version = first >> 4
     if version != VERSION:
-        raise CodecError("version", f"version {version}, this node speaks {VERSION}")
+        raise CodecError(DropReason.VERSION, f"version {version}, this node speaks {VERSION}")
     mtype = _TYPES[first & _TYPE_MASK]  # a table look-up, not an enum construction
     if mtype is None:
-        raise CodecError("malformed", f"unknown message type {first & _TYPE_MASK}")
+        raise CodecError(DropReason.MALFORMED, f"unknown message type {first & _TYPE_MASK}")
     signed = bool(first & _SIGNED)
     slot_at = HEADER_LEN + _SLOT_AT[mtype]
     got_slot = _read_slot(data, slot_at)
     if got_slot is None:
-        raise CodecError("malformed", f"{mtype.name} with a truncated or overlong slot field")
+        raise CodecError(DropReason.MALFORMED,
+                         f"{mtype.name} with a truncated or overlong slot field")
     slot, slot_len = got_slot
     if mtype == MsgType.CERT:
         return _decode_cert(data, swarm_id, sender, seq_bytes, slot, slot_len, signed,
@@ -316,7 +319,8 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     auth_len = SIGNATURE_LEN if strong else TAG_LEN
     expected = HEADER_LEN + body_len + (auth_len if signed else 0)
     if len(data) != expected:
-        raise CodecError("malformed", f"{mtype.name} of {len(data)} bytes, expected {expected}")
+        raise CodecError(DropReason.MALFORMED,
+                         f"{mtype.name} of {len(data)} bytes, expected {expected}")
     _verify(data, sender, mtype, signed, keys, verifier if strong else None)
     msg = _message(data, mtype, slot, slot_at + slot_len, strong=strong, linked=linked)
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
@@ -326,20 +330,20 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
 def _verify(data: bytes, sender: int, mtype: MsgType, signed: bool, keys: Sequence[bytes],
             verifier: Verifier | None) -> None:
     """The sender's own signature (`verifier`: a frame that must carry one), else the
-    swarm key's tag (`keys`), else nothing. Raises `CodecError("auth")`."""
+    swarm key's tag (`keys`), else nothing. Raises `CodecError(DropReason.AUTH)`."""
     if verifier is not None:
         if not signed:
-            raise CodecError("auth", f"{mtype.name} without its sender's signature")
+            raise CodecError(DropReason.AUTH, f"{mtype.name} without its sender's signature")
         if not verifier.verify(sender, data[:-SIGNATURE_LEN], data[-SIGNATURE_LEN:]):
-            raise CodecError("auth", f"bad signature of robot {sender}")
+            raise CodecError(DropReason.AUTH, f"bad signature of robot {sender}")
     elif keys:
         if not signed:
-            raise CodecError("auth", "unsigned frame on a swarm with a key")
+            raise CodecError(DropReason.AUTH, "unsigned frame on a swarm with a key")
         signed_part, got = data[:-TAG_LEN], data[-TAG_LEN:]
         if not any(hmac.compare_digest(tag(k, signed_part), got) for k in keys):
-            raise CodecError("auth", "bad authentication tag")
+            raise CodecError(DropReason.AUTH, "bad authentication tag")
     elif signed:
-        raise CodecError("auth", "signed frame but no swarm key configured")
+        raise CodecError(DropReason.AUTH, "signed frame but no swarm key configured")
 
 
 def _message(data: bytes, mtype: MsgType, slot: int, after: int, *, strong: bool,
@@ -365,29 +369,30 @@ def _message(data: bytes, mtype: MsgType, slot: int, after: int, *, strong: bool
         case MsgType.REFUTE:
             if not strong:
                 # Only its sender's own signature gives it meaning (per-robot mode).
-                raise CodecError("auth", "REFUTE outside per-robot mode")
+                raise CodecError(DropReason.AUTH, "REFUTE outside per-robot mode")
             return Refute(witness=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
                           epoch=_U16.unpack_from(data, after)[0],
                           seq=int.from_bytes(data[after + 2:after + 8], "big"))
-    raise CodecError("malformed", f"{mtype.name} has no body of its own")  # pragma: no cover
+    raise CodecError(DropReason.MALFORMED,
+                     f"{mtype.name} has no body of its own")  # pragma: no cover
 
 
 def _decode_cert(data: bytes, swarm_id: int, sender: int, seq_bytes: bytes, slot: int,
                  slot_len: int, signed: bool, verifier: Verifier | None,
                  inner: bool) -> Frame:
     if verifier is None:
-        raise CodecError("auth", "certificate frame but no robot keys configured")
+        raise CodecError(DropReason.AUTH, "certificate frame but no robot keys configured")
     if inner:
-        raise CodecError("malformed", "a certificate inside a certificate")
+        raise CodecError(DropReason.MALFORMED, "a certificate inside a certificate")
     if signed:
-        raise CodecError("malformed", "a certificate carries no tag of its own")
+        raise CodecError(DropReason.MALFORMED, "a certificate carries no tag of its own")
     raw = data[HEADER_LEN + slot_len:]
     if len(raw) < _INNER_MIN:
-        raise CodecError("malformed", f"certificate of {len(data)} bytes is too short")
-    got = decode(raw, (), verifier, inner=True)  # raises CodecError("auth") if forged
+        raise CodecError(DropReason.MALFORMED, f"certificate of {len(data)} bytes is too short")
+    got = decode(raw, (), verifier, inner=True)  # raises CodecError(DropReason.AUTH) if forged
     if not isinstance(got.msg, (Warn, Leave, Refute, Claim)) or got.msg.function != slot \
             or got.swarm_id != swarm_id:
-        raise CodecError("malformed",
+        raise CodecError(DropReason.MALFORMED,
                          "a certificate relays a WARN, LEAVE, REFUTE or CLAIM of its slot")
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), Cert(slot, got, raw))
 

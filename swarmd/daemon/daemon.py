@@ -37,7 +37,7 @@ from swarmd.base.notify import Notifier
 from swarmd.base.verify_budget import VerifyBudget
 from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
-from swarmd.core.events import NAME_KEY, Alert, Leave, event_of
+from swarmd.core.events import NAME_KEY, Alert, Event, Leave, LeaveCause
 from swarmd.core.node import Node
 from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
@@ -48,7 +48,7 @@ from swarmd.link.factory import make_link
 from swarmd.services import state as state_mod
 from swarmd.services.metrics import Metrics, MetricsServer
 from swarmd.services.revocation import EXIT_REVOKED, revoked_in
-from swarmd.services.runtime import EventSink, ReceiveFilter, Runtime
+from swarmd.services.runtime import ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
 
@@ -66,6 +66,10 @@ start never heartbeats, so READY goes out anyway after this long (it is running)
 ALERT_HOOK_TIMEOUT = 30.0
 """s. An alert hook still running after this is killed (a page or a mail takes
 seconds; a hung one must not pile up, one per alert)."""
+
+RecordSink = Callable[[dict[str, Any]], None]
+"""Receives each event-log record as written (`Event.record(t, robot)`, DESIGN
+section 3): the simulator's and the tests' copy of the event log."""
 
 
 def make_transport(cfg: Any) -> Transport:
@@ -128,52 +132,100 @@ class Daemon:
         transport: Transport | None = None,
         link: RobotLink | None = None,
         receive_filter: ReceiveFilter | None = None,
-        event_sink: EventSink | None = None,
+        event_sink: RecordSink | None = None,
         time_origin: float = 0.0,
         config_path: Path | None = None,
         notifier: Notifier | None = None,
     ) -> None:
-        self.cfg = cfg
+        self._cfg = cfg
         """The config last loaded (start or SIGHUP): the live-applied settings."""
-        self.running_cfg = cfg
+        self._running_cfg = cfg
         """The config the daemon started with: what a SIGHUP that needs a restart is
         compared against (a reload that changed the timing and one that changed it back
         must not ask for a restart)."""
-        self.config_path = config_path
-        self.robot_id = cfg.robot
-        self.swarm_id = cfg.swarm.swarm.id
-        self.handover_on_stop = cfg.handover_on_stop
+        self._config_path = config_path
+        self._robot_id = cfg.robot
+        self._swarm_id = cfg.swarm.swarm.id
+        self._handover_on_stop = cfg.handover_on_stop
         self._injected_transport = transport
         self._injected_link = link
-        self.receive_filter = receive_filter
-        self.extra_sink = event_sink
-        self.time_origin = time_origin
-        self.notifier = notifier if notifier is not None else Notifier.from_env()
-        self.metrics = Metrics(robot_id=cfg.robot, swarm_id=self.swarm_id)
+        self._injected_filter = receive_filter
+        self._extra_sink = event_sink
+        self._time_origin = time_origin
+        self._notifier = notifier if notifier is not None else Notifier.from_env()
+        self._metrics = Metrics(robot_id=cfg.robot, swarm_id=self._swarm_id)
         self._init_started()
-        self.state_file = state_mod.StateFile(
-            state_mod.state_path(cfg.state_dir, self.swarm_id, cfg.robot),
-            robot=cfg.robot, swarm=self.swarm_id, plan=cfg.swarm.to_plan())
-        self.state_errors = 0
-        self.reload_errors = 0
-        """SIGHUPs whose config or keys were refused (logged; the old ones stay)."""
+        self._state_file = state_mod.StateFile(
+            state_mod.state_path(cfg.state_dir, self._swarm_id, cfg.robot),
+            robot=cfg.robot, swarm=self._swarm_id, plan=cfg.swarm.to_plan())
+        self._state_errors = 0
+        self._reload_errors = 0
         self._function_specs: dict[str, dict[str, Any]] = self._specs(cfg)
         self._alert_hook = cfg.swarm.alert_hook
         self._hook_tasks: set[asyncio.Task[None]] = set()
-        self.revoked = asyncio.Event()  # a reload found this robot revoked: EXIT_REVOKED
+        self._revocation = asyncio.Event()  # a reload found this robot revoked: EXIT_REVOKED
 
     def _init_started(self) -> None:
         """What `start` makes: None until it runs."""
-        self.metrics_server: MetricsServer | None = None
-        self.event_log: EventLog | None = None
-        self.runtime: Runtime | None = None
+        self._metrics_server: MetricsServer | None = None
+        self._event_log: EventLog | None = None
+        self._runtime: Runtime | None = None
         self._waiting: asyncio.Task[None] | None = None
-        self._link_events: Callable[[dict[str, Any]], None] | None = None
-        """A link that shows the swarm (ros2) gets every event record too."""
-        self.signer: Ed25519Signer | None = None
-        self.keyring: Keyring | None = None
+        self._link_events: Callable[[Event], None] | None = None
+        """A link that shows the swarm (ros2) gets every event too."""
+        self._signer: Ed25519Signer | None = None
+        self._keyring: Keyring | None = None
         """Per-robot auth: this robot's key and every robot's public keys, the objects
         the node was given; SIGHUP replaces their keys in place (rotation, revocation)."""
+
+    # ---------------------------------------------------------------- what others read
+    @property
+    def cfg(self) -> RobotConfig:
+        """The config last loaded (start or SIGHUP)."""
+        return self._cfg
+
+    @property
+    def robot_id(self) -> int:
+        return self._robot_id
+
+    @property
+    def runtime(self) -> Runtime | None:
+        """The running runtime; None before `start`."""
+        return self._runtime
+
+    @property
+    def signer(self) -> Ed25519Signer | None:
+        """Per-robot auth: this robot's own key (what its node signs with)."""
+        return self._signer
+
+    @property
+    def keyring(self) -> Keyring | None:
+        """Per-robot auth: every robot's public key, and those revoked."""
+        return self._keyring
+
+    @property
+    def handover_on_stop(self) -> bool:
+        """Whether a graceful stop hands the function over (LEAVE), as last loaded."""
+        return self._handover_on_stop
+
+    @property
+    def revoked(self) -> bool:
+        """A reload found this robot revoked in the swarm file (it stops: EXIT_REVOKED)."""
+        return self._revocation.is_set()
+
+    async def wait_revoked(self) -> None:
+        """Return once a reload found this robot revoked."""
+        await self._revocation.wait()
+
+    @property
+    def state_errors(self) -> int:
+        """State files found unusable at start (set aside; the robot started fresh)."""
+        return self._state_errors
+
+    @property
+    def reload_errors(self) -> int:
+        """SIGHUPs whose config or keys were refused (logged; the old ones stay)."""
+        return self._reload_errors
 
     def _identity(self, cfg: RobotConfig) -> Identity | None:
         """The node's Identity in per-robot mode (None otherwise). Raises
@@ -181,9 +233,9 @@ class Daemon:
         material = cfg.identity_material()
         if material is None:
             return None
-        self.signer = Ed25519Signer(cfg.robot, material.private_key)
-        self.keyring = Keyring(material.public_keys, material.revoked, VerifyBudget())
-        return Identity(self.signer, self.keyring)
+        self._signer = Ed25519Signer(cfg.robot, material.private_key)
+        self._keyring = Keyring(material.public_keys, material.revoked, VerifyBudget())
+        return Identity(self._signer, self._keyring)
 
     @staticmethod
     def _specs(cfg: RobotConfig) -> dict[str, dict[str, Any]]:
@@ -195,29 +247,28 @@ class Daemon:
         return self._function_specs.get(function, {})
 
     # ---------------------------------------------------------------- events
-    def on_event(self, record: dict[str, Any]) -> None:
-        """Every event-log record: file, injected sink, stdout log, alert hook."""
-        if self.event_log is not None:
-            self.event_log.write(record)
-        if self.extra_sink is not None:
-            self.extra_sink(record)
+    def on_event(self, t: float, event: Event) -> None:
+        """Every event, at `t` s since the time origin: as a record to the event log
+        and the injected sink (where it is written out), typed to the link, the stdout
+        log and the alert hook."""
+        record = event.record(t, self._robot_id)
+        if self._event_log is not None:
+            self._event_log.write(record)
+        if self._extra_sink is not None:
+            self._extra_sink(record)
         if self._link_events is not None:
-            self._link_events(record)
-        event = event_of(record)
-        name = None if event is None else event.name
-        fields = dict(record) if event is None else event.fields()
-        log.info("event %s", name, extra={NAME_KEY: name, "fields": fields})
+            self._link_events(event)
+        log.info("event %s", event.name, extra={NAME_KEY: event.name, "fields": event.fields()})
         if isinstance(event, Alert) and self._alert_hook:
-            self._run_hook(record)
+            self._run_hook(event)
 
-    def _run_hook(self, record: Mapping[str, Any]) -> None:
+    def _run_hook(self, alert: Alert) -> None:
         """DESIGN rule 8: an alert (no standby left) runs the configured hook, in the
         background, with the alert in its environment."""
         hook = self._alert_hook
         assert hook is not None
-        env = {"SWARMD_ROBOT": str(self.robot_id),
-               "SWARMD_FUNCTION": str(record.get("function", "")),
-               "SWARMD_REASON": str(record.get("reason", ""))}
+        env = {"SWARMD_ROBOT": str(self._robot_id), "SWARMD_FUNCTION": alert.function,
+               "SWARMD_REASON": alert.reason}
 
         async def run() -> None:
             try:
@@ -238,10 +289,10 @@ class Daemon:
     # ---------------------------------------------------------------- state
     def _load_state(self) -> state_mod.PersistedState | None:
         try:
-            return self.state_file.load()
+            return self._state_file.load()
         except state_mod.StateError as exc:
-            self.state_errors += 1
-            moved = state_mod.set_aside(self.state_file.path)
+            self._state_errors += 1
+            moved = state_mod.set_aside(self._state_file.path)
             log.error("state file unusable; starting fresh", extra={
                 "error": str(exc), "moved_to": str(moved) if moved else None})
             return None
@@ -251,7 +302,7 @@ class Daemon:
         """Build the node and start transport, link and timers. Raises on set-up
         failure (the caller turns it into an exit code); `StartupError`, `EventLogError`,
         `MetricsError`, `TransportError` and `SocketLinkError` name the config field."""
-        cfg = self.cfg
+        cfg = self._cfg
         loop = asyncio.get_running_loop()
         keys = cfg.keys()  # signing key first, then those also accepted (rotation)
         identity = self._identity(cfg)
@@ -264,7 +315,7 @@ class Daemon:
         node = Node(cfg.robot, cfg.swarm.to_plan(), params, now, keys=keys,
                     identity=identity, seq_start=seq_start, restored=restored)
         try:
-            write_at = self.state_file.write_initial(persisted, seq_start)
+            write_at = self._state_file.write_initial(persisted, seq_start)
         except OSError as exc:  # StateWriteError names the file
             raise StartupError(f"state_dir {cfg.state_dir}: {exc}") from exc
         self._open_outputs(cfg)
@@ -272,51 +323,52 @@ class Daemon:
         link = self._injected_link or make_link(cfg.link)
         # A restored holder keeps `held` on disk until its rejoin hold is over.
         holding = restored is not None and restored.held is not None
-        self.runtime = self._make_runtime(
-            node, transport, link, persist_after=now + params.rejoin_hold if holding else now)
-        self.runtime.seq_write_at = write_at
-        self._watch(link, self.runtime)
+        self._runtime = self._make_runtime(
+            node, transport, link, persist_after=now + params.rejoin_hold if holding else now,
+            seq_write_at=write_at)
+        self._watch(link, self._runtime)
         log.info("starting", extra={
-            "robot": cfg.robot, "swarm": self.swarm_id, "transport": cfg.transport.kind,
+            "robot": cfg.robot, "swarm": self._swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
             "restored": persisted.to_json() if persisted is not None else None,
             "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode})
-        await self.runtime.start()
-        rt = self.runtime
+        await self._runtime.start()
+        rt = self._runtime
         self._waiting = loop.create_task(report_waiting(
             Waiting.of(cfg.swarm.to_plan(), cfg.robot), lambda: rt.heard(),
             grace=params.startup_grace, channel=describe_channel(cfg.transport)))
-        return self.runtime
+        return self._runtime
 
     def _open_outputs(self, cfg: RobotConfig) -> None:
         """Open the event log and start the metrics endpoint, if configured."""
         if cfg.event_log is not None:
-            self.event_log = EventLog(cfg.event_log)
+            self._event_log = EventLog(cfg.event_log)
         if cfg.metrics is not None:
-            self.metrics_server = self.metrics.start_server(
+            self._metrics_server = self._metrics.start_server(
                 cfg.metrics.host, cfg.metrics.port, allow_remote=cfg.metrics.allow_remote)
 
     def _make_runtime(self, node: Node, transport: Transport, link: RobotLink, *,
-                      persist_after: float) -> Runtime:
+                      persist_after: float, seq_write_at: int) -> Runtime:
         """The runtime that drives `node` over `transport` and `link`."""
         return Runtime(
             node, transport, link,
             function_params=self.function_params,
             event_sink=self.on_event,
             receive_filter=self._receive_filter(),
-            state_writer=self.state_file.write_snapshot,
+            state_writer=self._state_file.write_snapshot,
             persist_after=persist_after,
+            seq_write_at=seq_write_at,
             # Without an endpoint nobody reads the counters: spare the per-frame cost.
-            metrics=self.metrics if self.cfg.metrics is not None else None,
-            notifier=self.notifier,
-            time_origin=self.time_origin,
+            metrics=self._metrics if self._cfg.metrics is not None else None,
+            notifier=self._notifier,
+            time_origin=self._time_origin,
         )
 
     def _receive_filter(self) -> ReceiveFilter | None:
         """The injected filter (the simulator's losses), then, per robot, the signature
         budget's (`VerifyBudget.allows`: a flood past it is not even decoded)."""
-        budget = self.keyring.budget if self.keyring is not None else None
-        outer = self.receive_filter
+        budget = self._keyring.budget if self._keyring is not None else None
+        outer = self._injected_filter
         if budget is None:
             return outer
         if outer is None:
@@ -325,29 +377,35 @@ class Daemon:
 
     def _watch(self, link: RobotLink, runtime: Runtime) -> None:
         # A link that publishes the swarm's view (ros2) reads the node only through its
-        # snapshot and the event records (DESIGN section 3), on this loop.
+        # snapshot and its typed events (DESIGN section 3), on this loop.
         watch = getattr(link, "watch", None)
         if watch is not None:
-            self._link_events = watch(runtime.snapshot, self.cfg)
+            self._link_events = watch(runtime.snapshot, self._cfg)
 
-    async def stop(self) -> None:
-        """Stop the node (LEAVE if configured), then close everything, in that order."""
-        self.notifier.stopping()
+    def ready(self) -> None:
+        """The first heartbeat is out (or READY_TIMEOUT passed): tell systemd READY."""
+        self._notifier.ready()
+        log.info("ready", extra={"robot": self._robot_id})
+
+    async def stop(self, *, handover: bool | None = None) -> None:
+        """Stop the node, with a LEAVE if it held a function and `handover` (None: as
+        `handover_on_stop` says), then close everything, in that order."""
+        self._notifier.stopping()
         if self._waiting is not None:
             self._waiting.cancel()
-        rt = self.runtime
+        rt = self._runtime
         if rt is not None:
-            await rt.stop(handover=self.handover_on_stop)
+            await rt.stop(handover=self._handover_on_stop if handover is None else handover)
             log.info("stopped", extra={"stats": rt.stats()})
             await rt.close_io()
         for task in list(self._hook_tasks):
             with contextlib.suppress(asyncio.TimeoutError, Exception):
                 await asyncio.wait_for(asyncio.shield(task), 5.0)
-        if self.event_log is not None:
-            self.event_log.close()
-        if self.metrics_server is not None:
-            self.metrics_server.close()
-        self.notifier.close()
+        if self._event_log is not None:
+            self._event_log.close()
+        if self._metrics_server is not None:
+            self._metrics_server.close()
+        self._notifier.close()
 
     def reload(self) -> None:
         """SIGHUP: re-read the config and apply what can change live: the event log
@@ -355,67 +413,67 @@ class Daemon:
         function parameters sent on the next assign, and the keys (rotation). Anything
         else (robot id, transport, link, timing, the plan) needs a restart; a change
         there is logged as such and ignored."""
-        if self.config_path is None:
+        if self._config_path is None:
             log.warning("SIGHUP: no config path to reload from; ignored")
             return
         try:
-            new = load_robot(self.config_path)
+            new = load_robot(self._config_path)
         except ConfigError as exc:
-            if revoked_in(self.running_cfg.swarm.source, self.robot_id):
-                self._revoked()
+            if revoked_in(self._running_cfg.swarm.source, self._robot_id):
+                self._revoke()
                 return
-            self.reload_errors += 1
+            self._reload_errors += 1
             log.error("SIGHUP: config not reloaded", extra={
                 "problems": [str(p) for p in exc.problems]})
             return
-        old = self.running_cfg
+        old = self._running_cfg
         keys = self._reload_keys(new)
         self._reload_identity(new)
         try:
             self._reload_event_log(new.event_log)
         except OSError as exc:  # EventLogError: the old file (if any) stays in use
-            self.reload_errors += 1
+            self._reload_errors += 1
             log.error("SIGHUP: event log not reopened", extra={
-                "error": str(exc), "kept": str(self.event_log.path) if self.event_log
+                "error": str(exc), "kept": str(self._event_log.path) if self._event_log
                 else None})
-        self.handover_on_stop = new.handover_on_stop
+        self._handover_on_stop = new.handover_on_stop
         self._alert_hook = new.swarm.alert_hook
         self._function_specs = self._specs(new)
         restart_needed = _restart_needed(old, new)
-        self.cfg = new
+        self._cfg = new
         log.info("SIGHUP: config reloaded", extra={
             "keys": len(keys) if keys is not None else None,
             "restart_needed_for": restart_needed})
 
-    def _revoked(self) -> None:
+    def _revoke(self) -> None:
         """SIGHUP found this robot in the swarm file's `auth.revoked` (swarmd.services.revocation):
         nobody accepts its frames any more and its slot is being taken over, so it stops
         acting: one log line, a `leave` (reason `revoked`) in its event log if it held a
         function, then `run_daemon` releases it through the link and exits."""
-        if self.revoked.is_set():
+        if self._revocation.is_set():
             return
-        self.revoked.set()
-        snap = self.runtime.snapshot() if self.runtime is not None else None
+        self._revocation.set()
+        snap = self._runtime.snapshot() if self._runtime is not None else None
         held = snap.function if snap is not None and snap.role == Role.ACTIVE else None
         log.error("revoked: this robot's key is revoked in the swarm file; releasing its "
                   "function and stopping", extra={
-                      "robot": self.robot_id, "function": held,
-                      "swarm_file": self.running_cfg.swarm.source,
+                      "robot": self._robot_id, "function": held,
+                      "swarm_file": self._running_cfg.swarm.source,
                       "exit_status": EXIT_REVOKED})
         if held is not None:
-            self.on_event(Leave(function=held, reason="revoked").record(
-                round(time.time() - self.time_origin, 6), self.robot_id))
+            self.on_event(round(time.time() - self._time_origin, 6),
+                          Leave(function=held, reason=LeaveCause.REVOKED))
 
     def _reload_keys(self, new: RobotConfig) -> tuple[bytes, ...] | None:
         """SIGHUP: the new config's keys, given to the node; None when refused (the
         old ones stay in use)."""
         try:
             keys = new.keys()
-            if self.runtime is not None:
+            if self._runtime is not None:
                 # The node signs with keys[0] and accepts any: the rotation window.
-                self.runtime.set_keys(keys)
+                self._runtime.set_keys(keys)
         except Exception as exc:  # KeyFileError, NodeError, or an OSError reading
-            self.reload_errors += 1
+            self._reload_errors += 1
             log.error("SIGHUP: keys not reloaded; the old ones stay in use",
                       extra={"error": str(exc)})
             return None
@@ -426,35 +484,35 @@ class Daemon:
         list replace the keyring's, and this robot's identity_file its own key
         (docs/operations.md: rotating and revoking a robot's key). A key that cannot be
         read leaves the old ones in use. A change of auth mode needs a restart."""
-        if self.keyring is None or self.signer is None or new.swarm.auth_mode != "per-robot":
+        if self._keyring is None or self._signer is None or new.swarm.auth_mode != "per-robot":
             return
         try:
             material = new.identity_material()
             assert material is not None
-            self.keyring.replace(material.public_keys, material.revoked)
-            self.signer.replace(material.private_key)
-            if self.runtime is not None:
+            self._keyring.replace(material.public_keys, material.revoked)
+            self._signer.replace(material.private_key)
+            if self._runtime is not None:
                 # A revoked robot's heartbeat chain must not keep it alive: from now on
                 # only its anchors could, and they no longer verify.
-                self.runtime.revoke(material.revoked)
+                self._runtime.revoke(material.revoked)
         except Exception as exc:  # IdentityFileError, ValueError: a malformed key
-            self.reload_errors += 1
+            self._reload_errors += 1
             log.error("SIGHUP: identity keys not reloaded; the old ones stay in use",
                       extra={"error": str(exc)})
             return
         log.info("SIGHUP: identity keys reloaded", extra={
-            "robots": sorted(self.keyring.robots), "revoked": sorted(self.keyring.revoked)})
+            "robots": sorted(self._keyring.robots), "revoked": sorted(self._keyring.revoked)})
 
     def _reload_event_log(self, path: Path | None) -> None:
         """SIGHUP: reopen the event log (logrotate moved it, or the path changed), start
         one newly configured, close one no longer configured. Raises `EventLogError`."""
-        if self.event_log is not None and path is not None:
-            self.event_log.reopen(path)
-        elif self.event_log is not None:
-            self.event_log.close()
-            self.event_log = None
+        if self._event_log is not None and path is not None:
+            self._event_log.reopen(path)
+        elif self._event_log is not None:
+            self._event_log.close()
+            self._event_log = None
         elif path is not None:
-            self.event_log = EventLog(path)
+            self._event_log = EventLog(path)
 
 
 async def run_daemon(
@@ -463,7 +521,7 @@ async def run_daemon(
     transport: Transport | None = None,
     link: RobotLink | None = None,
     receive_filter: ReceiveFilter | None = None,
-    event_sink: EventSink | None = None,
+    event_sink: RecordSink | None = None,
     stop_event: asyncio.Event | None = None,
     on_ready: Callable[[Daemon], None] | None = None,
     time_origin: float = 0.0,
@@ -503,11 +561,11 @@ async def _lifecycle(daemon: Daemon, stop: asyncio.Event,
     if runtime is None:
         return EXIT_FAILURE
     await _serve(daemon, runtime, stop, on_ready)
-    revoked = daemon.revoked.is_set()
-    if revoked:  # nobody accepts its LEAVE: release the robot and go
-        daemon.handover_on_stop = False
-    log.info("stopping", extra={"handover": daemon.handover_on_stop})
-    await daemon.stop()
+    revoked = daemon.revoked
+    # A revoked robot's LEAVE nobody accepts: it releases the robot and goes.
+    handover = daemon.handover_on_stop and not revoked
+    log.info("stopping", extra={"handover": handover})
+    await daemon.stop(handover=handover)
     return EXIT_REVOKED if revoked else EXIT_OK
 
 
@@ -553,12 +611,12 @@ async def _serve(daemon: Daemon, runtime: Runtime, stop: asyncio.Event,
     """Announce readiness once the first heartbeat is out, then wait for `stop`."""
     try:
         with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(runtime.first_broadcast.wait(), READY_TIMEOUT)
-        daemon.notifier.ready()
-        log.info("ready", extra={"robot": daemon.robot_id})
+            await asyncio.wait_for(runtime.first_broadcast(), READY_TIMEOUT)
+        daemon.ready()
         if on_ready is not None:
             on_ready(daemon)
-        waits = [asyncio.ensure_future(e.wait()) for e in (stop, daemon.revoked)]
+        waits = [asyncio.ensure_future(stop.wait()),
+                 asyncio.ensure_future(daemon.wait_revoked())]
         try:
             await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
         finally:
@@ -575,6 +633,5 @@ async def _stop_cancelled(daemon: Daemon) -> None:
     the paper's robots would), but still release the robot, write the state and close
     transport, link and event log, so no timer keeps heartbeating for a daemon nobody
     runs and no socket is left open. A graceful stop with handover is `stop_event`."""
-    daemon.handover_on_stop = False
     log.info("stopping", extra={"handover": False, "cancelled": True})
-    await daemon.stop()
+    await daemon.stop(handover=False)

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -57,7 +57,7 @@ from swarmd.core.plan import SwarmPlan
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role
 from swarmd.daemon.monitor_claims import MonitorClaims
-from swarmd.transport.base import Channel, Transport
+from swarmd.transport.base import ChannelError, ChannelEvent, SendError, Transport
 
 
 class MonitorDrop(StrEnum):
@@ -66,6 +66,10 @@ class MonitorDrop(StrEnum):
 
     OTHER_SWARM = "other_swarm"
     """Another swarm's frame: a base station may share the channel with other swarms."""
+    SEND_ERROR = "transport_send_error"
+    """The monitor's own transport could not send (it sends nothing: a radio's report)."""
+    CHANNEL_ERROR = "transport_error"
+    """Its transport met an error that does not stop the channel (`ChannelError`)."""
 
 
 @dataclass(slots=True)
@@ -134,7 +138,7 @@ class MonitorState:
             return True
         return self.certified is not None and self.certified.believed(function, epoch, robot)
 
-    def _drop(self, reason: DropReason | MonitorDrop | str) -> None:
+    def _drop(self, reason: DropReason | MonitorDrop) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
 
     def feed(self, data: bytes, now: float) -> None:
@@ -394,9 +398,12 @@ async def listen(
     def on_frame(data: bytes) -> None:
         state.feed(data, loop.time())
 
-    def on_event(name: Channel, fields: Mapping[str, Any]) -> None:
-        if name in (Channel.SEND_ERROR, Channel.ERROR):
-            state._drop(f"transport_{name}")
+    def on_event(event: ChannelEvent) -> None:
+        match event:
+            case SendError():
+                state._drop(MonitorDrop.SEND_ERROR)
+            case ChannelError():
+                state._drop(MonitorDrop.CHANNEL_ERROR)
 
     await transport.start(on_frame, on_event)
     try:

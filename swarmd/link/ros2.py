@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from swarmd.core.events import Event
 from swarmd.core.records import Snapshot
 from swarmd.core.roles import Health
 from swarmd.link.base import CountedLog, HealthCallback
@@ -100,8 +101,7 @@ class Ros2Link:
         self._closed = False
 
     # -- the swarm's view (daemon.py calls this before `start`) ---------------------------
-    def watch(self, snapshot: Callable[[], Snapshot], cfg: Any) -> Callable[[Mapping[str, Any]],
-                                                                            None]:
+    def watch(self, snapshot: Callable[[], Snapshot], cfg: Any) -> Callable[[Event], None]:
         """Publish the daemon's view of the swarm from `snapshot()` (the node's, read on
         the loop thread only); returns the daemon's event callback."""
         self._snapshot = snapshot
@@ -110,8 +110,8 @@ class Ros2Link:
                                    str(swarm.swarm.id), swarm.params().t_max)
         return self._on_event
 
-    def _on_event(self, record: Mapping[str, Any]) -> None:
-        if self._status is not None and self._status.on_event(record) and self._loop:
+    def _on_event(self, event: Event) -> None:
+        if self._status is not None and self._status.on_event(event) and self._loop:
             self._loop.call_soon(self._publish_status, False)
 
     def _publish_status(self, rearm: bool = True) -> None:

@@ -7,7 +7,7 @@ Pure data, no rclpy: one `Status` per function the publisher knows and hears, na
 Levels follow diagnostic_msgs: OK the holder is heard; WARN a suspicion or a claim is
 under way (Figs. 7-9); ERROR an alert (no standby left, DESIGN rule 8); STALE the holder
 has not been heard for t_max. The daemon reads its node only through `Node.snapshot()`
-and the event records (DESIGN section 3).
+and its typed events (`swarmd.core.events`, DESIGN section 3).
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ from swarmd.core.events import (
     Alert,
     Backoff,
     Claim,
+    Event,
     Fenced,
     Leave,
     Started,
     Stopped,
     Takeover,
-    event_of,
 )
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Snapshot
@@ -54,7 +54,7 @@ def status_prefix(swarm_name: str) -> str:
 
 
 class SwarmStatus:
-    """A daemon's view of its neighbourhood, built from snapshots and event records."""
+    """A daemon's view of its neighbourhood, built from snapshots and events."""
 
     def __init__(self, plan: SwarmPlan, robot_id: int, swarm_name: str, t_max: float) -> None:
         self.plan = plan
@@ -71,9 +71,8 @@ class SwarmStatus:
         self.claiming: set[str] = set()
         self.known: Mapping[str, tuple[int, int]] = {}
 
-    def on_event(self, record: Mapping[str, Any]) -> bool:
-        """Fold one event record; True when it may change a status (publish now)."""
-        event = event_of(record)
+    def on_event(self, event: Event) -> bool:
+        """Fold one event; True when it may change a status (publish now)."""
         function = getattr(event, "function", None)
         if not isinstance(function, str):
             return isinstance(event, Started | Stopped | Fenced | Leave)

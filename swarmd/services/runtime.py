@@ -52,12 +52,19 @@ from swarmd.base.notify import Notifier
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.drops import DropReason
-from swarmd.core.events import Event, Started
+from swarmd.core.events import Event, RoleName, Started
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
 from swarmd.services.metrics import Metrics
-from swarmd.transport.base import Channel, Transport
+from swarmd.transport.base import (
+    ChannelError,
+    ChannelEvent,
+    ChannelUp,
+    SendError,
+    Transport,
+    describe,
+)
 
 # The name an operator filters the JSON logs on ("logger", docs/daemon.md): it names the
 # component, not the file, so it stays when the module moves between folders.
@@ -65,8 +72,9 @@ log = logging.getLogger("swarmd.runtime")
 
 ReceiveFilter = Callable[[bytes, float], bool]
 """(frame, loop time) -> False to drop the frame (the simulator's loss and partitions)."""
-EventSink = Callable[[dict[str, Any]], None]
-"""Receives each event-log record (`Event.record(t, robot)`)."""
+EventSink = Callable[[float, Event], None]
+"""Receives each event the node emits, as the typed object it is, with its time `t`
+(s since the time origin): the sink turns it into a record where it writes one out."""
 StateWriter = Callable[[Snapshot], int]
 """Persists a snapshot (see swarmd/services/state.py); called on role / function / epoch change
 and when the sequence number nears the reservation; returns the sequence number at which
@@ -122,6 +130,7 @@ class Runtime:
         receive_filter: ReceiveFilter | None = None,
         state_writer: StateWriter | None = None,
         persist_after: float = 0.0,
+        seq_write_at: int = 0,
         metrics: Metrics | None = None,
         notifier: Notifier | None = None,
         time_origin: float = 0.0,
@@ -130,23 +139,23 @@ class Runtime:
         batch: int = BATCH,
     ) -> None:
         self._node = node
-        self.robot_id = node.robot_id
+        self._robot_id = node.robot_id
         self._transport = transport
         self._link = link
-        self.function_params = function_params
-        self.event_sink = event_sink
-        self.receive_filter = receive_filter
-        self._init_persistence(state_writer, persist_after)
-        self.metrics = metrics
-        self.notifier = notifier
-        self.time_origin = time_origin
-        self.wall_clock = wall_clock
-        self.batch = batch
+        self._function_params = function_params
+        self._event_sink = event_sink
+        self._receive_filter = receive_filter
+        self._init_persistence(state_writer, persist_after, seq_write_at)
+        self._metrics = metrics
+        self._notifier = notifier
+        self._time_origin = time_origin
+        self._wall_clock = wall_clock
+        self._batch = batch
         self._counters: dict[str, int] = dict.fromkeys(_COUNTERS, 0)
         self._raw_send_failed = False
-        self.max_lateness = 0.0
+        self._max_lateness = 0.0
         """s. Largest delay seen between a deadline and the tick that served it."""
-        self.first_broadcast = asyncio.Event()
+        self._first_broadcast = asyncio.Event()
         """Set once the first frame (the first heartbeat) went out: READY (notify.py)."""
         self._init_scheduling(queue_size)
         self._init_reports()
@@ -165,25 +174,25 @@ class Runtime:
         self._running = False
         self._loop: asyncio.AbstractEventLoop | None = None
 
-    def _init_persistence(self, state_writer: StateWriter | None,
-                          persist_after: float) -> None:
+    def _init_persistence(self, state_writer: StateWriter | None, persist_after: float,
+                          seq_write_at: int) -> None:
         """When and what state the runtime writes (swarmd/services/state.py)."""
-        self.state_writer = state_writer
-        self.persist_after = persist_after
+        self._state_writer = state_writer
+        self._persist_after = persist_after
         """loop time before which node-driven state is not written: a restarted holder
         keeps its persisted `held` until its rejoin hold is over, so a crash during the
         hold does not forget it."""
         self._last_persisted: tuple[Any, ...] | None = None
-        self.seq_write_at = 0
+        self._seq_write_at = seq_write_at
         """Reaching this sequence number forces a state write (the reservation in the
-        state file must stay ahead of every seq sent; swarmd/services/state.py)."""
+        state file must stay ahead of every seq sent; swarmd/services/state.py): at
+        first, where the state file written before the start reserved up to."""
 
     def _init_reports(self) -> None:
         """What was last logged or notified, so a report is made once per change."""
         self._last_role: tuple[Role, str | None, int] | None = None
         self._last_health: Health | None = None
         self._reported: dict[str, float] = {}
-        self.drop_report_interval = DROP_REPORT_S
         self._drops_reported: dict[str, int] = {}
         self._drop_reported_at = -DROP_REPORT_S
         # hash(frame) of the last SENT_MEMORY frames sent, oldest first (an ordered set).
@@ -212,7 +221,7 @@ class Runtime:
             self._running = False
             raise
         self._rearm()
-        period = self.notifier.watchdog_period() if self.notifier is not None else None
+        period = self._notifier.watchdog_period() if self._notifier is not None else None
         if period is not None:
             self._watchdog_at(self.loop.time() + period, period)
 
@@ -233,6 +242,11 @@ class Runtime:
             self._watchdog.cancel()
             self._watchdog = None
         self._check_state(force=True)
+
+    async def first_broadcast(self) -> None:
+        """Return once the first frame (the first heartbeat) went out: READY
+        (notify.py)."""
+        await self._first_broadcast.wait()
 
     def heard(self) -> Mapping[int, float]:
         """robot -> loop time of the last frame the node accepted from it."""
@@ -326,10 +340,10 @@ class Runtime:
                 case Event() as event:
                     changed = True
                     self._event(event)
-                    if isinstance(event, Started) and event.role != "active":
+                    if isinstance(event, Started) and event.role is not RoleName.ACTIVE:
                         self._release_at_start()
-        if self.metrics is not None and actions:
-            self.metrics.observe_actions(actions)
+        if self._metrics is not None and actions:
+            self._metrics.observe_actions(actions)
         if changed:
             self._check_state()
 
@@ -345,10 +359,10 @@ class Runtime:
         digests[hash(frame)] = None
         if len(digests) > SENT_MEMORY:
             del digests[next(iter(digests))]
-        if self.metrics is not None:
-            self.metrics.frame_sent()
-        if not self.first_broadcast.is_set():
-            self.first_broadcast.set()
+        if self._metrics is not None:
+            self._metrics.frame_sent()
+        if not self._first_broadcast.is_set():
+            self._first_broadcast.set()
 
     def _release_at_start(self) -> None:
         """The node's `started` as a standby (at the start, or after a rejoin hold that
@@ -364,9 +378,9 @@ class Runtime:
 
     def _assign(self, function: str, epoch: int) -> None:
         params: Mapping[str, Any] = {}
-        if self.function_params is not None:
+        if self._function_params is not None:
             try:
-                params = self.function_params(function)
+                params = self._function_params(function)
             except Exception:
                 log.exception("no parameters for function", extra={"function": function})
         try:
@@ -376,14 +390,10 @@ class Runtime:
             log.exception("robot link assign failed", extra={"function": function})
 
     def _event(self, event: Event) -> None:
-        record = event.record(round(self.wall_clock() - self.time_origin, 6), self.robot_id)
-        self._emit_record(record)
-
-    def _emit_record(self, record: dict[str, Any]) -> None:
-        if self.event_sink is None:
+        if self._event_sink is None:
             return
         try:
-            self.event_sink(record)
+            self._event_sink(round(self._wall_clock() - self._time_origin, 6), event)
         except Exception:
             self._counters["sink_errors"] += 1
             log.exception("event sink failed")
@@ -415,12 +425,12 @@ class Runtime:
         if due is not None and self._counters["ticks"] > 0:
             # (The first tick is due at construction time; start-up is not lateness.)
             lateness = max(0.0, now - due)
-            self.max_lateness = max(self.max_lateness, lateness)
-            if self.metrics is not None:
-                self.metrics.heartbeat_lateness(lateness)
+            self._max_lateness = max(self._max_lateness, lateness)
+            if self._metrics is not None:
+                self._metrics.heartbeat_lateness(lateness)
         self._counters["ticks"] += 1
         self._fed = 0
-        if now - self._drop_reported_at >= self.drop_report_interval:
+        if now - self._drop_reported_at >= DROP_REPORT_S:
             self._drop_reported_at = now
             self._report_drops()
         self._step(self._node.tick)
@@ -443,8 +453,8 @@ class Runtime:
 
     def _watchdog_at(self, when: float, period: float) -> None:
         def ping() -> None:
-            if self.notifier is not None:
-                self.notifier.watchdog()
+            if self._notifier is not None:
+                self._notifier.watchdog()
             # Scheduled from the previous deadline, so the ping period does not drift.
             self._watchdog_at(when + period, period)
 
@@ -455,13 +465,13 @@ class Runtime:
         if not self._running:
             return
         self._counters["received"] += 1
-        if self.metrics is not None:
-            self.metrics.frame_received()
+        if self._metrics is not None:
+            self._metrics.frame_received()
         now = self.loop.time()
-        if self.receive_filter is not None and not self._keep(data, now):
+        if self._receive_filter is not None and not self._keep(data, now):
             return
         armed = self._armed_at
-        if self._queue or self._drain_scheduled or self._fed >= self.batch \
+        if self._queue or self._drain_scheduled or self._fed >= self._batch \
                 or (armed is not None and now >= armed):
             self._enqueue(data)
             return
@@ -471,9 +481,9 @@ class Runtime:
 
     def _keep(self, data: bytes, now: float) -> bool:
         """The receive filter's verdict (a filter that raises keeps the frame)."""
-        assert self.receive_filter is not None
+        assert self._receive_filter is not None
         try:
-            keep = self.receive_filter(data, now)
+            keep = self._receive_filter(data, now)
         except Exception:
             self._counters["filter_errors"] += 1
             log.exception("receive filter raised; frame kept")
@@ -487,8 +497,8 @@ class Runtime:
         if len(self._queue) >= self._queue_size:
             self._queue.popleft()
             self._counters[RuntimeDrop.QUEUE_OVERFLOW] += 1
-            if self.metrics is not None:
-                self.metrics.dropped(RuntimeDrop.QUEUE_OVERFLOW)
+            if self._metrics is not None:
+                self._metrics.dropped(RuntimeDrop.QUEUE_OVERFLOW)
         self._queue.append(data)
         if not self._drain_scheduled:
             self._drain_scheduled = True
@@ -499,7 +509,7 @@ class Runtime:
         if not self._running:
             return
         queue, loop = self._queue, self.loop
-        for _ in range(min(self.batch, len(queue))):
+        for _ in range(min(self._batch, len(queue))):
             self._feed(queue.popleft(), loop.time())
         self._rearm()
         if queue and not self._drain_scheduled:
@@ -525,14 +535,14 @@ class Runtime:
     def _duplicate_id(self) -> None:
         """A valid frame with our id that we did not send (module docstring)."""
         self._counters["duplicate_id"] += 1
-        if self.metrics is not None:
-            self.metrics.duplicate_id()
+        if self._metrics is not None:
+            self._metrics.duplicate_id()
         now = self.loop.time()
         if now - self._duplicate_logged_at >= DUPLICATE_REPORT_S:
             self._duplicate_logged_at = now
-            log.error(f"another daemon is sending as robot {self.robot_id}: two robot "
+            log.error(f"another daemon is sending as robot {self._robot_id}: two robot "
                       "files with the same id?",
-                      extra={"robot": self.robot_id, "frames": self._counters["duplicate_id"]})
+                      extra={"robot": self._robot_id, "frames": self._counters["duplicate_id"]})
 
     # ---------------------------------------------------------------- robot health
     def _on_health(self, health: Health) -> None:
@@ -545,21 +555,21 @@ class Runtime:
         self._check_state()
 
     # ---------------------------------------------------------------- channel events
-    def _on_transport_event(self, name: Channel, fields: Mapping[str, Any]) -> None:
+    def _on_transport_event(self, event: ChannelEvent) -> None:
         """A channel condition (radio up or down, a send error): counted and logged to
         the daemon's own log, not the event log, whose names are a contract (DESIGN
         section 3, `swarmd.core.events`). The protocol itself notices a dead channel through
         missing heartbeats, as the paper's robots would."""
         now = self.loop.time()
-        failed = name != Channel.UP
-        if name in (Channel.SEND_ERROR, Channel.ERROR):
+        name = event.condition
+        if isinstance(event, SendError | ChannelError):
             self._counters["transport_errors"] += 1
             last = self._reported.get(name)
             if last is not None and now - last < _RATE_LIMIT_S:
                 return  # counted; reported at most once a second
             self._reported[name] = now
-        log.log(logging.WARNING if failed else logging.INFO, "channel: %s", name,
-                extra={"channel": name, "fields": dict(fields)})
+        level = logging.INFO if isinstance(event, ChannelUp) else logging.WARNING
+        log.log(level, "channel: %s", name, extra={"channel": name, "fields": describe(event)})
 
     # ---------------------------------------------------------------- persistence
     def _check_state(self, *, force: bool = False) -> None:
@@ -575,19 +585,19 @@ class Runtime:
             status = f"{snap.role.name.lower()} {snap.function or '-'} epoch {snap.epoch}"
             log.info("role", extra={"role": snap.role.name.lower(),
                                     "function": snap.function, "epoch": snap.epoch})
-            if self.notifier is not None:
-                self.notifier.status(status)
-        if self.metrics is not None:
-            self.metrics.update(snap)
-        if self.state_writer is None:
+            if self._notifier is not None:
+                self._notifier.status(status)
+        if self._metrics is not None:
+            self._metrics.update(snap)
+        if self._state_writer is None:
             return
-        if not force and self.loop.time() < self.persist_after:
+        if not force and self.loop.time() < self._persist_after:
             return
         key = (snap.role, snap.function, snap.epoch, tuple(sorted(snap.known.items())))
-        if not force and key == self._last_persisted and snap.seq < self.seq_write_at:
+        if not force and key == self._last_persisted and snap.seq < self._seq_write_at:
             return
         try:
-            self.seq_write_at = self.state_writer(snap)
+            self._seq_write_at = self._state_writer(snap)
         except OSError as exc:  # disk full, directory gone or read-only: say which
             self._counters["persist_errors"] += 1
             log.error("cannot write the state file; will retry on the next change",
@@ -605,4 +615,4 @@ class Runtime:
     def stats(self) -> dict[str, Any]:
         """Counters, the core's drops and the largest tick lateness (s)."""
         return {**self._counters, "queue": len(self._queue),
-                "max_lateness": self.max_lateness, "drops": dict(self._node.drops)}
+                "max_lateness": self._max_lateness, "drops": dict(self._node.drops)}

@@ -20,15 +20,19 @@ import asyncio
 import logging
 import time
 from collections import Counter
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 from swarmd.transport import fragment, framing
 from swarmd.transport.base import (
-    Channel,
+    ChannelDown,
     ChannelEvents,
+    ChannelUp,
     EventCallback,
     FrameCallback,
+    SendFailure,
     TransportError,
+    failure_of,
 )
 from swarmd.transport.media import SERIAL_MAX_PAYLOAD
 from swarmd.transport.reopen import Reopener
@@ -37,6 +41,16 @@ log = logging.getLogger(__name__)
 
 DEFAULT_MAX_PAYLOAD = SERIAL_MAX_PAYLOAD
 """Largest datagram (a frame or a fragment; media.py: one RF packet after framing)."""
+
+
+@dataclass(frozen=True, slots=True)
+class SerialUp(ChannelUp):
+    """`port` is open at `baud`, carrying datagrams of up to `max_payload` bytes."""
+
+    kind: ClassVar[str] = "serial"
+    port: str
+    baud: int
+    max_payload: int
 
 
 class _Protocol(asyncio.Protocol):
@@ -104,8 +118,7 @@ class SerialTransport:
         try:
             await self._open()
         except Exception as exc:
-            self._events.emit(Channel.DOWN, {"kind": "serial", "port": self.port,
-                                                 "reason": f"cannot open: {exc}"})
+            self._events.emit(ChannelDown("serial", self.port, f"cannot open: {exc}"))
             self._reopener.lost()
         self._reopener.start()
 
@@ -117,8 +130,7 @@ class SerialTransport:
             loop, lambda: _Protocol(self), self.port, baudrate=self.baud)
         self._transport = transport
         self.decoder = framing.FrameDecoder(max_frame=max(self._max_payload, 255))
-        self._events.emit(Channel.UP, {"kind": "serial", "port": self.port, "baud": self.baud,
-                                           "max_payload": self._max_payload})
+        self._events.emit(SerialUp(self.port, self.baud, self._max_payload))
 
     async def close(self) -> None:
         self._closing = True
@@ -135,16 +147,17 @@ class SerialTransport:
         try:
             datagrams = fragment.split(frame, self._max_payload, fragment.new_msg_id())
         except fragment.FragmentError:
-            self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
+            self._events.send_error(SendFailure.OVERSIZE, "oversize", size=len(frame),
+                                    limit=self._max_payload)
             return
         transport = self._transport
         if transport is None:
-            self._events.send_error("radio down")
+            self._events.send_error(SendFailure.DOWN, "radio down")
             return
         if transport.get_write_buffer_size() > self.write_buffer_limit:
             # The radio's flow control or baud rate cannot keep up: shed load rather
             # than queue stale heartbeats without bound.
-            self._events.send_error("write buffer full")
+            self._events.send_error(SendFailure.NO_BUFFER, "write buffer full")
             return
         if len(datagrams) > 1:
             self.counters["fragmented"] += 1
@@ -152,7 +165,7 @@ class SerialTransport:
             # One write: the fragments of a frame leave back to back.
             transport.write(b"".join(framing.encode(d) for d in datagrams))
         except Exception as exc:
-            self._events.send_error(f"write failed: {exc}")
+            self._events.send_error(failure_of(exc), f"write failed: {exc}")
             return
         self.counters["sent"] += 1
 
@@ -181,7 +194,7 @@ class SerialTransport:
             return
         reason = str(exc) if exc else "port closed"
         log.warning("serial %s down: %s", self.port, reason)
-        self._events.emit(Channel.DOWN, {"kind": "serial", "port": self.port, "reason": reason})
+        self._events.emit(ChannelDown("serial", self.port, reason))
         if self._reopener is not None:
             self._reopener.lost()
 

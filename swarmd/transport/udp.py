@@ -17,7 +17,8 @@ import asyncio
 import errno
 import logging
 import socket
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 from swarmd.transport.addresses import (
     DEFAULT_GROUP,
@@ -28,11 +29,14 @@ from swarmd.transport.addresses import (
     multicast_group,
 )
 from swarmd.transport.base import (
-    Channel,
+    ChannelError,
     ChannelEvents,
+    ChannelUp,
     EventCallback,
     FrameCallback,
+    SendFailure,
     TransportError,
+    failure_of,
 )
 from swarmd.transport.media import UDP_MAX_PAYLOAD
 
@@ -56,6 +60,16 @@ _HINTS = {
                       "pick another port or stop it)",
 }
 """Set-up errors whose errno alone does not tell the operator which field to fix."""
+
+
+@dataclass(frozen=True, slots=True)
+class UdpUp(ChannelUp):
+    """The socket is open on `group`:`port`, sending through `interface`."""
+
+    kind: ClassVar[str] = "udp"
+    group: str
+    port: int
+    interface: str
 
 
 class UdpTransport:
@@ -93,7 +107,8 @@ class UdpTransport:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
         self.send_reasons: dict[str, int] = {}
-        """Send errors by reason (`send_error:<reason>`); their total is in `counters`."""
+        """Send errors by `SendFailure` (`send_error:<failure>`); their total is in
+        `counters`."""
         self._events = ChannelEvents("udp", self.send_reasons, log)
 
     @classmethod
@@ -139,8 +154,7 @@ class UdpTransport:
         # 256 KiB buffer per datagram, which dominates an idle daemon's CPU time
         # (bench/bench_daemon.py); our frames are tens of bytes.
         self._loop.add_reader(self._sock.fileno(), self._read_ready)
-        self._events.emit(Channel.UP, {"kind": "udp", "group": self.group, "port": self.port,
-                                       "interface": self.interface})
+        self._events.emit(UdpUp(self.group, self.port, self.interface))
 
     def _read_ready(self) -> None:
         sock, on_frame, counters = self._sock, self._on_frame, self.counters
@@ -161,32 +175,34 @@ class UdpTransport:
     def send(self, frame: bytes) -> None:
         """Broadcast one frame to the group; errors are counted and reported, never raised."""
         if self._sock is None:
-            self._fail_send("transport not open")
+            self._fail_send(SendFailure.NOT_OPEN, "transport not open")
             return
         if len(frame) > MAX_PAYLOAD:
-            self._fail_send("oversize", size=len(frame), limit=MAX_PAYLOAD)
+            self._fail_send(SendFailure.OVERSIZE, "oversize", size=len(frame),
+                            limit=MAX_PAYLOAD)
             return
         try:
             self._sock.sendto(frame, (self.group, self.port))
         except BlockingIOError:
             # Socket buffer full: drop rather than queue. A heartbeat is only worth
             # sending now; the next one follows within a period.
-            self._fail_send("socket buffer full")
+            self._fail_send(SendFailure.NO_BUFFER, "socket buffer full")
             return
         except OSError as exc:
-            self._fail_send(str(exc))
+            self._fail_send(failure_of(exc), str(exc))
             return
         self.counters["sent"] += 1
 
-    def _fail_send(self, reason: str, **fields: Any) -> None:
+    def _fail_send(self, reason: SendFailure, detail: str, *, size: int | None = None,
+                   limit: int | None = None) -> None:
         self.counters["send_errors"] += 1
-        self._events.send_error(reason, **fields)
+        self._events.send_error(reason, detail, size=size, limit=limit)
 
     def _error(self, where: str, exc: Exception) -> None:
         # ICMP errors and the like arrive here; they never stop the socket, so count
-        # them and tell the event log (transport contract).
+        # them and tell the daemon's log (transport contract).
         self.counters["receive_errors"] += 1
-        self._events.emit(Channel.ERROR, {"kind": "udp", "where": where, "reason": str(exc)})
+        self._events.emit(ChannelError("udp", str(exc), where))
 
     async def close(self) -> None:
         """Leave the group and close the socket."""

@@ -42,14 +42,18 @@ import asyncio
 import logging
 import time
 from collections import Counter
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 from swarmd.transport import fragment
 from swarmd.transport.base import (
-    Channel,
+    ChannelDown,
+    ChannelError,
     ChannelEvents,
+    ChannelUp,
     EventCallback,
     FrameCallback,
+    SendFailure,
     TransportError,
 )
 from swarmd.transport.media import MAX_PAYLOAD, PROTOCOLS
@@ -64,9 +68,23 @@ from swarmd.transport.xbee_device import (
     RadioSetupError,
 )
 
-__all__ = ["RadioInfo", "RadioMismatch", "RadioRefused", "RadioSetupError", "XBeeTransport"]
+__all__ = ["RadioInfo", "RadioMismatch", "RadioRefused", "RadioSetupError", "XBeeTransport",
+           "XBeeUp"]
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class XBeeUp(ChannelUp):
+    """The radio on `port` is open: what it reported at start (hex as XCTU shows it)."""
+
+    kind: ClassVar[str] = "xbee"
+    port: str
+    protocol: str
+    pan_id: str
+    channel: str
+    address: str
+    max_payload: int
 
 
 def _check_options(protocol: str, api_mode: int, role: str | None, max_in_flight: int) -> None:
@@ -209,15 +227,13 @@ class XBeeTransport:
         self.info = info
         self._max_payload = info.max_payload
         self._up = True
-        self._events.emit(Channel.UP, {
-            "kind": "xbee", "port": self.port, "protocol": info.protocol,
-            "pan_id": f"0x{info.pan_id:04X}", "channel": f"0x{info.channel:02X}",
-            "address": f"{info.address64:016X}", "max_payload": info.max_payload,
-        })
+        self._events.emit(XBeeUp(self.port, info.protocol, f"0x{info.pan_id:04X}",
+                                 f"0x{info.channel:02X}", f"{info.address64:016X}",
+                                 info.max_payload))
 
     def _reopen_failed(self, exc: Exception) -> None:
         if isinstance(exc, RadioSetupError):
-            self._events.emit(Channel.ERROR, {"kind": "xbee", "reason": str(exc)})
+            self._events.emit(ChannelError("xbee", str(exc)))
 
     def _reopened(self) -> None:
         log.warning("XBee %s back after %.1f s", self.port, time.monotonic() - self._down_since)
@@ -229,7 +245,7 @@ class XBeeTransport:
         self._down_since = time.monotonic()
         self.counters["outages"] += 1
         log.warning("XBee %s down: %s", self.port, reason)
-        self._events.emit(Channel.DOWN, {"kind": "xbee", "port": self.port, "reason": reason})
+        self._events.emit(ChannelDown("xbee", self.port, reason))
         self._drop_in_flight("radio down")
         if self._radio is not None:
             self._radio.close_soon()
@@ -262,16 +278,17 @@ class XBeeTransport:
         try:
             datagrams = fragment.split(frame, self._max_payload, fragment.new_msg_id())
         except fragment.FragmentError:
-            self._events.send_error("oversize", size=len(frame), limit=self._max_payload)
+            self._events.send_error(SendFailure.OVERSIZE, "oversize", size=len(frame),
+                                    limit=self._max_payload)
             return
         if not self._up:
-            self._events.send_error("radio down")
+            self._events.send_error(SendFailure.DOWN, "radio down")
             return
         if len(datagrams) > 1:
             self.counters["fragmented"] += 1
         for datagram in datagrams:
             if self._window.offer(datagram):
-                self._events.send_error("queue full")
+                self._events.send_error(SendFailure.NO_BUFFER, "queue full")
         self._pump()
 
     def _received(self, datagram: bytes) -> None:
@@ -320,15 +337,16 @@ class XBeeTransport:
         if status == 0:
             self.counters["delivered"] += 1
         else:
-            self._events.send_error(_STATUS_TEXT.get(status, f"transmit status 0x{status:02X}"),
-                                    status=status)
+            self._events.send_error(
+                SendFailure.REFUSED,
+                _STATUS_TEXT.get(status, f"transmit status 0x{status:02X}"), status=status)
         self._pump()
 
     def _on_status_timeout(self) -> None:
         assert self._loop is not None
         self._status_timer = None
         for _ in self._window.expire(self._loop.time()):
-            self._events.send_error("no transmit status")
+            self._events.send_error(SendFailure.TIMEOUT, "no transmit status")
         if self._window.stalled:
             self._went_down("radio stopped answering (no transmit status 3 times)")
         else:
