@@ -17,6 +17,14 @@ warning and every earlier one of that witness, at every robot that has the REFUT
 which the frames' holders relay to whoever still acts on a voided claim. Robots that
 hold the same frames therefore hold the same view of every slot.
 
+*Every proof is bound to its run* (DESIGN, "Who may say what"): a holder's LEAVE is
+refuted the same way, by the holder itself — `REFUTE(holder, f, epoch, seq)`, itself
+as the witness. Within one run of a daemon a robot never holds again the entry it left
+(the slot can only come back to it at a higher epoch), so a LEAVE of its own about the
+very entry it holds is a recording (an earlier run's, or a hold it resumed after a
+restart that nobody took over): it answers it so, and the takeover that LEAVE backs
+is void wherever the REFUTE reaches (`voided_by`).
+
 State, per slot f (all bounded: a flood of invented epochs or claimants pushes out
 the oldest, it cannot grow the store):
 - `evidence`: {(suspect, epoch): {witness: its latest signed WARN or LEAVE}}.
@@ -46,13 +54,6 @@ from swarmd.core.plan import SwarmPlan
 EVIDENCE_REMEMBERED = 16
 """(suspect, epoch) episodes of signed evidence kept per slot (per-robot mode); a flood
 of warnings about invented epochs pushes out the oldest, it cannot grow the node."""
-
-
-
-
-_LEAVE_BACKED = -1
-"""`certified`'s backer seq for a claim backed by the suspect's own LEAVE, which no
-REFUTE can void: a holder's word about its own slot."""
 
 
 def seq_of(raw: bytes) -> int:
@@ -94,8 +95,9 @@ class EvidenceStore:
             # healed); about E - 2, a takeover at E - 1 that its holder refuted, whose
             # reassertion at E outranks a rival there (DESIGN, "Convergence").
             return []
-        refuted = witness != suspect \
-            and self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw)
+        # A warning the suspect refuted, or its own LEAVE it refuted (a recording:
+        # module doc).
+        refuted = self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw)
         episodes = self._evidence.setdefault(f, {})
         got = episodes.get((suspect, epoch))
         if got is None:
@@ -128,15 +130,19 @@ class EvidenceStore:
     def _backers(self, f: str, suspect: int, epoch: int, claimant: int,
                  refutes: bool = False) -> dict[int, int]:
         """{witness: seq} of the signed evidence backing `claimant` taking f over from
-        `suspect` at `epoch`: the suspect's own LEAVE alone, or the warnings of distinct
-        witnesses (the robots that may hold a slot watching f, rule 3, and the claimant
-        itself as rule 9's own ears, once), never the suspect's. With `refutes`, only
-        the warnings the suspect has not refuted: what a claimant may still act on."""
+        `suspect` at `epoch`: the suspect's own LEAVE alone (the suspect as its own
+        backer), or the warnings of distinct witnesses (the robots that may hold a slot
+        watching f, rule 3, and the claimant itself as rule 9's own ears, once), never
+        the suspect's. With `refutes`, only the frames the suspect has not refuted: what
+        a claimant may still act on."""
         got = self._evidence.get(f, {}).get((suspect, epoch))
         if not got:
             return {}
-        if suspect in got:
-            return {suspect: _LEAVE_BACKED}
+        leave = got.get(suspect)
+        if leave is not None and (
+                not refutes
+                or seq_of(leave) > self.refuted_up_to(f, suspect, epoch, suspect)):
+            return {suspect: seq_of(leave)}
         may = self.may_watch(f)
         out: dict[int, int] = {}
         for w, raw in got.items():
@@ -147,9 +153,9 @@ class EvidenceStore:
         return out
 
     def _enough(self, failed: int, backers: dict[int, int]) -> bool:
-        if backers.get(failed) == _LEAVE_BACKED:
-            return True
-        return len(backers) >= self._params.quorum
+        """A quorum of witnesses, or the failed robot's own LEAVE (`_backers` never
+        counts the suspect as a witness, so its entry is that LEAVE)."""
+        return failed in backers or len(backers) >= self._params.quorum
 
     def may_watch(self, f: str, *, claimants: bool = False) -> frozenset[int]:
         """Every robot that may hold a slot watching f (its holder or a substitute):
@@ -192,7 +198,7 @@ class EvidenceStore:
     def _still(self, f: str, epoch: int, entry: tuple[int, dict[int, int]]) -> bool:
         failed, backers = entry
         left = {w: s for w, s in backers.items()
-                if s == _LEAVE_BACKED or s > self.refuted_up_to(f, failed, epoch - 1, w)}
+                if s > self.refuted_up_to(f, failed, epoch - 1, w)}
         return self._enough(failed, left)
 
     def is_certified(self, f: str, claimant: int, epoch: int) -> bool:
@@ -212,12 +218,25 @@ class EvidenceStore:
         not stalled, when the claim reached it; rule 4). One signed frame decides it, so
         every robot that holds that frame and the certificate judges alike, whichever
         warnings each happens to hold. A takeover backed by the holder's own LEAVE is
-        never void."""
+        void only by the holder's REFUTE of that LEAVE (module doc: a recording of
+        another run), never by a refute of the claim: a holder that left and came back
+        to its old entry (a restart) does not get its slot back by refuting."""
+        return None if self._voiding(f, claimant, epoch) is None else \
+            self._certified[f][(claimant, epoch)][0]
+
+    def _voiding(self, f: str, claimant: int, epoch: int) -> bytes | None:
+        """The signed REFUTE that voids the certified takeover (claimant, epoch) of f
+        (`voided_by`), or None."""
         entry = self._certified.get(f, {}).get((claimant, epoch))
-        if entry is None or entry[1].get(entry[0]) == _LEAVE_BACKED:
+        if entry is None:
             return None
-        failed = entry[0]
-        return failed if self.refuted_up_to(f, failed, epoch, claimant) >= 0 else None
+        failed, backers = entry
+        refutes = self._refutes.get(f, {})
+        if failed in backers:  # backed by its LEAVE, which only failed itself refutes
+            got = refutes.get((failed, epoch - 1), {}).get(failed)
+            return got[1] if got is not None and got[0] >= backers[failed] else None
+        got = refutes.get((failed, epoch), {}).get(claimant)
+        return got[1] if got is not None else None
 
     def reasserted(self, f: str, holder: int, epoch: int) -> int | None:
         """Is (holder, epoch) of f the reassertion of `holder`'s hold at `epoch - 2` over a
@@ -272,10 +291,10 @@ class EvidenceStore:
         certified no such takeover)."""
         voided = self.reasserted(f, holder, epoch)
         if voided is not None:
-            # A reassertion: the takeover it outranks, then the refutes that void it.
-            got = self._refutes.get(f, {}).get((holder, epoch - 1), {}).get(voided)
-            refutes = (got[1],) if got is not None else ()
-            frames = self._takeover_frames(f, voided, epoch - 1) + refutes
+            # A reassertion: the takeover it outranks, then the refute that voids it.
+            refute = self._voiding(f, voided, epoch - 1)
+            frames = self._takeover_frames(f, voided, epoch - 1) \
+                + ((refute,) if refute is not None else ())
         else:
             frames = self._takeover_frames(f, holder, epoch)
         if not frames or not self._due(self._evidence_relayed_at, f, now, every):
@@ -370,7 +389,7 @@ class EvidenceStore:
     def add_refute(self, f: str, holder: int, r: wire.Refute, raw: bytes) -> bool:
         """Keep `holder`'s signed REFUTE `r` (raw bytes). True if it refutes more than
         what was known: the node then re-judges the claims it believes."""
-        if r.witness == holder or r.witness not in self.may_watch(f, claimants=True):
+        if r.witness not in self.may_watch(f, claimants=True):
             return False  # refutes nothing a certificate could count
         episodes = self._refutes.setdefault(f, {})
         got = episodes.get((holder, r.epoch))

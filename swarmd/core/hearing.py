@@ -239,14 +239,16 @@ class Hearing(NodeBase):
 
     def _ours_unheld(self, f: str, sender: int, w: wire.Warn, seq: int, now: float) -> bool:
         """A warning about ourselves. Holding the slot, we answer it (rule 4). Not
-        holding it while every view still names us (we left it, or were faulty, and
-        nobody took it over): the warning is right, and as a robot that covers the slot
-        we may take it back like any standby — True, count it (DESIGN, "Convergence": a
-        slot has a holder while a live robot covers it)."""
+        holding it while the warner's view names us at an entry no older than ours (we
+        left it, or were faulty, and nobody took it over; or the others learnt a hold of
+        ours we cannot prove any more, or never had: a restart that could not verify
+        it, a takeover recorded in another run): the warning is right, and as a robot
+        that covers the slot we may take it over like any standby — True, count it
+        (DESIGN, "Convergence": a slot has a holder while a live robot covers it)."""
         if self._role == Role.ACTIVE and f == self._function:
             self._warned_about_us(f, sender, w.epoch, seq, now)
             return False
-        return tuple(self._known[f]) == (self._robot_id, w.epoch)
+        return not greater(self._known[f], Holder(self._robot_id, w.epoch))
 
     def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
         """Rule 4: a warning about ourselves is answered with a heartbeat at once (and,

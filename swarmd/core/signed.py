@@ -57,9 +57,12 @@ class Signed(NodeBase):
 
     def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
                          raw: bytes, now: float | None = None) -> None:
-        if suspect == self._robot_id and witness != suspect and now is not None:
+        if suspect == self._robot_id and now is not None:
             # Evidence against us, relayed in a certificate (we may have missed the
-            # warning itself): while we hold the slot, we refute it (rule 4).
+            # warning itself): while we hold the slot, we refute it (rule 4). Our own
+            # LEAVE of the very entry we hold is a recording, of an earlier run or of a
+            # hold we resumed after a restart (`evidence.py`): refuted alike, so that it
+            # backs no takeover of the slot we execute.
             self._refute(f, witness, epoch, seq_of(raw), now)
         ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
         if ready is None:
@@ -207,10 +210,11 @@ class Signed(NodeBase):
     # everywhere the word reaches (DESIGN, "Convergence").
 
     def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
-        """We hold f at `epoch` and hear `witness`'s warning number `seq` about us: sign
-        and broadcast that we are alive after it. Not out of a buffer read after our own
-        stall: then the warning was right (we were silent), and the takeover it backs
-        fences us (rule 2)."""
+        """We hold f at `epoch` and hear `witness`'s warning number `seq` about us (or,
+        `witness` being us, our own LEAVE of that entry): sign and broadcast that we are
+        alive, holding it, after it. Not out of a buffer read after our own stall: then
+        the warning was right (we were silent), and the takeover it backs fences us
+        (rule 2)."""
         if self._identity is None or self._role != Role.ACTIVE or f != self._function \
                 or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
             return
@@ -246,13 +250,15 @@ class Signed(NodeBase):
         if ahead != known:
             self._learn_reassertion(f, ahead, now)
         # A refute of a claim (its own epoch, `_refute_claim`) proves the refuter's
-        # reassertion one epoch above it, whatever entry our view holds now: a relayed
-        # proof brings it to a robot whose view moved on without it (a rival at that
-        # epoch, or none).
-        mine = Holder(refuter.robot, refuter.epoch + 1)
-        if refuter.epoch < EPOCH_MAX and greater(mine, self._known[f]) \
-                and self._ev.reasserted(f, mine.robot, mine.epoch) is not None:
-            self._learn_reassertion(f, mine, now)
+        # reassertion one epoch above it, and a refute of its own LEAVE (the epoch it
+        # held) the reassertion above the claim that LEAVE backed, whatever entry our
+        # view holds now: a relayed proof brings it to a robot whose view moved on
+        # without it (a rival at that epoch, or none).
+        for epoch in (refuter.epoch + 1, refuter.epoch + 2):
+            mine = Holder(refuter.robot, epoch)
+            if epoch <= EPOCH_MAX and greater(mine, self._known[f]) \
+                    and self._ev.reasserted(f, mine.robot, mine.epoch) is not None:
+                self._learn_reassertion(f, mine, now)
 
     def _relay_refutes(self, f: str, now: float) -> None:
         """Someone acts on a takeover of f that refutes we hold void (an uncertified
