@@ -59,7 +59,8 @@ class Verifier:
         self._keys = dict(keys)
         self.calls = 0
 
-    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
+    def verify(self, robot: int, data: bytes, signature: bytes, *,
+               history: bool = False) -> bool:
         self.calls += 1
         key = self._keys.get(robot)
         if key is None or len(signature) != 64:

@@ -23,6 +23,7 @@ from swarmd.base.identity import (
     Keyring,
     generate_identity,
     public_key_of,
+    read_key_file,
     read_private_key,
     read_public_keys,
     throwaway_identities,
@@ -66,6 +67,21 @@ def test_keyring_replace_rotates_and_revokes_in_place() -> None:
     with pytest.raises(ValueError, match="32 bytes"):
         ring.replace({3: b"short"})
     assert ring.revoked == {3}                         # a bad set leaves the old one
+
+
+def test_keys_no_longer_in_force_verify_history_only() -> None:
+    """A retired key and every key of a revoked robot verify a certificate's backers
+    (`history=True`: DESIGN, "Key changes never rewrite history"), nothing else."""
+    (old, old_pub), (new, new_pub) = generate_identity(), generate_identity()
+    by_old, by_new = Ed25519Signer(3, old).sign(b"m"), Ed25519Signer(3, new).sign(b"m")
+    ring = Keyring({3: new_pub}, retired={3: [old_pub]})
+    assert not ring.verify(3, b"m", by_old) and ring.verify(3, b"m", by_old, history=True)
+    assert ring.verify(3, b"m", by_new, history=True)
+    ring.replace({3: new_pub}, revoked=[3], retired={3: [old_pub]})
+    assert not ring.verify(3, b"m", by_new) and ring.verify(3, b"m", by_new, history=True)
+    assert ring.verify(3, b"m", by_old, history=True)
+    assert not ring.verify(3, b"n", by_new, history=True)  # still a signature check
+    assert not ring.verify(9, b"m", by_new, history=True)  # unknown: no key at all
 
 
 def test_signer_replace_signs_with_the_new_key() -> None:
@@ -143,6 +159,16 @@ def test_public_key_file_lists_several_keys_with_comments(tmp_path: Path) -> Non
     path.write_text("zz\n")
     with pytest.raises(IdentityFileError, match="hex digits"):
         read_public_keys(path)
+    # A rotation's retired key: kept apart, for history only (docs/operations.md).
+    path.write_text(f"{b.hex()}  # new\nretired\t{a.hex()}  # the old one\n")
+    assert read_public_keys(path) == (b,) and read_key_file(path) == ((b,), (a,))
+    path.write_text(f"retired {a.hex()}\n")
+    assert read_key_file(path) == ((), (a,))
+    with pytest.raises(IdentityFileError, match="only retired"):
+        read_public_keys(path)
+    path.write_text("retired\n")
+    with pytest.raises(IdentityFileError, match="hex digits"):
+        read_key_file(path)
 
 
 # -- swarmd keygen ---------------------------------------------------------------------------
@@ -240,8 +266,18 @@ def test_revoked_robot_needs_no_key_and_cannot_start(tmp_path: Path) -> None:
     cfg = load_robot(_robot(tmp_path, 2, swarm, "identity_file: keys/robot-2.key\n"))
     material = cfg.identity_material()
     assert material is not None and 5 not in material.public_keys
+    assert 5 not in material.retired  # no key left to verify its history with
     msg = _one_error(_robot(tmp_path, 5, swarm, "identity_file: keys/robot-5.key\n"))
     assert "robot 5 is revoked" in msg
+    # Kept, a revoked robot's key verifies its history; a broken one is an error.
+    write_identity(keys, 5, force=True)
+    material = load_robot(_robot(tmp_path, 2, swarm, "identity_file: keys/robot-2.key\n"
+                                 )).identity_material()
+    assert material is not None and 5 not in material.public_keys
+    assert material.retired[5] == read_public_keys(keys / "robot-5.pub")
+    (keys / "robot-5.pub").write_text("garbage\n")
+    msg = _one_error(_robot(tmp_path, 2, swarm, "identity_file: keys/robot-2.key\n"))
+    assert "auth.keys_dir: revoked robot 5: public key" in msg
 
 
 def test_start_refuses_an_unsigned_swarm_that_does_not_say_so(tmp_path: Path) -> None:
@@ -332,6 +368,13 @@ async def test_daemon_gives_the_node_its_identity_and_sighup_reloads_it(
         swarm.write_text(paper_text("{mode: per-robot, keys_dir: keys, revoked: [4]}"))
         d.reload()
         assert ring.revoked == {4} and not ring.verify(4, b"m", four.sign(b"m"))
+        # What it signed stays history (its .pub is kept), as do robot 3's retired key's.
+        assert ring.verify(4, b"m", four.sign(b"m"), history=True)
+        pub3 = keys / "robot-3.pub"
+        pub3.write_text(pub3.read_text() + f"retired {old3.public_key.hex()}\n")
+        d.reload()
+        assert not ring.verify(3, b"m", old3.sign(b"m"))
+        assert ring.verify(3, b"m", old3.sign(b"m"), history=True)
 
         # A broken keys dir is refused: the keys in use stay.
         (keys / "robot-5.pub").write_text("garbage\n")

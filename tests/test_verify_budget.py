@@ -57,7 +57,8 @@ class _Counting:
     def __init__(self) -> None:
         self.calls = 0
 
-    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
+    def verify(self, robot: int, data: bytes, signature: bytes, *,
+               history: bool = False) -> bool:
         self.calls += 1
         return True
 

@@ -13,7 +13,10 @@ Files (written by `swarmd keygen --robot N DIR` / `--swarm SWARM.yaml DIR`):
   may access it, as the swarm key is (`swarmd.base.keys`).
 - ``robot-N.pub``: the public key, 64 hex digits a line. More than one line means every
   key listed is accepted for robot N: the window of a key rotation
-  (docs/operations.md, "Rotating a robot's key"). ``#`` starts a comment.
+  (docs/operations.md, "Rotating a robot's key"). A line ``retired <key>`` is a key the
+  rotation replaced: it verifies only history, the warnings and LEAVEs that back a
+  takeover accepted while it was in force (`swarmd.core.auth.Verifier`), never a frame
+  robot N sends now. ``#`` starts a comment.
 
 The keyring is mutable in place (`Keyring.replace`), so a daemon reloads public keys
 and the revoked list on SIGHUP without rebuilding its node; `Ed25519Signer.replace`
@@ -55,6 +58,7 @@ __all__ = [
     "private_key_path",
     "public_key_of",
     "public_key_path",
+    "read_key_file",
     "read_private_key",
     "read_public_keys",
     "throwaway_identities",
@@ -129,32 +133,32 @@ PublicKeys = Mapping[int, bytes | Iterable[bytes]]
 class Keyring:
     """`swarmd.core.auth.Verifier`: every robot's public key(s), minus the revoked.
 
+    Keys no longer in force — every key of a revoked robot, a key a rotation retired
+    (`retired`) — verify history only (`verify(..., history=True)`: a certificate's
+    warnings and LEAVEs), so that a takeover accepted before a key changed keeps its
+    proof (DESIGN, "Key changes never rewrite history").
+
     `verify` never raises: an unknown or revoked robot, a signature of the wrong
     length, a bad signature all give False (the core counts the drop).
     """
 
     def __init__(self, public_keys: PublicKeys, revoked: Iterable[int] = (),
-                 budget: VerifyBudget | None = None) -> None:
+                 budget: VerifyBudget | None = None, *,
+                 retired: PublicKeys | None = None) -> None:
         self._keys: dict[int, tuple[Ed25519PublicKey, ...]] = {}
+        self._retired: dict[int, tuple[Ed25519PublicKey, ...]] = {}
         self._revoked: frozenset[int] = frozenset()
         self.budget = budget
         """The daemon's: how many signatures it checks a second (`verify_budget`)."""
-        self.replace(public_keys, revoked)
+        self.replace(public_keys, revoked, retired=retired)
 
-    def replace(self, public_keys: PublicKeys, revoked: Iterable[int] = ()) -> None:
-        """Swap in a new set of keys and revocations (SIGHUP). Raises ValueError on a
-        malformed key, leaving the old set in place."""
-        keys: dict[int, tuple[Ed25519PublicKey, ...]] = {}
-        for robot, value in public_keys.items():
-            raw = (value,) if isinstance(value, bytes | bytearray) else tuple(value)
-            parsed = []
-            for k in raw:
-                if len(k) != PUBLIC_KEY_LEN:
-                    raise ValueError(f"robot {robot}: an Ed25519 public key is "
-                                     f"{PUBLIC_KEY_LEN} bytes, got {len(k)}")
-                parsed.append(Ed25519PublicKey.from_public_bytes(bytes(k)))
-            keys[robot] = tuple(parsed)
-        self._keys = keys
+    def replace(self, public_keys: PublicKeys, revoked: Iterable[int] = (), *,
+                retired: PublicKeys | None = None) -> None:
+        """Swap in a new set of keys, revocations and retired keys (SIGHUP). Raises
+        ValueError on a malformed key, leaving the old set in place."""
+        keys = _parse_keys(public_keys)
+        old = _parse_keys(retired or {})
+        self._keys, self._retired = keys, old
         self._revoked = frozenset(revoked)
 
     @property
@@ -172,13 +176,16 @@ class Keyring:
             return ()
         return tuple(_public_bytes(k) for k in self._keys.get(robot, ()))
 
-    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
-        if robot in self._revoked or len(signature) != SIGNATURE_LEN \
-                or robot not in self._keys:
+    def verify(self, robot: int, data: bytes, signature: bytes, *,
+               history: bool = False) -> bool:
+        keys = self._keys.get(robot, ()) if history or robot not in self._revoked else ()
+        if history:
+            keys += self._retired.get(robot, ())
+        if not keys or len(signature) != SIGNATURE_LEN:
             return False
         if self.budget is not None and not self.budget.take(robot):
             return False  # a flood of signed frames: not checked, so not believed
-        for key in self._keys.get(robot, ()):
+        for key in keys:
             try:
                 key.verify(bytes(signature), bytes(data))
             except InvalidSignature:
@@ -187,6 +194,22 @@ class Keyring:
                 return False
             return True
         return False
+
+
+def _parse_keys(public_keys: PublicKeys) -> dict[int, tuple[Ed25519PublicKey, ...]]:
+    """robot -> its keys, parsed. Raises ValueError naming the robot of a malformed
+    one."""
+    keys: dict[int, tuple[Ed25519PublicKey, ...]] = {}
+    for robot, value in public_keys.items():
+        raw = (value,) if isinstance(value, bytes | bytearray) else tuple(value)
+        parsed = []
+        for k in raw:
+            if len(k) != PUBLIC_KEY_LEN:
+                raise ValueError(f"robot {robot}: an Ed25519 public key is "
+                                 f"{PUBLIC_KEY_LEN} bytes, got {len(k)}")
+            parsed.append(Ed25519PublicKey.from_public_bytes(bytes(k)))
+        keys[robot] = tuple(parsed)
+    return keys
 
 
 def throwaway_identities(robot_ids: Iterable[int]) -> dict[int, Identity]:
@@ -235,8 +258,25 @@ def read_private_key(path: Path | str) -> bytes:
         f"{2 * PRIVATE_KEY_LEN} hex digits (make one with: swarmd keygen --robot ID DIR)")
 
 
+_RETIRED = b"retired"
+"""The word that starts a key line a rotation retired (module doc)."""
+
+
 def read_public_keys(path: Path | str) -> tuple[bytes, ...]:
-    """The public key(s) in a ``robot-N.pub`` file: one per line, at least one.
+    """The public key(s) in force in a ``robot-N.pub`` file: one per line, at least
+    one (`retired` lines are not: `read_key_file`).
+
+    Raises `IdentityFileError` naming the file."""
+    keys, _ = read_key_file(path)
+    if not keys:
+        raise IdentityFileError(f"public key {path} lists no key in force, only retired "
+                                "ones (make one with: swarmd keygen --robot ID DIR)")
+    return keys
+
+
+def read_key_file(path: Path | str) -> tuple[tuple[bytes, ...], tuple[bytes, ...]]:
+    """(keys in force, retired keys) of a ``robot-N.pub`` file (module doc), at least
+    one key in all.
 
     Raises `IdentityFileError` naming the file."""
     path = Path(path)
@@ -249,16 +289,21 @@ def read_public_keys(path: Path | str) -> tuple[bytes, ...]:
     except OSError as exc:
         raise IdentityFileError(f"public key {path}: {exc.strerror or exc}") from None
     keys: list[bytes] = []
+    retired: list[bytes] = []
     for line in data.splitlines():
         line = line.split(b"#", 1)[0].strip()
-        if line:
-            key = _parse_hex_key(line, f"public key {path}", "public key file")
-            if key not in keys:
-                keys.append(key)
-    if not keys:
+        if not line:
+            continue
+        word, *rest = line.split(None, 1)
+        into = retired if word == _RETIRED and rest else keys
+        key = _parse_hex_key(rest[0] if into is retired else line, f"public key {path}",
+                             "public key file")
+        if key not in into:
+            into.append(key)
+    if not keys and not retired:
         raise IdentityFileError(f"public key {path} is empty (make it: swarmd keygen "
                                 "--robot ID DIR)")
-    return tuple(keys)
+    return tuple(keys), tuple(k for k in retired if k not in keys)
 
 
 def _refuse_non_regular(path: Path) -> bool:

@@ -134,7 +134,7 @@ def _state(err: Console, swarm_cfg: SwarmConfig, keys: list[bytes]) -> MonitorSt
     """An empty view of the swarm, checking frames with `keys`."""
     from swarmd.base.identity import Keyring
     from swarmd.base.keys import KeyFileError
-    from swarmd.config.auth import public_keys
+    from swarmd.config.auth import public_keys, retired_keys
     from swarmd.daemon.monitor import MonitorState
 
     # Per-robot auth: every robot's public keys, so the base station verifies the
@@ -142,7 +142,8 @@ def _state(err: Console, swarm_cfg: SwarmConfig, keys: list[bytes]) -> MonitorSt
     keyring: Keyring | None = None
     if swarm_cfg.auth_mode == "per-robot":
         try:
-            keyring = Keyring(public_keys(swarm_cfg), swarm_cfg.revoked)
+            keyring = Keyring(public_keys(swarm_cfg), swarm_cfg.revoked,
+                              retired=retired_keys(swarm_cfg))
         except KeyFileError as exc:  # heartbeats still show; signed frames are dropped
             err.print(f"warning: {exc}: signed WARN/CLAIM/LEAVE frames cannot be "
                       "verified and are not shown")

@@ -5,7 +5,8 @@ keys_dir: ..., revoked: [...]}`) is part of the swarm file's schema in `swarm.py
 are the checks that reach past it: the key file loads, the keys dir holds a public key
 for every robot not revoked, the revoked robots are in the swarm. `swarmd check` reports
 them (`swarm_rules.cross_check`), `swarmd start` refuses a robot whose swarm fails them
-(`robot.py`, with `deploying`), and `public_keys` reads the keys for the keyring.
+(`robot.py`, with `deploying`), and `public_keys` and `retired_keys` read the keys for
+the keyring.
 """
 
 from __future__ import annotations
@@ -14,7 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from swarmd.base.identity import IdentityFileError, public_key_path, read_public_keys
+from swarmd.base.identity import (
+    IdentityFileError,
+    public_key_path,
+    read_key_file,
+    read_public_keys,
+)
 from swarmd.base.keys import KeyFileError, load_key
 from swarmd.config.errors import Loc
 from swarmd.config.swarm import NoAuth, PerRobotAuth, SwarmConfig
@@ -94,6 +100,14 @@ def _per_robot_issues(cfg: SwarmConfig, auth: PerRobotAuth, *,
                 ("auth", "keys_dir"),
                 f"robot {r}: {exc} (make it: swarmd keygen --robot {r} {keys_dir}, "
                 "then copy robot-N.pub to every robot)"))
+    for r in sorted(ids & set(auth.revoked)):
+        path = public_key_path(keys_dir, r)
+        if not path.exists():
+            continue  # a revoked robot's key is optional: it only proves history
+        try:
+            read_key_file(path)
+        except IdentityFileError as exc:
+            out.append(AuthIssue(("auth", "keys_dir"), f"revoked robot {r}: {exc}"))
     return out
 
 
@@ -106,3 +120,24 @@ def public_keys(cfg: SwarmConfig) -> dict[int, tuple[bytes, ...]]:
     revoked = cfg.revoked
     return {r: read_public_keys(public_key_path(keys_dir, r))
             for r in cfg.robot_ids() if r not in revoked}
+
+
+def retired_keys(cfg: SwarmConfig) -> dict[int, tuple[bytes, ...]]:
+    """The keys that verify history only (`swarmd.base.identity.Keyring`): the lines a
+    rotation retired (`retired <key>`) of every robot, and every key of a revoked robot
+    whose public key file is still in the keys dir (DESIGN, "Key changes never rewrite
+    history"). Raises IdentityFileError (the first bad file; a missing file of a
+    revoked robot is none)."""
+    keys_dir = cfg.keys_dir_path
+    if keys_dir is None:
+        return {}
+    out: dict[int, tuple[bytes, ...]] = {}
+    for r in cfg.robot_ids():
+        path = public_key_path(keys_dir, r)
+        if r in cfg.revoked and not path.exists():
+            continue
+        current, retired = read_key_file(path)
+        old = current + retired if r in cfg.revoked else retired
+        if old:
+            out[r] = old
+    return out

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import ipaddress
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -27,7 +27,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictInt, f
 
 from swarmd.base.identity import IdentityFileError, public_key_of, read_private_key
 from swarmd.base.keys import KeyFileError, load_key
-from swarmd.config.auth import auth_issues, public_keys
+from swarmd.config.auth import auth_issues, public_keys, retired_keys
 from swarmd.config.errors import ConfigError, ConfigUnreadable, Problem, format_loc
 from swarmd.config.source import Source, parse_source, read_source, validate
 from swarmd.config.swarm import RobotEntry, SwarmConfig
@@ -266,6 +266,9 @@ class IdentityMaterial:
     private_key: bytes
     public_keys: dict[int, tuple[bytes, ...]]
     revoked: frozenset[int]
+    retired: dict[int, tuple[bytes, ...]] = field(default_factory=dict)
+    """Keys that verify history only: retired by a rotation, or a revoked robot's
+    (`swarmd.config.auth.retired_keys`)."""
 
 
 @dataclass(frozen=True)
@@ -317,7 +320,8 @@ class RobotConfig:
         if self.identity_file is None:
             raise IdentityFileError(f"{self.source}: identity_file is not set")
         return IdentityMaterial(read_private_key(self.identity_file),
-                                public_keys(self.swarm), self.swarm.revoked)
+                                public_keys(self.swarm), self.swarm.revoked,
+                                retired_keys(self.swarm))
 
 
 def load_robot(path: str | Path) -> RobotConfig:

@@ -25,9 +25,17 @@ class Signer(Protocol):
 
 
 class Verifier(Protocol):
-    def verify(self, robot: int, data: bytes, signature: bytes) -> bool:
+    def verify(self, robot: int, data: bytes, signature: bytes, *,
+               history: bool = False) -> bool:
         """Is `signature` robot `robot`'s over `data`? False, never an exception, for an
-        unknown or revoked robot, a bad signature, or wrong lengths."""
+        unknown or revoked robot, a bad signature, or wrong lengths.
+
+        `history`: `data` is a warning or a LEAVE backing a takeover's certificate
+        (`wire.BACKERS`, relayed or restored), not a frame heard first-hand: a key no
+        longer in force — a revoked robot's, or one retired by a rotation — verifies it
+        still, so that a takeover accepted before the key changed keeps its proof
+        (DESIGN, "Key changes never rewrite history"). Only keys in force verify
+        anything else."""
         ...
 
 

@@ -151,6 +151,12 @@ Message = Heartbeat | Warn | Claim | Leave | Cert | Refute
 STRONG = frozenset({MsgType.WARN, MsgType.CLAIM, MsgType.LEAVE, MsgType.REFUTE})
 """The frames that change state: in per-robot mode they carry their sender's own
 signature (`SIGNATURE_LEN` bytes) instead of the swarm's HMAC tag."""
+BACKERS = frozenset({MsgType.WARN, MsgType.LEAVE})
+"""The frames that back a takeover's certificate. Relayed inside a CERT (or restored
+from a state file), they are history: verified with every key their sender ever had,
+one since retired or revoked included (`Verifier.verify`'s `history`; DESIGN, "Key
+changes never rewrite history"). A CLAIM or REFUTE, and every frame heard first-hand,
+needs a key in force."""
 
 SLOT_MAX = 0xFFFF
 _HB_TAIL = struct.Struct(">HB")
@@ -321,20 +327,23 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     if len(data) != expected:
         raise CodecError(DropReason.MALFORMED,
                          f"{mtype.name} of {len(data)} bytes, expected {expected}")
-    _verify(data, sender, mtype, signed, keys, verifier if strong else None)
+    _verify(data, sender, mtype, signed, keys, verifier if strong else None,
+            history=inner and mtype in BACKERS)
     msg = _message(data, mtype, slot, slot_at + slot_len, strong=strong, linked=linked)
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
                  data if strong else b"")
 
 
 def _verify(data: bytes, sender: int, mtype: MsgType, signed: bool, keys: Sequence[bytes],
-            verifier: Verifier | None) -> None:
-    """The sender's own signature (`verifier`: a frame that must carry one), else the
-    swarm key's tag (`keys`), else nothing. Raises `CodecError(DropReason.AUTH)`."""
+            verifier: Verifier | None, *, history: bool = False) -> None:
+    """The sender's own signature (`verifier`: a frame that must carry one; `history`:
+    a certificate's backer, `BACKERS`), else the swarm key's tag (`keys`), else nothing.
+    Raises `CodecError(DropReason.AUTH)`."""
     if verifier is not None:
         if not signed:
             raise CodecError(DropReason.AUTH, f"{mtype.name} without its sender's signature")
-        if not verifier.verify(sender, data[:-SIGNATURE_LEN], data[-SIGNATURE_LEN:]):
+        if not verifier.verify(sender, data[:-SIGNATURE_LEN], data[-SIGNATURE_LEN:],
+                               history=history):
             raise CodecError(DropReason.AUTH, f"bad signature of robot {sender}")
     elif keys:
         if not signed:

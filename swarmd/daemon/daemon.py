@@ -234,7 +234,8 @@ class Daemon:
         if material is None:
             return None
         self._signer = Ed25519Signer(cfg.robot, material.private_key)
-        self._keyring = Keyring(material.public_keys, material.revoked, VerifyBudget())
+        self._keyring = Keyring(material.public_keys, material.revoked, VerifyBudget(),
+                                retired=material.retired)
         return Identity(self._signer, self._keyring)
 
     @staticmethod
@@ -480,16 +481,18 @@ class Daemon:
         return keys
 
     def _reload_identity(self, new: RobotConfig) -> None:
-        """SIGHUP in per-robot mode: the public keys of the keys dir and the `revoked`
-        list replace the keyring's, and this robot's identity_file its own key
-        (docs/operations.md: rotating and revoking a robot's key). A key that cannot be
-        read leaves the old ones in use. A change of auth mode needs a restart."""
+        """SIGHUP in per-robot mode: the public keys of the keys dir (retired ones too,
+        which verify history only) and the `revoked` list replace the keyring's, and
+        this robot's identity_file its own key (docs/operations.md: rotating and
+        revoking a robot's key). A key that cannot be read leaves the old ones in use. A
+        change of auth mode needs a restart."""
         if self._keyring is None or self._signer is None or new.swarm.auth_mode != "per-robot":
             return
         try:
             material = new.identity_material()
             assert material is not None
-            self._keyring.replace(material.public_keys, material.revoked)
+            self._keyring.replace(material.public_keys, material.revoked,
+                                  retired=material.retired)
             self._signer.replace(material.private_key)
             if self._runtime is not None:
                 # A revoked robot's heartbeat chain must not keep it alive: from now on
