@@ -333,7 +333,9 @@ def test_per_robot_random_chaos_breaks_no_invariant() -> None:
     sys.modules["bench_chaos"] = bench
     spec.loader.exec_module(bench)
     from swarmd.core.params import udp
-    for seed in range(0, 300, 5):
+    # Seeds 0-99 run per robot in tests/test_chaos.py; here 25 (a standby's own refuted
+    # claim relayed back in a reassertion's proof) and a sample beyond them.
+    for seed in (25, *range(100, 300, 10)):
         case = bench.draw_case(seed, max_robots=12)
         res = run_virtual(case.plan, udp(), duration=case.duration, faults=case.faults,
                           loss=case.loss, seed=case.seed, auth="per-robot")

@@ -136,7 +136,7 @@ first merged, each a shape the table's proofs had to cover; clean in every mode 
   its state file's entry naming itself: an entry nobody could be shown a proof of, and
   views split for good (a restarted robot now keeps its own entry only for the slot it
   held).
-(Classic seed 25, in tests/test_attacks.py's sample: a standby's own refuted claim,
+(Classic seed 25, run per robot here and in tests/test_attacks.py: a standby's own refuted claim,
 relayed back as part of a reassertion's proof, never certified at it.)"""
 
 

@@ -272,7 +272,10 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     takeover = one("takeover", robot=6, function="f2", replaced=2)
     received = [json.loads(line) for line in
                 (tmp_path / "realtime" / "ros2" / "robot6.jsonl").read_text().splitlines()]
-    goal = next(r for r in received if r["kind"] == "goal")
+    # The first goal after the takeover: on a loaded machine 6 may have flown another
+    # slot it covers for a while before (a late heartbeat suspected, rule 2 fenced it).
+    goal = next(r for r in received
+                if r["kind"] == "goal" and r["w"] - result.t0 >= takeover["t"] - 0.01)
     assert goal["position"] == [0.0, 2.0, 1.5] and goal["frame"] == "map"
     delay = goal["w"] - result.t0 - takeover["t"]
     print(f"robot 6's stack got f2's goal {delay * 1000:.1f} ms after its takeover event")
