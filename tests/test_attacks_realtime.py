@@ -134,8 +134,14 @@ def test_per_robot_one_insider_breaks_nothing(runs: dict[tuple[str, str], Run],
     # Only the dead robot is replaced, by its standby, within the bound (+ one T_max).
     dead = {"claim": "crash:2@3", "replay": "crash:2@2.5", "ahead_all": "crash:2@3.5"}.get(
         attack)
-    assert out["takeovers"] == (1 if dead else 0)
-    assert out["holders"] == {"f1": [1], "f2": [6 if dead else 2], "f3": [3], "f4": [4]}
+    if _slack(out) < T_MAX:
+        assert out["takeovers"] == (1 if dead else 0)
+        assert out["holders"] == {"f1": [1], "f2": [6 if dead else 2], "f3": [3], "f4": [4]}
+    else:
+        # A robot's own event loop ran later than T_max (the run's lateness figure): a
+        # loaded machine, not the attack, can have got a live robot suspected there,
+        # and the checker (no violation above) judged what followed.
+        assert out["takeovers"] >= (1 if dead else 0)
     if dead is not None:
         latency, by = _taken_over(out, dead)
         # replay: standby 6 is back 0.5 s after the crash; its bound runs from then

@@ -267,7 +267,10 @@ async def test_ros2_swarm_health_in_goal_out_and_the_swarm_on_diagnostics(
     # Health from /diagnostics: robot 4's stack reports ERROR, its daemon leaves, 5 takes f4.
     leave = one("leave", robot=4, function="f4")
     assert leave["t"] >= unhealthy
-    assert one("takeover", robot=5, function="f4")["t"] >= leave["t"]
+    # 5's takeover after the leave (on a loaded machine a late heartbeat may have had 4
+    # suspected, taken over and fenced back before: rule 2).
+    assert [e for e in events if e["event"] == "takeover" and e["robot"] == 5
+            and e["function"] == "f4" and e["t"] >= leave["t"]]
     # The crash: robot 6 takes f2; its stack gets f2's goal pose.
     takeover = one("takeover", robot=6, function="f2", replaced=2)
     received = [json.loads(line) for line in
