@@ -90,14 +90,16 @@ class Ears:
 
     def alive_to_me(self, f: str, holder: int, epoch: int, now: float) -> bool:
         """Rule 4 from a standby's own ears: on a broadcast medium the standby hears the
-        suspect too, so one heard within its own patience for the suspect's link is
-        alive whatever the witnesses missed: a takeover needs the standby's silence to
-        be as unlikely from a live robot as each witness's (DESIGN "Detection": a live
-        robot is replaced only if three independent links fade at once). Less half a
-        heartbeat period: after a real crash the witnesses warn a patience after the
-        last heartbeat, which the standby heard at the same moment give or take the
-        channel's jitter, so on a clean link the first quorum claims (Fig. 7's timing)."""
-        within = self.patience(holder) - self._params.heartbeat_interval / 2
+        suspect too, so one heard within its own patience for the suspect's link, less
+        T_max/2, is alive whatever the witnesses missed: a takeover needs the standby's
+        silence to be nearly as unlikely from a live robot as each witness's (DESIGN
+        "Detection": a live robot is replaced only if three independent links fade at
+        once). On a clean link that is T_max/2, as before beliefs: after a real crash
+        the witnesses warn T_max after the last heartbeat, which the standby heard at
+        the same moment give or take the channel's jitter, so the first quorum claims;
+        a frame of the suspect's heard later (a replay that got through, a refutation)
+        holds the claim back for T_max/2, no more."""
+        within = self.patience(holder) - self._params.t_max / 2
         return self.heard_lately(f, holder, epoch, now, within)
 
     def own_ears(self, f: str, known: Mapping[str, Holder], now: float) -> bool:
