@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from swarmd.core import events as ev
 from swarmd.core import wire
-from swarmd.core.belief import byte_level
+from swarmd.core.belief import byte_level, level_byte
 from swarmd.core.drops import DropReason
 from swarmd.core.evidence import seq_of
 from swarmd.core.nodebase import NodeBase
@@ -84,8 +84,11 @@ class Hearing(NodeBase):
             # here too. Our warning about that holder carries the entry (DESIGN,
             # "Convergence"): the stale holder and anyone else that missed it move
             # forward (`_warned_newer`), the stale holder fences, and the slot's
-            # watchers take it from there. Once per T_max per slot.
-            self._send(wire.Warn(known.robot, hb.function, known.epoch))
+            # watchers take it from there. Once per T_max per slot. It says how strongly
+            # we suspect that holder: a standby counts it only as a suspicion (DESIGN
+            # "Detection"), the entry travels either way.
+            level = self._ears.level_now(known.robot, now)
+            self._send(wire.Warn(known.robot, hb.function, known.epoch, level_byte(level)))
 
     def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an

@@ -68,6 +68,13 @@ class Ears:
         link = self._links.get(robot)
         return LEVEL_MAX if link is None else link.level(silence)
 
+    def level_now(self, robot: int, now: float) -> float:
+        """`level` for `robot`'s silence since its last slot heartbeat we heard."""
+        link = self._links.get(robot)
+        if link is None or link.last is None:
+            return LEVEL_MAX
+        return link.level(now - link.last)
+
     def forget_gaps(self) -> None:
         """This robot stalled: the silences it is about to see are its own."""
         for link in self._links.values():
