@@ -74,7 +74,8 @@ class Params:
     """Suspicion level (-log10 of how often a live neighbour is silent that long on the
     link as measured, `belief.py`) at which a watcher suspects it, and that a standby
     needs from each witness and from its own ears before it claims. 2: a silence a live
-    robot on that link produces once in a hundred heartbeats."""
+    robot on that link produces once in a hundred heartbeats. Above 3.7 a link not
+    measured yet is given more than `t_max` (`belief.PRIOR_BURSTS`)."""
 
     def __post_init__(self) -> None:
         for f in fields(self):
