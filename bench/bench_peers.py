@@ -1,8 +1,9 @@
 """swarmd against SWIM, side by side on loopback: swim-protocol 0.6.3 (the asyncio SWIM
 library on PyPI) and swarmd, 5 members each, at equal datagrams per member per second.
 
-    python bench/bench_peers.py            # 10 crashes per system and rate, 120 s at 20% loss
-    python bench/bench_peers.py --quick    # 3 crashes, 30 s at 20% loss (a few minutes)
+    python bench/bench_peers.py            # 10 crashes per system, rate and channel, 120 s
+    python bench/bench_peers.py --quick    # 3 crashes, 30 s windows (a quarter of an hour)
+    python bench/bench_peers.py --channel "30% bursts of 8"   # one lossy channel only
 
 What is compared, per rate (about 2 and 8 datagrams per member per second):
 - crash -> detection, SWIM: a member is SIGKILLed; time until the first survivor marks
@@ -15,9 +16,15 @@ What is compared, per rate (about 2 and 8 datagrams per member per second):
 - datagrams and UDP payload bytes per member per second, measured in steady state before
   the crash: SWIM counts in each member what it sends, swarmd by a passive listener on
   the multicast group (one heartbeat is one datagram for every neighbour);
-- false detections over a window at 20% loss per receiver and no crash: SWIM's OFFLINE
-  marks of live members (summed over observers) and SUSPECT marks; swarmd's false
-  takeovers and false suspicions (`swarmd sim` summary).
+- false detections over a window with no crash on a lossy channel: SWIM's OFFLINE marks
+  of live members (summed over observers) and SUSPECT marks; swarmd's false takeovers
+  and false suspicions (`swarmd sim` summary).
+
+Channels (`CHANNELS`): clean, then the same loss patterns for both systems, drawn per
+receiver: 20 % independent losses, and Gilbert-Elliott bursts per sender and receiver
+(`--loss-model burst`, sim/shared/channel.py; `swim_member.py --burst-len` for SWIM) of
+8 datagrams at 30 % and of 4 at 40 %. Each lossy channel gets its crashes and its
+window; one line per system, rate and channel.
 
 Timings. SWIM: its defaults (ping 1 s, ping timeout 0.3 s, ping-req 0.9 s, suspect 5 s,
 sync 0.5 s) give about 2 datagrams per member per second; all divided by 4 give about 8.
@@ -58,6 +65,9 @@ SWIM_VERSION = "0.6.3"
 MEMBERS = 5
 VICTIM = 2  # swarmd: robot 2 (an active); SWIM: the second member
 HERE = Path(__file__).resolve().parent
+CHANNELS = {"clean": (0.0, 0.0), "20% independent": (0.2, 0.0),
+            "30% bursts of 8": (0.3, 8.0), "40% bursts of 4": (0.4, 4.0)}
+"""Name -> (loss, mean burst in datagrams; 0: independent losses)."""
 RATES = {"~2/s": 1.0, "~8/s": 4.0}
 """Label -> speed-up of SWIM's default timings; swarmd's udp() preset is slowed down by
 4 / speed-up (heartbeat 0.4 s at ~2/s, 0.1 s at ~8/s)."""
@@ -137,12 +147,15 @@ class SwimMember:
 
 
 class SwimCluster:
-    def __init__(self, python: str, scale: float, loss: float, seed: int) -> None:
+    def __init__(self, python: str, scale: float, channel: tuple[float, float],
+                 seed: int) -> None:
         names = [f"127.0.0.1:{free_port()}" for _ in range(MEMBERS)]
         self.members: list[SwimMember] = []
+        loss, burst = channel
         for i, name in enumerate(names):
             cmd = [python, str(HERE / "swim_member.py"), "--name", name,
-                   "--scale", str(scale), "--loss", str(loss), "--seed", str(seed * 100 + i)]
+                   "--scale", str(scale), "--loss", str(loss), "--seed", str(seed * 100 + i),
+                   "--burst-len", str(burst)]
             for peer in names:
                 if peer != name:
                     cmd += ["--peer", peer]
@@ -196,8 +209,9 @@ def steady(scale: float) -> float:
     return 12.0 / scale + 1.0
 
 
-def swim_crash(python: str, scale: float, seed: int) -> dict[str, Any]:
-    cluster = SwimCluster(python, scale, 0.0, seed)
+def swim_crash(python: str, scale: float, seed: int,
+               channel: tuple[float, float] = (0.0, 0.0)) -> dict[str, Any]:
+    cluster = SwimCluster(python, scale, channel, seed)
     try:
         if not cluster.wait(cluster.converged, 30):
             return {"error": "members never all saw each other ONLINE"}
@@ -221,8 +235,9 @@ def swim_crash(python: str, scale: float, seed: int) -> dict[str, Any]:
         cluster.stop()
 
 
-def swim_false(python: str, scale: float, window: float, seed: int) -> dict[str, Any]:
-    cluster = SwimCluster(python, scale, 0.2, seed)
+def swim_false(python: str, scale: float, window: float, seed: int,
+               channel: tuple[float, float]) -> dict[str, Any]:
+    cluster = SwimCluster(python, scale, channel, seed)
     try:
         cluster.wait(cluster.converged, 30)
         time.sleep(steady(scale))
@@ -278,8 +293,9 @@ def swarm_file(directory: Path, slow_down: float) -> Path:
     return path
 
 
-async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None, loss: float,
-                      seed: int) -> tuple[dict[str, Any], list[tuple[float, int]], float]:
+async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None,
+                      channel: tuple[float, float], seed: int,
+                      ) -> tuple[dict[str, Any], list[tuple[float, int]], float]:
     from sim.realtime.orchestrator import run_realtime_async
     from sim.realtime.robotfiles import free_udp_port
     from sim.realtime.summary import summarize_realtime
@@ -298,9 +314,11 @@ async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None, lo
 
     await listener.start(lambda data: heard.append((time.time(), len(data))), on_event)
     faults = [parse_fault(f"crash:{VICTIM}@{crash_at}")] if crash_at is not None else []
+    loss, burst = channel
     try:
-        result = await run_realtime_async(path, duration=duration, faults=faults, loss=loss,
-                                          seed=seed, port=port)
+        result = await run_realtime_async(
+            path, duration=duration, faults=faults, loss=loss, seed=seed, port=port,
+            loss_model="burst" if burst else "bernoulli", burst_len=burst or 4.0)
     finally:
         await listener.close()
     summary = summarize_realtime(result, faults, cfg.to_plan(), cfg.params(), loss=loss)
@@ -313,22 +331,28 @@ def _rate(heard: list[tuple[float, int]], start: float, end: float) -> tuple[flo
     return len(inside) / span, sum(inside) / span
 
 
-def swarmd_crash(path: Path, slow_down: float, seed: int) -> dict[str, Any]:
+def swarmd_crash(path: Path, slow_down: float, seed: int,
+                 channel: tuple[float, float] = (0.0, 0.0)) -> dict[str, Any]:
     params = slowed_params(slow_down)
-    # After the processes' start (a second), the start-up grace and two t_max of calm.
-    crash_at = 1.0 + params.startup_grace + 2 * params.t_max
-    settle = 2.0 + params.takeover_bound()  # the takeover, with two seconds to spare
+    lossy = bool(channel[0])
+    # After the processes' start (a second), the start-up grace and two t_max of calm;
+    # on a lossy channel half a minute more, in which the watchers measure the links
+    # (DESIGN "Detection").
+    crash_at = 1.0 + params.startup_grace + 2 * params.t_max + (30.0 if lossy else 0.0)
+    # The takeover, with two seconds to spare.
+    settle = 2.0 + params.takeover_bound(lossy=lossy)
     doc, heard, t0 = asyncio.run(_swarmd_run(path, duration=crash_at + settle,
-                                             crash_at=crash_at, loss=0.0, seed=seed))
+                                             crash_at=crash_at, channel=channel, seed=seed))
     fault = doc["faults"][0] if doc["faults"] else {}
     dgrams, nbytes = _rate(heard, t0 + crash_at - 2.5, t0 + crash_at)
     return {"detect": fault.get("detection_latency"), "takeover": fault.get("takeover_latency"),
             "dgrams": dgrams, "bytes": nbytes, "problems": doc.get("process_problems")}
 
 
-def swarmd_false(path: Path, window: float, seed: int) -> dict[str, Any]:
-    doc, heard, t0 = asyncio.run(_swarmd_run(path, duration=window, crash_at=None, loss=0.2,
-                                             seed=seed))
+def swarmd_false(path: Path, window: float, seed: int,
+                 channel: tuple[float, float]) -> dict[str, Any]:
+    doc, heard, t0 = asyncio.run(_swarmd_run(path, duration=window, crash_at=None,
+                                             channel=channel, seed=seed))
     dgrams, nbytes = _rate(heard, t0 + 3.0, t0 + window)
     return {"takeovers": doc["false_takeovers"], "suspicions": doc["false_suspicions"],
             "dgrams": dgrams, "bytes": nbytes}
@@ -360,14 +384,17 @@ def fmt(xs: list[float]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
-                    help="3 crashes per system and rate, 30 s at 20%% loss")
+                    help="3 crashes per system, rate and channel; 30 s windows")
     ap.add_argument("--runs", type=int, default=None, help="crashes per system and rate")
     ap.add_argument("--window", type=float, default=None,
-                    help="seconds at 20%% loss for false detections")
+                    help="seconds with no crash on each lossy channel")
+    ap.add_argument("--channel", action="append", choices=sorted(CHANNELS), default=None,
+                    help="only these channels (repeatable; default: every one)")
     ap.add_argument("--json", type=Path, default=None, help="also write the raw figures here")
     args = ap.parse_args()
     runs = args.runs or (3 if args.quick else 10)
     window = args.window or (30.0 if args.quick else 120.0)
+    channels = {name: CHANNELS[name] for name in args.channel or CHANNELS}
     python = swim_python()
     raw: dict[str, Any] = {"swim_protocol": SWIM_VERSION, "runs": runs, "window_s": window}
     rows = []
@@ -375,31 +402,13 @@ def main() -> None:
         for label, scale in RATES.items():
             slow_down = 4.0 / scale
             path = swarm_file(Path(tmp), slow_down)
-            swim = [swim_crash(python, scale, seed) for seed in range(runs)]
-            ours = [swarmd_crash(path, slow_down, seed) for seed in range(runs)]
-            swim_loss = swim_false(python, scale, window, 1)
-            ours_loss = swarmd_false(path, window, 1)
-            raw[label] = {"swim": swim, "swarmd": ours, "swim_loss": swim_loss,
-                          "swarmd_loss": ours_loss}
-
-            missed_swim = sum(1 for r in swim if r.get("detect") is None)
-            missed_ours = sum(1 for r in ours if r.get("takeover") is None)
-            rows.append((
-                f"swim-protocol {SWIM_VERSION} (defaults / {scale:g})", label,
-                mean(swim, "dgrams", 1), mean(swim, "bytes", 0), "-",
-                fmt(vals(swim, "detect")) + (f" ({missed_swim} missed)" if missed_swim else ""),
-                f"{swim_loss['offline']} OFFLINE ({swim_loss['suspect']} SUSPECT)",
-            ))
-            rows.append((
-                f"swarmd (heartbeat {slowed_params(slow_down).heartbeat_interval:g} s)", label,
-                mean(ours, "dgrams", 1), mean(ours, "bytes", 0),
-                fmt(vals(ours, "takeover")) + (f" ({missed_ours} missed)" if missed_ours else ""),
-                fmt(vals(ours, "detect")),
-                f"{ours_loss['takeovers']} takeovers ({ours_loss['suspicions']} suspicions)",
-            ))
-    header = ("system", "rate", "datagrams/member/s", "bytes/member/s",
+            for name, channel in channels.items():
+                got = one_channel(python, path, scale, slow_down, channel, runs, window)
+                raw[f"{label}, {name}"] = got
+                rows += table_rows(got, label, name, scale, slow_down)
+    header = ("system", "rate", "channel", "datagrams/member/s", "bytes/member/s",
               "crash->takeover s (median / p99)", "crash->detection s (median / p99)",
-              f"false, {window:g} s at 20% loss")
+              f"false, {window:g} s with no crash")
     print(f"5 members on loopback, {runs} crashes per row (kill -9 of one member)\n")
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
@@ -407,6 +416,41 @@ def main() -> None:
         print("| " + " | ".join(row) + " |")
     if args.json is not None:
         args.json.write_text(json.dumps(raw, indent=2))
+
+
+def one_channel(python: str, path: Path, scale: float, slow_down: float,
+                channel: tuple[float, float], runs: int, window: float) -> dict[str, Any]:
+    """Both systems' crashes on one channel and, if it is lossy, their false detections."""
+    got: dict[str, Any] = {
+        "swim": [swim_crash(python, scale, seed, channel) for seed in range(runs)],
+        "swarmd": [swarmd_crash(path, slow_down, seed, channel) for seed in range(runs)],
+    }
+    if channel[0]:
+        got["swim_loss"] = swim_false(python, scale, window, 1, channel)
+        got["swarmd_loss"] = swarmd_false(path, window, 1, channel)
+    return got
+
+
+def table_rows(got: dict[str, Any], label: str, name: str, scale: float,
+               slow_down: float) -> list[tuple[str, ...]]:
+    swim, ours = got["swim"], got["swarmd"]
+    swim_loss, ours_loss = got.get("swim_loss"), got.get("swarmd_loss")
+    missed_swim = sum(1 for r in swim if r.get("detect") is None)
+    missed_ours = sum(1 for r in ours if r.get("takeover") is None)
+    return [(
+        f"swim-protocol {SWIM_VERSION} (defaults / {scale:g})", label, name,
+        mean(swim, "dgrams", 1), mean(swim, "bytes", 0), "-",
+        fmt(vals(swim, "detect")) + (f" ({missed_swim} missed)" if missed_swim else ""),
+        f"{swim_loss['offline']} OFFLINE ({swim_loss['suspect']} SUSPECT)"
+        if swim_loss else "-",
+    ), (
+        f"swarmd (heartbeat {slowed_params(slow_down).heartbeat_interval:g} s)", label, name,
+        mean(ours, "dgrams", 1), mean(ours, "bytes", 0),
+        fmt(vals(ours, "takeover")) + (f" ({missed_ours} missed)" if missed_ours else ""),
+        fmt(vals(ours, "detect")),
+        f"{ours_loss['takeovers']} takeovers ({ours_loss['suspicions']} suspicions)"
+        if ours_loss else "-",
+    )]
 
 
 if __name__ == "__main__":

@@ -6,7 +6,10 @@ holds swim-protocol (stdlib and swimprotocol only: it never imports swarmd).
 Timings are swim-protocol's defaults divided by `--scale` (ping 1 s, ping timeout 0.3 s,
 ping-req timeout 0.9 s, suspect 5 s, sync 0.5 s). `--loss P` drops each received
 datagram with probability P (drawn per datagram and per receiver, as `swarmd sim
---loss`). Prints JSON lines on stdout: one per status change it sees
+--loss`); with `--burst-len L` the losses come in bursts, L datagrams long on average,
+per sending member (Gilbert-Elliott, as `swarmd sim --loss-model burst --burst-len L`:
+sim/shared/channel.py, rewritten here since this script never imports swarmd).
+Prints JSON lines on stdout: one per status change it sees
 (`{"t", "member", "status"}`, wall-clock t) and `{"t", "sent", "bytes"}` every 0.25 s
 (datagrams and UDP payload bytes this member sent so far).
 """
@@ -37,7 +40,29 @@ def emit(record: dict[str, Any]) -> None:
     sys.stdout.flush()
 
 
-def instrument(loss: float, seed: int) -> None:
+class Bursts:
+    """Per sending address, a two-state channel: a bad spell loses every datagram and
+    lasts `burst_len` on average; the stationary share of bad is `loss`."""
+
+    def __init__(self, loss: float, burst_len: float, rng: random.Random) -> None:
+        self.to_good = 1.0 / burst_len
+        self.to_bad = loss / (burst_len * (1.0 - loss)) if loss else 0.0
+        self.rng = rng
+        self.bad: set[tuple[str, int]] = set()
+
+    def lost(self, addr: tuple[str, int]) -> bool:
+        if addr in self.bad:
+            if self.rng.random() < self.to_good:
+                self.bad.discard(addr)
+                return False
+            return True
+        if self.to_bad and self.rng.random() < self.to_bad:
+            self.bad.add(addr)
+            return True
+        return False
+
+
+def instrument(loss: float, seed: int, burst_len: float = 0.0) -> None:
     """Count what is sent (every packet is packed once) and drop received datagrams."""
     pack = UdpPack.pack
     rng = random.Random(seed)
@@ -51,8 +76,11 @@ def instrument(loss: float, seed: int) -> None:
     UdpPack.pack = counting_pack
     received = UdpProtocol.datagram_received
 
+    bursts = Bursts(loss, burst_len, rng) if burst_len else None
+
     def lossy(self: UdpProtocol, data: bytes, addr: tuple[str, int]) -> None:
-        if rng.random() >= loss:
+        lost = bursts.lost(addr) if bursts is not None else rng.random() < loss
+        if not lost:
             received(self, data, addr)
 
     UdpProtocol.datagram_received = lossy
@@ -94,8 +122,10 @@ def main() -> None:
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--loss", type=float, default=0.0)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--burst-len", type=float, default=0.0,
+                    help="mean loss burst in datagrams (0: independent losses)")
     args = ap.parse_args()
-    instrument(args.loss, args.seed)
+    instrument(args.loss, args.seed, args.burst_len)
     asyncio.run(run(args))
 
 

@@ -279,7 +279,7 @@ def test_per_robot_frame_sizes_and_verification(paper: Paper) -> None:
     leave = enc(2, wire.Leave(2, 0, 0))
     relay = enc(6, wire.Cert(2, wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0)), warn))
     sizes = [len(x) for x in (beat, anchor, warn, claim, leave, relay)]
-    assert sizes == [32, 88, 80, 80, 79, 92]
+    assert sizes == [32, 88, 81, 80, 79, 93]  # a WARN carries its belief (DESIGN "Detection")
     bare = wire.encode(wire.Frame(plan.swarm_id, 2, 7, wire.Heartbeat(2, 0, 1, 0, 1, bytes(8))),
                        None, ids[2].signer)
     assert len(bare) == 24  # per robot without a swarm key: the link alone

@@ -78,7 +78,8 @@ def test_a_hundred_robots_fit_one_802154_channel_at_radio() -> None:
 
 
 def test_the_slot_field_widens_the_budget_past_127_functions() -> None:
-    assert heartbeat_size(True, 2) == 24 and warn_size(True, 3) == 11 + 4 + 3 + 8
+    # A WARN: suspect, epoch and belief (DESIGN "Detection") besides the slot and tag.
+    assert heartbeat_size(True, 2) == 24 and warn_size(True, 3) == 11 + 5 + 3 + 8
     small = budget_for(60, 20, 4, radio(), medium="802.15.4", signed=True)
     wide = budget_for(60, 20, 4, radio(), medium="802.15.4", signed=True, slot_bytes=2)
     assert wide.heartbeat_bytes == small.heartbeat_bytes + 1
@@ -95,16 +96,19 @@ def test_lines_are_human_readable() -> None:
 
 
 def test_per_robot_frames_on_digimesh_are_counted_in_fragments() -> None:
-    # An 80 B signed WARN on DigiMesh (73 B): 2 fragments of 6 + 40 B; a 92 B CERT: 2 of
-    # 6 + 46 B (transport/fragment.py). Each pays the full per-frame overhead.
-    assert fragments("digimesh", 80) == 2 and fragments("digimesh", 92) == 2
-    assert fragments("802.15.4", 92) == 1 and fragments("serial", 92) == 2
+    # An 81 B signed WARN on DigiMesh (73 B): 2 fragments of 6 + 41 and 6 + 40 B; a 93 B
+    # CERT: 2 of 6 + 47 and 6 + 46 B (transport/fragment.py). Each pays the full
+    # per-frame overhead. (A WARN carries its belief byte, DESIGN "Detection".)
+    assert fragments("digimesh", 81) == 2 and fragments("digimesh", 93) == 2
+    assert fragments("802.15.4", 93) == 1 and fragments("serial", 93) == 2
     assert fragments("digimesh", 1000) == 0  # more than 8 fragments
-    assert frame_airtime("digimesh", 80) == pytest.approx(2 * airtime("digimesh", 46))
-    assert frame_airtime("digimesh", 92) == pytest.approx(2 * airtime("digimesh", 52))
+    assert frame_airtime("digimesh", 81) == pytest.approx(
+        airtime("digimesh", 47) + airtime("digimesh", 46))
+    assert frame_airtime("digimesh", 93) == pytest.approx(
+        airtime("digimesh", 53) + airtime("digimesh", 52))
     b = channel_budget(paper_plan(), radio(), medium="digimesh", signed=True,
                        per_robot=True)
-    assert (b.warn_bytes, b.cert_bytes) == (80, 92)
+    assert (b.warn_bytes, b.cert_bytes) == (81, 93)
     assert (b.warn_fragments, b.cert_fragments) == (2, 2)
     assert not any("payload limit" in w for w in b.warnings)
     # The peak by hand: heartbeats (links of 32 B, and anchors of 88 B in 2 fragments of
@@ -119,10 +123,10 @@ def test_per_robot_frames_on_digimesh_are_counted_in_fragments() -> None:
     claim_rate = 1 / p.claim_hold
     peak = ((hb_rate - anchors) * airtime("digimesh", 32)
             + anchors * 2 * airtime("digimesh", 50)
-            + (2 / p.warn_interval + claim_rate) * 2 * airtime("digimesh", 46)
-            + claim_rate * 3 * 2 * airtime("digimesh", 52)) * 4
+            + (2 / p.warn_interval + claim_rate) * frame_airtime("digimesh", 81)
+            + claim_rate * 3 * frame_airtime("digimesh", 93)) * 4
     assert b.peak_airtime_share == pytest.approx(peak)
-    assert "warning/claim 80 B (2 fragments), certificate frame 92 B (2 fragments)" in (
+    assert "warning/claim 81 B (2 fragments), certificate frame 93 B (2 fragments)" in (
         "\n".join(b.lines()))
     on_154 = channel_budget(paper_plan(), radio(), medium="802.15.4", signed=True,
                             per_robot=True)
@@ -131,10 +135,10 @@ def test_per_robot_frames_on_digimesh_are_counted_in_fragments() -> None:
 
 def test_a_frame_that_cannot_be_split_is_warned(monkeypatch: pytest.MonkeyPatch) -> None:
     # No real medium refuses a swarmd frame (8 fragments of 64 - 6 B carry 464 B); a
-    # 15 B payload (9 B per fragment) would need 9 fragments for an 80 B WARN.
+    # 15 B payload (9 B per fragment) would need 9 fragments for an 81 B WARN.
     from swarmd.services import budget
 
     monkeypatch.setitem(budget.MAX_PAYLOAD, "serial", 15)
     b = budget_for(4, 2, 2, radio(), medium="serial", signed=True, per_robot=True)
     assert b.warn_fragments == 0 and b.cert_fragments == 0
-    assert any("92 B frame needs more than 8 fragments" in w for w in b.warnings)
+    assert any("93 B frame needs more than 8 fragments" in w for w in b.warnings)

@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 from swarmd.cli import app
 from swarmd.config import load_swarm
 from swarmd.core import params, wire
+from swarmd.core.belief import level_byte
 from swarmd.core.plan import RobotPlan, SwarmPlan
 from swarmd.core.roles import Health, Role
 from swarmd.daemon.monitor import MonitorState
@@ -94,6 +95,9 @@ def test_monitor_warnings_are_votes_within_the_window_and_a_claim_clears_them() 
     state = MonitorState(paper_plan(), p)
     tx = Sender()
     healthy_swarm(state, tx, 0.0)
+    # A doubt (a level below suspect_level, DESIGN "Detection") is no vote, here either.
+    state.feed(tx.frame(1, wire.Warn(2, 2, 0, belief=level_byte(p.suspect_level) - 1)), 0.9)
+    assert next(r for r in state.rows(0.95) if r["robot"] == 2)["votes"] == 0
     state.feed(tx.frame(1, wire.Warn(2, 2, 0)), 1.0)
     state.feed(tx.frame(3, wire.Warn(2, 2, 0)), 1.05)
     row = next(r for r in state.rows(1.1) if r["robot"] == 2)

@@ -80,3 +80,11 @@ def test_one_takeover_bound_for_check_and_the_checker(preset: Callable[[], Param
     assert p.takeover_bound() == pytest.approx(p.t_max + p.vote_window + p.claim_hold)
     assert Bounds.of(p, 0.0).takeover == pytest.approx(p.takeover_bound())
     assert Bounds.of(p, 0.1).takeover == pytest.approx(p.takeover_bound(lossy=True))
+    # DESIGN "Detection": on a lossy channel a link's patience may reach t_max_bursty,
+    # and so may a clean one's after a link fault taught it a long silence.
+    assert p.takeover_bound(lossy=True) == pytest.approx(
+        p.t_max_bursty + 3 * p.vote_window + p.claim_hold)
+    assert Bounds.of(p, 0.0).takeover_faded == pytest.approx(
+        p.takeover_bound(patience=p.t_max_bursty))
+    assert p.takeover_bound(patience=0.0) == p.takeover_bound()  # never below t_max
+    assert p.takeover_bound(patience=1e9) == p.takeover_bound(patience=p.t_max_bursty)

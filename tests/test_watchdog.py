@@ -128,3 +128,53 @@ def test_refresh_after_a_stall(setup: str, stall_at: float, expect_state: WatchS
     w.refresh(stall_at)
     assert state(w) is expect_state
     assert w.deadline == pytest.approx(expect_deadline)
+
+
+# ---------------------------------------------------------------------- beliefs
+# DESIGN "Detection": a link whose belief gives it more patience than T_max is doubted
+# from T_max on (warnings the holder answers, no standby counts) and suspected only when
+# the patience runs out.
+def test_a_patient_link_is_doubted_from_t_max_and_suspected_at_its_patience() -> None:
+    w = SlotWatch("f2", P, now=0.0)
+    w.heard(1.0, patience=1.5)
+    assert w.deadline == pytest.approx(1.0 + P.t_max)  # Fig. 7's T_max: the first doubt
+    t, doubts = w.deadline, 0
+    while (fired := w.fire(t)).doubt:
+        assert state(w) is WatchState.DOUBT and not w.suspecting and not fired.first
+        doubts += 1
+        t = w.deadline
+    assert t == pytest.approx(2.5) and fired.first and state(w) is WatchState.SUSPECT
+    assert doubts == 10  # one every warn_interval from 1.5 to 2.4
+    assert w.since == pytest.approx(2.5)  # the episode (and rule 8's alert) starts here
+
+
+def test_a_doubt_heard_away_is_no_refutation() -> None:
+    w = SlotWatch("f2", P, now=0.0)
+    w.heard(0.0, patience=1.0)
+    assert w.fire(0.5).doubt
+    assert w.heard(0.6, patience=1.0) is False  # nothing was suspected: nothing to refute
+    assert state(w) is WatchState.RUNNING and w.since is None
+
+
+def test_a_stall_in_doubt_starts_again_from_t_max() -> None:
+    w = SlotWatch("f2", P, now=0.0)
+    w.heard(0.0, patience=1.0)
+    w.fire(0.5)
+    w.refresh(5.0)  # our own stall: the silence was ours
+    assert state(w) is WatchState.RUNNING and w.deadline == pytest.approx(5.0 + P.t_max)
+
+
+def test_a_clean_link_is_never_doubted() -> None:
+    w = SlotWatch("f2", P, now=0.0)
+    w.heard(0.0, patience=P.t_max)
+    fired = w.fire(0.5)
+    assert not fired.doubt and fired.first and state(w) is WatchState.SUSPECT
+
+
+def test_a_claim_heard_in_doubt_hands_over() -> None:
+    w = SlotWatch("f2", P, now=0.0)
+    w.heard(0.0, patience=1.5)
+    w.fire(0.5)
+    w.claim_heard(0.6)  # another watcher's quorum was met first
+    assert state(w) is WatchState.HANDOVER
+    assert w.fire(w.deadline).first  # a claimant never heard: suspected, and logged

@@ -28,6 +28,7 @@ MESSAGES: list[Message] = [
     Heartbeat(function=3, epoch=7, role=1, health=0),
     Heartbeat(function=0, epoch=0, role=2, health=2),
     Warn(suspect=2, function=2, epoch=5),
+    Warn(suspect=2, function=2, epoch=5, belief=13),  # a doubt (DESIGN "Detection")
     Claim(failed=2, function=2, epoch=6),
     Leave(function=4, epoch=1, reason=int(wire.LeaveReason.FAULT)),
 ]
@@ -103,7 +104,8 @@ frames = st.builds(
     msg=st.one_of(
         st.builds(Heartbeat, slots, st.integers(0, 0xFFFF), st.integers(0, 15),
                   st.integers(0, 15)),
-        st.builds(Warn, st.integers(0, 0xFFFF), slots, st.integers(0, 0xFFFF)),
+        st.builds(Warn, st.integers(0, 0xFFFF), slots, st.integers(0, 0xFFFF),
+                  st.integers(0, 255)),
         st.builds(Claim, st.integers(0, 0xFFFF), slots, st.integers(0, 0xFFFF)),
         st.builds(Leave, slots, st.integers(0, 0xFFFF), st.integers(0, 255)),
     ),
@@ -184,11 +186,29 @@ def test_key_rotation_accepts_old_and_new() -> None:
         Frame(1, 1, 1, Heartbeat(0x10000, 0, 1, 0)),
         Frame(1, 1, 1, Claim(1, -1, 0)),
         Frame(1, 1, 1, Warn(0x10000, 1, 0)),
+        Frame(1, 1, 1, Warn(1, 1, 0, belief=256)),
+        Frame(1, 1, 1, Warn(1, 1, 0, belief=-1)),
     ],
 )
 def test_encode_refuses_out_of_range_fields(frame: Frame) -> None:
     with pytest.raises(ValueError):
         encode(frame)
+
+
+@pytest.mark.parametrize("key", [None, KEY], ids=["unsigned", "shared key"])
+def test_a_warning_carries_its_belief_byte(key: bytes | None) -> None:
+    # DESIGN "Detection": WARN = suspect (2), slot, epoch (2), belief (1). A WARN without
+    # the byte (the body before beliefs) is malformed, not read as some other belief.
+    keys = (KEY,) if key else ()
+    data = encode(Frame(7, 1, 9, Warn(2, 3, 4, belief=21)), key)
+    assert len(data) == wire.HEADER_LEN + 2 + 1 + 2 + 1 + (wire.TAG_LEN if key else 0)
+    assert decode(data, keys).msg == Warn(2, 3, 4, belief=21)
+    short = data[:wire.HEADER_LEN + 5]
+    if key:
+        short += wire.tag(key, short)
+    with pytest.raises(CodecError) as info:
+        decode(short, keys)
+    assert info.value.reason == "malformed"
 
 
 def test_seq_seed_rises_with_time_and_clamps() -> None:

@@ -9,9 +9,11 @@ nothing until it resumes.
 
 Invariants (each violation names the time, robot and what went wrong):
 1. takeover: an ACTIVE robot that crashes (or collides, leaves, reports a fault, or stays
-   paused long enough) is replaced within `bounds.takeover`, whatever else fails at the
-   same time, whenever its slot keeps a live covering standby and (for a silent failure:
-   crash, collide, pause) at least one live watcher. "Live" means not failed at any
+   paused long enough) is replaced within the takeover bound (`bounds.takeover`;
+   `bounds.takeover_faded` once a link fault or a pause may have taught the watchers a
+   longer patience, DESIGN "Detection"), whatever else fails at the same time, whenever
+   its slot keeps a live covering standby and (for a silent failure: crash, collide,
+   pause) at least one live watcher. "Live" means not failed at any
    moment between the failure and the deadline. Not a violation:
    - every standby that could have come was consumed by another failure (it took over
      another slot by the deadline, or failed itself): a standby takes one slot, the
@@ -98,18 +100,24 @@ class Bounds:
     settle: float
     """After the last fault, by when every view of every slot is one (invariant 8): a
     takeover, then the holders' unasked certificate relay (`RELAY_EVERY` T_max)."""
+    takeover_faded: float = 0.0
+    """The takeover bound for a failure after a link fault or a pause: the watchers may
+    have measured that silence as a fade of the link and wait up to `t_max_bursty`."""
 
     @classmethod
     def of(cls, p: Params, loss: float) -> Bounds:
-        # Crash -> every watcher suspects within t_max; two warnings reach the standby
-        # within the vote window; then claim_hold. Loss only delays the warnings, which
-        # repeat every warn_interval: allow two more vote windows under loss.
+        # Crash -> every watcher suspects within its patience for the link (DESIGN
+        # "Detection": t_max on a clean link, up to t_max_bursty on one its belief
+        # measured losing heartbeats in bursts); two warnings reach the standby within
+        # the vote window; then claim_hold. Loss also delays the warnings, which repeat
+        # every warn_interval: allow two more vote windows under loss.
         takeover = p.takeover_bound(lossy=bool(loss))
+        faded = p.takeover_bound(lossy=bool(loss), patience=p.t_max_bursty)
         # A stale holder heartbeats on resume; the new holder answers at once (rule 2).
         dual = p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
         converge = 2 * p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
-        settle = takeover + converge + RELAY_EVERY * p.t_max
-        return cls(takeover, dual, converge, settle)
+        settle = faded + converge + RELAY_EVERY * p.t_max
+        return cls(takeover, dual, converge, settle, faded)
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,6 +189,9 @@ class Checker:
     failures: list[_Failure] = field(default_factory=list)
     """Every injected failure of one robot, in time order."""
     paused_until: dict[int, float] = field(default_factory=dict)
+    faded_at: float | None = None
+    """When the first link fault or pause began: from then on a watcher's belief may
+    have learnt a long silence as a fade, and `Bounds.takeover_faded` holds."""
     false_suspicions: int = 0
     """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
     started: set[int] = field(default_factory=set)
@@ -211,6 +222,9 @@ class Checker:
         if phase == "begin":
             self.faults.append((t, fault))
             self.last_fault_at.append(t)
+            if self.faded_at is None and (fault.kind in LINK_KINDS
+                                          or fault.kind is FaultKind.PAUSE):
+                self.faded_at = t
             if fault.kind in (*_STOPPING_FAULTS, FaultKind.PAUSE, FaultKind.RESTART):
                 end = fault.end if fault.kind is FaultKind.PAUSE \
                     else t if fault.kind is FaultKind.RESTART else float("inf")
@@ -456,7 +470,7 @@ class Checker:
     def _judge_expect(self, e: _Expect, duration: float) -> Violation | None:
         """Invariant 1 for one failure whose slot was not taken over (see the module
         docstring): the violation, or None when the miss is excused."""
-        bound = self.bounds.takeover
+        bound = self._takeover_bound(e.t)
         near = set(self.plan.watched_by(e.function))
         hood = {*self.plan.covered_by(e.function), *e.standbys, *e.watchers}
         mates = [x for x in self.failures if x.robot != e.robot
@@ -487,7 +501,7 @@ class Checker:
     def _expect_deadline(self, e: _Expect, mates: list[_Failure]) -> float:
         """By when the failure's slot must be taken over: the takeover bound, restarted
         by each failure in its neighbourhood and stretched by a standby's grace."""
-        bound = self.bounds.takeover
+        bound = self._takeover_bound(e.t)
         deadline = e.t + bound
         moved = True
         while moved:  # each failure in the neighbourhood restarts the clock
@@ -504,6 +518,14 @@ class Checker:
             if before and before[-1] > 0.5 and e.t - before[-1] < grace:
                 deadline = max(deadline, before[-1] + grace + bound)
         return deadline
+
+    def _takeover_bound(self, t: float) -> float:
+        """The takeover bound for a failure at `t` (DESIGN "Detection": a function of the
+        links as measured): the configured one, unless a link fault or a pause came
+        before, which the watchers may have learnt as a fade."""
+        if self.faded_at is not None and self.faded_at < t:
+            return self.bounds.takeover_faded
+        return self.bounds.takeover
 
     def _excused(self, e: _Expect, deadline: float, duration: float) -> bool:
         """Whether the slot was taken over in time, or the miss is no violation."""

@@ -63,6 +63,8 @@ def _not_bool(value: Any) -> Any:
 
 
 Seconds = Annotated[float, BeforeValidator(_not_bool)]
+Level = Annotated[float, BeforeValidator(_not_bool)]
+"""A number, not seconds (`Params.suspect_level`, `Params.patience_cap`)."""
 
 
 class SwarmInfo(_Model):
@@ -86,6 +88,8 @@ class Timing(_Model):
     standby_timeout: Seconds | None = None
     alert_after: Seconds | None = None
     rejoin_hold: Seconds | None = None
+    patience_cap: Level | None = None
+    suspect_level: Level | None = None
 
     def overrides(self) -> dict[str, float | int]:
         """The Params fields this file sets explicitly."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from swarmd.core import events as ev
 from swarmd.core import wire
+from swarmd.core.belief import byte_level, level_byte
 from swarmd.core.drops import DropReason
 from swarmd.core.evidence import seq_of
 from swarmd.core.nodebase import NodeBase
@@ -83,8 +84,11 @@ class Hearing(NodeBase):
             # here too. Our warning about that holder carries the entry (DESIGN,
             # "Convergence"): the stale holder and anyone else that missed it move
             # forward (`_warned_newer`), the stale holder fences, and the slot's
-            # watchers take it from there. Once per T_max per slot.
-            self._send(wire.Warn(known.robot, hb.function, known.epoch))
+            # watchers take it from there. Once per T_max per slot. It says how strongly
+            # we suspect that holder: a standby counts it only as a suspicion (DESIGN
+            # "Detection"), the entry travels either way.
+            level = self._ears.level_now(known.robot, now)
+            self._send(wire.Warn(known.robot, hb.function, known.epoch, level_byte(level)))
 
     def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
@@ -127,7 +131,8 @@ class Hearing(NodeBase):
             suspected = watch.suspecting
             reasserted = self._identity is not None and epoch > before.epoch \
                 and self._ev.reasserted(f, sender, epoch) is not None
-            if watch.heard(now) and suspected and (epoch <= before.epoch or reasserted):
+            if watch.heard(now, self._ears.patience(sender)) and suspected \
+                    and (epoch <= before.epoch or reasserted):
                 # The suspect heard alive (rule 4), or the rival that won the suspect's
                 # own takeover race at its epoch (lowest id): the suspicion is over, and
                 # the log says so (the paper's property: every warning ends in a
@@ -154,13 +159,17 @@ class Hearing(NodeBase):
         f = self._slot(w.function)
         if f is None:
             return
-        self._views_from_warn(f, sender, w, raw, now)
+        # A warning below the suspicion level is a watcher's doubt (DESIGN "Detection"):
+        # the suspect answers it (rule 4), views move on it, but it is nobody's evidence
+        # and no standby counts it (Fig. 9 counts accusations).
+        strong = byte_level(w.belief) >= self._params.suspect_level
+        self._views_from_warn(f, sender, w, raw, now, evidence=strong)
         holder, epoch = self._known[f]
         if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
             return
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, w.epoch)
-        if f not in self._covers or not self._standing_by():
+        if not strong or f not in self._covers or not self._standing_by():
             return
         if greater(Holder(holder, epoch), Holder(w.suspect, w.epoch)):
             return  # about an older holder: stale
@@ -177,24 +186,26 @@ class Hearing(NodeBase):
             return
         count = self._count_vote(f, sender, w, now)
         # Rule 4 from our own ears: the channel is a broadcast, so the standby hears the
-        # suspect too. Heard within T_max/2, the suspect is alive whatever the witnesses
-        # missed (loss); after a real crash this is silent by the time warnings come
-        # (they come T_max after the last heartbeat), so it costs no latency. The next
-        # warning re-checks.
-        if count >= self._params.quorum and not self._ears.heard_lately(
-                f, w.suspect, w.epoch, now, self._params.t_max / 2):
+        # suspect too. Heard within our own patience for its link (`Ears.alive_to_me`),
+        # the suspect is alive whatever the witnesses missed (loss); after a real crash
+        # this is silent by the time warnings come (they come a patience after the last
+        # heartbeat), so it costs no latency. The next warning re-checks. The takeover
+        # of a live robot so needs three links silent at once (DESIGN "Detection").
+        if count >= self._params.quorum and not self._ears.alive_to_me(
+                f, w.suspect, w.epoch, now):
             self._start_claim(f, w.suspect, w.epoch, now)
 
     def _views_from_warn(self, f: str, sender: int, w: wire.Warn, raw: bytes,
-                         now: float) -> None:
+                         now: float, *, evidence: bool = True) -> None:
         """A warning about f's holder, before any standby counts it: per robot, its
-        evidence is kept, and a robot whose view of f is newer than the warning's shows
-        the warner its certificate; in the other modes a newer epoch in it may raise our
-        view (DESIGN, "Convergence")."""
+        evidence is kept (a suspicion's, not a doubt's), and a robot whose view of f is
+        newer than the warning's shows the warner its certificate; in the other modes a
+        newer epoch in it may raise our view (DESIGN, "Convergence")."""
         if self._identity is None:
             self._warned_newer(f, sender, w, now)
             return
-        self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
+        if evidence:
+            self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
         if self._holds(f) and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
             self._relay_cert(f, now)  # a watcher that missed our takeover
         elif greater(self._known[f], Holder(w.suspect, w.epoch)):

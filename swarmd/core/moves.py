@@ -9,6 +9,7 @@ from __future__ import annotations
 from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Assign, Release
+from swarmd.core.belief import LEVEL_MAX, level_byte
 from swarmd.core.claims import WaitState
 from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.nodebase import NodeBase
@@ -126,12 +127,19 @@ class Moves(NodeBase):
         state = self._state
         assert isinstance(state, Active)
         state.watches = {g: SlotWatch(g, self._params, now,
-                                      self._heard_at.get(self._known[g].robot))
+                                      self._heard_at.get(self._known[g].robot),
+                                      self._ears.patience(self._known[g].robot))
                          for g in self._plan.watched(state.function)}
 
     def _watch_fired(self, g: str, watch: SlotWatch, now: float) -> None:
         subject, epoch = self._known[g]
         fired = watch.fire(now)
+        level = self._warn_level(subject, watch, now)
+        if fired.doubt:
+            # Not a suspicion yet (DESIGN "Detection"): the warning asks the holder to
+            # answer (rule 4), its weak level tells standbys not to count it.
+            self._send(wire.Warn(subject, self._plan.slot(g), epoch, level_byte(level)))
+            return
         if fired.first:
             self._emit(ev.Suspect(subject=subject, function=g))
             self._emit(ev.Warn(subject=subject, function=g))
@@ -149,7 +157,17 @@ class Moves(NodeBase):
             # first fire: one more T_max of silence first, so loss alone rarely alerts.
             watch.mark_alerted()
             self._emit(ev.Alert(function=g, reason=ev.AlertCause.NO_STANDBY))
-        self._send(wire.Warn(subject, self._plan.slot(g), epoch))
+        # A suspicion: its level, and at least the swarm's `suspect_level` (the patience
+        # cap, `t_max_bursty`, may have ended the wait before the level got there).
+        strong = max(level, self._params.suspect_level)
+        self._send(wire.Warn(subject, self._plan.slot(g), epoch, level_byte(strong)))
+
+    def _warn_level(self, subject: int, watch: SlotWatch, now: float) -> float:
+        """How strongly we suspect `subject` now: the belief of its link for the silence
+        since we last heard the slot (never heard: as strongly as can be)."""
+        if watch.last_heard is None:
+            return LEVEL_MAX
+        return self._ears.level(subject, now - watch.last_heard)
 
     # ------------------------------------------------------------------ heartbeats
     def _send_heartbeat(self, now: float, *, extra: bool = False) -> None:

@@ -114,6 +114,12 @@ class Node(Hearing, Moves, Signed, Restart):
         """Signed per robot: WARN, CLAIM and LEAVE carry their sender's own signature."""
         return self._identity is not None
 
+    def patience(self, robot: int) -> float:
+        """s of silence of `robot`'s slot heartbeats after which this robot suspects it:
+        its belief of that link (DESIGN "Detection"; `t_max` for a clean or unmeasured
+        link, up to `t_max_bursty`)."""
+        return self._ears.patience(robot)
+
     @property
     def drops(self) -> Mapping[str, int]:
         """Cumulative dropped frames by reason, live (a missing reason reads 0); cheap
@@ -355,6 +361,7 @@ class Node(Hearing, Moves, Signed, Restart):
         if armed is not None and self._started and now - armed > self._params.t_max / 2:
             for w in self._watches.values():
                 w.refresh(now)
+            self._ears.forget_gaps()  # the gap was ours: no sample of any link
             self._clear_votes()
             if self._claim is not None:
                 self._claim.until = max(self._claim.until, now + self._params.claim_hold)

@@ -5,10 +5,11 @@ model). Two presets: `udp()` for loopback / Wi-Fi multicast, where frames
 are cheap and latency is milliseconds, and `radio()` for XBee / SiK radios, where the
 air is shared at 250 kbps and a frame costs milliseconds of airtime.
 
-The takeover bound follows from the fields (`Params.takeover_bound`): a watcher fires at
-most `t_max` after the last heartbeat it heard (paper Fig. 7), so a crash is suspected
-within `t_max` and taken over within `t_max + vote_window + claim_hold` when nothing is
-lost (two more vote windows under loss).
+The takeover bound follows from the fields (`Params.takeover_bound`): a watcher fires
+after the patience its belief of the link gives (`belief.py`): `t_max` after the last
+heartbeat it heard on a clean link (paper Fig. 7), more on a link that fades in bursts,
+never more than `t_max_bursty`. A crash is taken over within `patience + vote_window +
+claim_hold` when nothing is lost (two more vote windows under loss).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
+from swarmd.core.belief import LEVEL_MAX
 from swarmd.core.errors import ParamsError as ParamsError
 
 
@@ -61,12 +63,34 @@ class Params:
     """s. A robot restarted with a function in its persisted state listens this long
     before it resumes, so it learns of a takeover made while it was down (rule 2)."""
 
+    patience_cap: float
+    """Times `t_max`. The most patience a watcher's belief may give a link that loses
+    heartbeats in bursts (DESIGN "Detection"): its silence is suspected after between
+    `t_max` (a clean link, Fig. 7 as configured) and `t_max_bursty` = this x `t_max`,
+    which the takeover bound on a lossy link uses. A multiple, so that a file that
+    overrides `t_max` alone keeps the same proportion. At least 1 (1: Fig. 7 as is)."""
+
+    suspect_level: float
+    """Suspicion level (-log10 of how often a live neighbour is silent that long on the
+    link as measured, `belief.py`) at which a watcher suspects it, and that a standby
+    needs from each witness and from its own ears before it claims. 2: a silence a live
+    robot on that link produces once in a hundred heartbeats. Above 3.7 a link not
+    measured yet is given more than `t_max` (`belief.PRIOR_BURSTS`)."""
+
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name == "quorum":
                 if not isinstance(value, int) or value < 1:
                     raise ParamsError(f"quorum must be an integer >= 1, got {value!r}")
+            elif f.name == "suspect_level":
+                if not isinstance(value, (int, float)) or not 0 < value <= LEVEL_MAX:
+                    raise ParamsError(f"suspect_level must be a number in (0, {LEVEL_MAX}], "
+                                      f"got {value!r}")
+            elif f.name == "patience_cap":
+                if not isinstance(value, (int, float)) or not value >= 1:
+                    raise ParamsError(f"patience_cap must be a number >= 1 (times t_max), "
+                                      f"got {value!r}")
             elif not isinstance(value, (int, float)) or value <= 0:
                 raise ParamsError(f"{f.name} must be a positive number of seconds, got {value!r}")
         if self.t_max < 2 * self.heartbeat_interval:
@@ -90,15 +114,26 @@ class Params:
         """A copy with some fields changed, validated again."""
         return replace(self, **overrides)
 
-    def takeover_bound(self, *, lossy: bool = False) -> float:
+    def takeover_bound(self, *, lossy: bool = False, patience: float | None = None) -> float:
         """s from a holder's crash to its takeover, at most: every watcher suspects within
-        `t_max` of the last heartbeat it heard (paper Fig. 7); the quorum's warnings meet
-        within `vote_window` (DESIGN rule 3); then the claim hold (the wait state). On a
-        `lossy` channel the warnings, repeated every `warn_interval`, may need two more
-        vote windows. The one formula `swarmd check` prints and the invariant checker
-        holds runs to."""
-        bound = self.t_max + self.vote_window + self.claim_hold
+        `patience` of the last heartbeat it heard (its belief of the link, `belief.py`,
+        kept within [`t_max`, `t_max_bursty`]); the quorum's warnings meet within
+        `vote_window` (DESIGN rule 3); then the claim hold (the wait state). On a clean
+        link the patience is `t_max` (paper Fig. 7): the bound users configure. On a
+        `lossy` channel the links may fade in bursts, so the patience is at most
+        `t_max_bursty` (the default there), and the warnings, repeated every
+        `warn_interval`, may need two more vote windows. The one formula `swarmd check`
+        prints and the invariant checker holds runs to."""
+        if patience is None:
+            patience = self.t_max_bursty if lossy else self.t_max
+        wait = min(max(patience, self.t_max), self.t_max_bursty)
+        bound = wait + self.vote_window + self.claim_hold
         return bound + 2 * self.vote_window if lossy else bound
+
+    @property
+    def t_max_bursty(self) -> float:
+        """s. The most patience any link gets (`patience_cap` x `t_max`)."""
+        return self.patience_cap * self.t_max
 
     @property
     def claim_horizon(self) -> float:
@@ -109,6 +144,13 @@ class Params:
 
     def as_dict(self) -> dict[str, float | int]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+SUSPECT_LEVEL = 2.2
+"""The presets' `suspect_level`. Measured on the paper swarm at `udp()` (DESIGN
+"Detection"): with 30 % loss in bursts of 8 heartbeats a watcher waits ~1.7 s, so a crash
+is still taken over within 2 s, and a live robot is suspected by a quorum and its standby
+at once too rarely to be replaced."""
 
 
 def udp() -> Params:
@@ -125,6 +167,8 @@ def udp() -> Params:
         standby_timeout=2.0,  # four standby heartbeats
         alert_after=2.0,  # no claim within 4 x t_max: nobody is coming
         rejoin_hold=0.7,  # > t_max + heartbeat: a holder's heartbeat is heard by then
+        patience_cap=4.0,  # at most 2 s: 30 % loss in bursts of 8 gets ~1.5 s
+        suspect_level=SUSPECT_LEVEL,
     )
 
 
@@ -149,7 +193,12 @@ def radio() -> Params:
         standby_timeout=24.0,  # three standby heartbeats: a lost one is no dead standby
         alert_after=8.0,
         rejoin_hold=3.0,  # > t_max + heartbeat_interval
+        patience_cap=4.0,  # at most 8 s, as at udp 4 x t_max
+        suspect_level=SUSPECT_LEVEL,
     )
 
 
 PRESETS = {"udp": udp, "radio": radio}
+
+UNITLESS = frozenset({"quorum", "patience_cap", "suspect_level"})
+"""The fields that are not seconds."""

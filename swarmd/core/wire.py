@@ -10,9 +10,10 @@ Layout (big-endian)::
   it fits any XBee broadcast payload: Zigbee 92 B, 802.15.4 100 B, DigiMesh 73 B).
 - body: HEARTBEAT `slot, epoch (16), role|health (8)`, per robot followed by `n (8),
   link (8 bytes)` (its hash chain, `chain.py`: 24 bytes with no tag; an anchor carries
-  the sender's signature in place of the tag, 88 bytes); WARN and CLAIM `robot (16), slot,
-  epoch (16)`; LEAVE `slot, epoch (16), reason (8)`; REFUTE `witness (16), slot, epoch
-  (16), the witness's seq (48)`; CERT `slot, a relayed signed frame`.
+  the sender's signature in place of the tag, 88 bytes); WARN `robot (16), slot, epoch
+  (16), belief (8)`; CLAIM `robot (16), slot, epoch (16)`; LEAVE `slot, epoch (16),
+  reason (8)`; REFUTE `witness (16), slot, epoch (16), the witness's seq (48)`; CERT
+  `slot, a relayed signed frame`.
 - slot: a function's wire index (0 = none, 1..65535), variable length so that a swarm
   of fewer than 128 functions pays one byte as it always did: `0xxxxxxx` is 0..127 in
   one byte; a first byte 0x80..0xFE carries 15 bits `1hhhhhhh llllllll` (128..0x7EFF,
@@ -95,11 +96,14 @@ class Heartbeat:
 
 @dataclass(frozen=True, slots=True)
 class Warn:
-    """The paper's warning (ping_id = sender, warn_id = suspect)."""
+    """The paper's warning (ping_id = sender, warn_id = suspect). `belief`: how strongly
+    the sender suspects, its suspicion level in tenths (0..255, `belief.level_byte`;
+    DESIGN "Detection"): a standby counts the warning only from its `suspect_level` up."""
 
     suspect: int
     function: int
     epoch: int
+    belief: int = 255
 
 
 @dataclass(frozen=True, slots=True)
@@ -168,7 +172,7 @@ _SLOT_AT = {MsgType.HEARTBEAT: 0, MsgType.WARN: 2, MsgType.CLAIM: 2, MsgType.LEA
 REFUTE)."""
 _TYPES: tuple[MsgType | None, ...] = (None, *MsgType, None)
 """Message type by the low 3 bits of byte 0 (0 and 7 are no type)."""
-_FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 4, MsgType.CLAIM: 4, MsgType.LEAVE: 3,
+_FIXED_BODY = {MsgType.HEARTBEAT: 3, MsgType.WARN: 5, MsgType.CLAIM: 4, MsgType.LEAVE: 3,
                MsgType.REFUTE: 10}
 _INNER_MIN = HEADER_LEN + 4 + SIGNATURE_LEN
 """Body bytes besides the slot field."""
@@ -241,8 +245,13 @@ def _body(msg: Message) -> bytes:
         case Heartbeat(function, epoch, role, health):
             return encode_slot(function) + struct.pack(
                 ">HB", epoch, (role & 0x0F) | ((health & 0x0F) << 4))
-        case Warn(suspect, function, epoch) | Claim(suspect, function, epoch):
-            return _U16.pack(suspect) + encode_slot(function) + _U16.pack(epoch)
+        case Warn(suspect, function, epoch, belief):
+            if not 0 <= belief <= 0xFF:
+                raise ValueError(f"belief {belief} does not fit 8 bits")
+            return _U16.pack(suspect) + encode_slot(function) + _U16.pack(epoch) \
+                + bytes((belief,))
+        case Claim(failed, function, epoch):
+            return _U16.pack(failed) + encode_slot(function) + _U16.pack(epoch)
         case Leave(function, epoch, reason):
             return encode_slot(function) + struct.pack(">HB", epoch, reason)
         case Cert(function, _, raw):
@@ -368,7 +377,7 @@ def _message(data: bytes, mtype: MsgType, slot: int, after: int, *, strong: bool
                              anchor=strong)
         case MsgType.WARN:
             return Warn(suspect=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
-                        epoch=_U16.unpack_from(data, after)[0])
+                        epoch=_U16.unpack_from(data, after)[0], belief=data[after + 2])
         case MsgType.CLAIM:
             return Claim(failed=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
                          epoch=_U16.unpack_from(data, after)[0])

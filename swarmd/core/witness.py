@@ -5,17 +5,20 @@
 - Rules 6 and 8: is anyone left who may take a slot over (`Ears.live_standby`)?
 - Rule 9: the standby's own ears stand in for watchers lost with the suspect
   (`Ears.own_ears`), and rule 4 from its own ears: a suspect heard lately is alive
-  (`Ears.heard_lately`).
+  (`Ears.alive_to_me`).
 
 `Ears` keeps, per slot, the last heartbeat heard *for that slot* (a robot that stopped
 heartbeating but still sends other frames, a faulty liar, must not look alive to the
-standby that would replace it), and per robot its last standby heartbeat. Pure.
+standby that would replace it), per robot its last standby heartbeat, and per robot
+heard heartbeating a slot the belief of its link (`belief.py`): how long a silence of
+that robot is still no news (DESIGN "Detection"). Pure.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 
+from swarmd.core.belief import LEVEL_MAX, LinkBelief
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder, SlotBeat
@@ -28,7 +31,7 @@ def witnesses(plan: SwarmPlan, known: Mapping[str, Holder], f: str) -> set[int]:
 
 
 class Ears:
-    __slots__ = ("_params", "_plan", "_robot_id", "_slot_heard", "_standby_at",
+    __slots__ = ("_links", "_params", "_plan", "_robot_id", "_slot_heard", "_standby_at",
                  "_start")
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, start: float) -> None:
@@ -38,14 +41,53 @@ class Ears:
         self._start = start
         self._slot_heard: dict[str, SlotBeat] = {}
         self._standby_at: dict[int, float] = {}
+        self._links: dict[int, LinkBelief] = {}
+        """robot -> its link's belief; one per robot of the plan at most."""
 
     def slot_beat(self, f: str, holder: int, epoch: int, now: float) -> None:
         """A heartbeat of f's holder at `epoch` was accepted at `now`."""
         self._slot_heard[f] = SlotBeat(holder, epoch, now)
+        link = self._links.get(holder)
+        if link is None:
+            link = self._links[holder] = LinkBelief(self._params.heartbeat_interval)
+        link.beat(now, (f, epoch), self._params.t_max_bursty)
+
+    # ------------------------------------------------------------------ beliefs
+    def patience(self, robot: int) -> float:
+        """s of silence of `robot`'s slot heartbeats after which this robot suspects it:
+        `t_max` on a clean or unmeasured link, up to `t_max_bursty` on a bursty one."""
+        p = self._params
+        link = self._links.get(robot)
+        if link is None:
+            return p.t_max
+        return link.patience(p.suspect_level, p.t_max, p.t_max_bursty)
+
+    def level(self, robot: int, silence: float) -> float:
+        """How strongly a `silence` (s) of `robot` is suspected on its link (`belief.py`);
+        a robot never heard heartbeating a slot is as suspect as can be."""
+        link = self._links.get(robot)
+        return LEVEL_MAX if link is None else link.level(silence)
+
+    def level_now(self, robot: int, now: float) -> float:
+        """`level` for `robot`'s silence since its last slot heartbeat we heard."""
+        link = self._links.get(robot)
+        if link is None or link.last is None:
+            return LEVEL_MAX
+        return link.level(now - link.last)
+
+    def forget_gaps(self) -> None:
+        """This robot stalled: the silences it is about to see are its own."""
+        for link in self._links.values():
+            link.forget_gap()
 
     def standby_beat(self, robot: int, now: float) -> None:
         """A healthy standby (or claimant) heartbeat of `robot` was heard at `now`."""
         self._standby_at[robot] = now
+        link = self._links.get(robot)
+        if link is not None:
+            # It heartbeats as a standby now (restarted, fenced, rejoining): its silence
+            # on the slot it held was no fade of its link.
+            link.forget_gap()
 
     def heard_lately(self, f: str, holder: int, epoch: int, now: float, within: float) -> bool:
         """Was f heard from `holder` at `epoch` less than `within` ago?"""
@@ -53,25 +95,41 @@ class Ears:
         return heard is not None and (heard.holder, heard.epoch) == (holder, epoch) \
             and now - heard.at < within
 
+    def alive_to_me(self, f: str, holder: int, epoch: int, now: float) -> bool:
+        """Rule 4 from a standby's own ears: on a broadcast medium the standby hears the
+        suspect too, so one heard within its own patience for the suspect's link, less
+        T_max/2, is alive whatever the witnesses missed: a takeover needs the standby's
+        silence to be nearly as unlikely from a live robot as each witness's (DESIGN
+        "Detection": a live robot is replaced only if three independent links fade at
+        once). On a clean link that is T_max/2, as before beliefs: after a real crash
+        the witnesses warn T_max after the last heartbeat, which the standby heard at
+        the same moment give or take the channel's jitter, so the first quorum claims;
+        a frame of the suspect's heard later (a replay that got through, a refutation)
+        holds the claim back for T_max/2, no more."""
+        within = self.patience(holder) - self._params.t_max / 2
+        return self.heard_lately(f, holder, epoch, now, within)
+
     def own_ears(self, f: str, known: Mapping[str, Holder], now: float) -> bool:
         """Rule 9: is this standby a witness of f's holder's silence itself?
 
         Only when (a) it has heard no heartbeat for slot f for T_max — on a broadcast
         medium a live suspect is heard by the standby as well as by its watchers, so a
         liar's warning about a live robot finds the standby's ears against it — and
-        (b) fewer than a quorum of f's watchers are alive by their own heartbeats, so
-        the quorum can no longer be met by watchers alone. Never during the start-up
-        grace, when silence means nothing yet."""
+        (b) fewer than a quorum of f's watchers are alive by their own heartbeats (each
+        judged by its own link's patience), so the quorum can no longer be met by
+        watchers alone. Never during the start-up grace, when silence means nothing
+        yet."""
         p = self._params
         if now - self._start < p.startup_grace:
             return False
         heard = self._slot_heard.get(f)
-        if heard is not None and now - heard.at < p.t_max:
+        if heard is not None and now - heard.at < self.patience(heard.holder):
             return False
         live = 0
         for g in self._plan.watched_by(f):
             beat = self._slot_heard.get(g)
-            if beat is not None and beat.holder == known[g].robot and now - beat.at < p.t_max:
+            if beat is not None and beat.holder == known[g].robot \
+                    and now - beat.at < self.patience(beat.holder):
                 live += 1
         return live < p.quorum
 

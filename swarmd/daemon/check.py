@@ -24,7 +24,7 @@ from swarmd.config.robot import from_source as robot_from_source
 from swarmd.config.source import read_source
 from swarmd.config.swarm import Coverage, SwarmConfig
 from swarmd.config.swarm_rules import inspect_swarm
-from swarmd.core.params import Params, ParamsError
+from swarmd.core.params import UNITLESS, Params, ParamsError
 
 if TYPE_CHECKING:
     from swarmd.services.budget import Budget  # budget_section imports it only when it runs
@@ -154,11 +154,12 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
         return None
     overrides = cfg.timing.overrides()
     rows = tuple(
-        (name, f"{value:g}" + ("" if name == "quorum" else " s"),
+        (name, f"{value:g}" + ("" if name in UNITLESS else " s"),
          "file" if name in overrides else cfg.timing.preset)
         for name, value in params.as_dict().items()
     )
     bound = params.takeover_bound()
+    bursty = params.takeover_bound(lossy=True)
     return Section(
         key="timing",
         title=f"Timing (preset {cfg.timing.preset})",
@@ -169,9 +170,12 @@ def timing_section(cfg: SwarmConfig) -> Section | None:
             "params": params.as_dict(),
             "overrides": sorted(overrides),
             "takeover_bound_s": round(bound, 6),
+            "takeover_bound_bursty_s": round(bursty, 6),
         },
         notes=(
             f"takeover bound (no loss): t_max + vote_window + claim_hold = {bound:g} s",
+            f"on a link that loses heartbeats in bursts: t_max_bursty + 3 vote_window + "
+            f"claim_hold = {bursty:g} s (DESIGN, Detection)",
         ),
     )
 

@@ -50,6 +50,7 @@ from typing import Any
 
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
+from swarmd.core.belief import byte_level
 from swarmd.core.chain import PeerChains
 from swarmd.core.drops import DropReason
 from swarmd.core.params import Params
@@ -158,7 +159,10 @@ class MonitorState:
         match frame.msg:
             case wire.Heartbeat(function, epoch, role, health):
                 self._on_heartbeat(seen, frame.sender, function, epoch, role, health)
-            case wire.Warn(suspect, function, _epoch):
+            case wire.Warn(suspect, function, _epoch, belief) \
+                    if byte_level(belief) >= self.params.suspect_level:
+                # A suspicion; a doubt (a weaker level, DESIGN "Detection") only asks
+                # the robot to answer, and no standby counts it: neither does the table.
                 target = self.robots.get(suspect)
                 if target is None and suspect in self.plan.robots:
                     target = self.robots[suspect] = Heard(suspect, float("-inf"))

@@ -63,7 +63,8 @@ MAX_PAYLOAD = {**media.MAX_PAYLOAD, "serial": media.SERIAL_MAX_PAYLOAD,
 1500-byte Ethernet MTU."""
 
 HEARTBEAT_BODY = 3  # wire.py: epoch (2), role|health (1), plus the slot field
-WARN_BODY = 4  # suspect (2), epoch (2), plus the slot field
+WARN_BODY = 5  # suspect (2), epoch (2), belief (1), plus the slot field; a CLAIM has no
+# belief byte, and is counted as large as a WARN (one byte to spare)
 MEDIA = tuple(MAX_PAYLOAD)
 
 
@@ -140,7 +141,7 @@ class Budget:
     per_robot: bool = False
     """WARN, CLAIM and LEAVE signed with each robot's own key (certificates on claims)."""
     warn_bytes: int = 0
-    """Bytes of a WARN (a CLAIM is the same size)."""
+    """Bytes of a WARN (a CLAIM, one byte less, is counted as large)."""
     cert_bytes: int = 0
     """Bytes of one CERT frame (per-robot mode; 0 otherwise)."""
     warn_fragments: int = 1
@@ -210,7 +211,8 @@ def anchor_rates(active: int, standby: int, params: Params) -> float:
 
 
 def warn_size(signed: bool, slot_bytes: int = 1, *, per_robot: bool = False) -> int:
-    """Bytes of a WARN or CLAIM; per-robot mode signs them with Ed25519."""
+    """Bytes of a WARN (a CLAIM is one byte less: counted as a WARN); per-robot mode signs
+    them with Ed25519."""
     auth = SIGNATURE_LEN if per_robot else TAG_LEN if signed else 0
     return HEADER_LEN + WARN_BODY + slot_bytes + auth
 
