@@ -61,14 +61,24 @@ _SEED_DOMAIN = b"swarmd heartbeat chain v1"
 def step(robot: int, link: bytes) -> bytes:
     """The link before `link` in `robot`'s chain (its hash, personalised per robot so a
     table built for one robot's chains is no use on another's)."""
-    person = _PERSON.get(robot)
-    if person is None:  # robot ids are 16 bits: the table stays small
-        person = _PERSON[robot] = b"swarmd-hb" + robot.to_bytes(2, "big")
-    return hashlib.blake2b(link, digest_size=LINK_LEN, person=person).digest()
+    h = _hasher(robot).copy()
+    h.update(link)
+    return h.digest()
 
 
-_PERSON: dict[int, bytes] = {}
-"""robot -> its BLAKE2b personalisation, built once (`step` runs for every link heard)."""
+def _hasher(robot: int) -> hashlib.blake2b:
+    """`robot`'s personalised BLAKE2b, empty, built once: copying it is about a third
+    cheaper than building one with its parameters for every link (`step` runs for every
+    link heard, and a chain is `CHAIN_LEN` of them)."""
+    base = _PERSON.get(robot)
+    if base is None:  # robot ids are 16 bits: the table stays small
+        person = b"swarmd-hb" + robot.to_bytes(2, "big")
+        base = _PERSON[robot] = hashlib.blake2b(digest_size=LINK_LEN, person=person)
+    return base
+
+
+_PERSON: dict[int, hashlib.blake2b] = {}
+"""robot -> its personalised BLAKE2b, not fed yet (`_hasher`)."""
 
 
 def resync_after(params: Params) -> float:
@@ -132,9 +142,12 @@ class OwnChain:
         seed = hashlib.blake2b(
             self._signer.sign(_SEED_DOMAIN + self._robot.to_bytes(2, "big") + stamp),
             digest_size=LINK_LEN).digest()
+        base = _hasher(self._robot)
         links = [seed]
         for _ in range(CHAIN_LEN - 1):
-            links.append(step(self._robot, links[-1]))
+            h = base.copy()  # `step`, inlined: drawing is most of a short run's hashing
+            h.update(links[-1])
+            links.append(h.digest())
         self._links = links  # popped from the end: the last one made goes out first
         self._anchor_due = ANCHOR_RUN
 

@@ -325,9 +325,13 @@ class Node(Hearing, Moves, Signed, Restart):
         self._chains.forget(robots)
 
     def next_deadline(self) -> float | None:
-        """When `tick` must be called next (absolute, same clock as `now`)."""
+        """When `tick` must be called next (absolute, same clock as `now`). Every entry
+        point ends in `_drain`, which works it out once (a driver asks after each)."""
         if self._stopped:
             return None
+        return self._armed if self._armed is not None else self._deadline()
+
+    def _deadline(self) -> float | None:
         if not self._started:
             return self._start_time
         candidates = [w.deadline for w in self._watches.values()]
@@ -377,7 +381,7 @@ class Node(Hearing, Moves, Signed, Restart):
         """End of every entry point: hand the actions over, and remember the deadline the
         driver is about to arm, by which `_advance` tells our own stall."""
         if not self._stopped:
-            self._armed = self.next_deadline()
+            self._armed = self._deadline()
         out, self._pending = self._pending, []
         return out
 
