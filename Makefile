@@ -16,8 +16,12 @@ $(STAMP)/system: scripts/system-deps.sh
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
+# MAVProxy (the suite's ground station from ArduPilot, tests/test_mavproxy_vehicle.py) goes
+# in without its declared OpenCV and VTK, some hundred MB a headless session never loads:
+# its runtime needs only pymavlink, pyserial and numpy, which the dev extra brings.
 $(STAMP)/python: pyproject.toml | $(PY)
 	$(PIP) install -q -e '.[sim,ros2,dev]'
+	$(PIP) install -q --no-deps 'MAVProxy>=1.8.75'
 	mkdir -p $(STAMP) && touch $@
 
 setup: $(STAMP)/system $(STAMP)/python
