@@ -183,15 +183,45 @@ def test_stacks_that_are_up_before_their_daemons_never_make_them_leave(
     assert field.leaves() == []
 
 
+START_TRIES = 3
+"""Starts of a field a test may discard (`started`)."""
+
+
+def started(tmp: Path, domain: int, *, health_timeout: float = 2.0,
+            alone: int | None = None) -> tuple[Field, subprocess.Popen[bytes] | None]:
+    """A field of robots 1-4, stacks and daemons up, each robot executing its own function
+    (robot `alone`'s stack in a process of its own, which is returned). On a loaded
+    machine a daemon may start so late that standby 4 took its slot at the start: the
+    start-up grace's business (docs/operations.md), not what these tests are about, so
+    such a start is discarded and the field started anew, as bench_ros2_field.py
+    discards it, at most START_TRIES times."""
+    for attempt in range(START_TRIES):
+        field = Field(tmp, domain, f"field{attempt}", health_timeout=health_timeout)
+        others = [r for r in (1, 2, 3, 4) if r != alone]
+        field.start_stacks(*others)
+        own = field.start_stacks(alone) if alone is not None else None
+        for r in (1, 2, 3, 4):
+            field.start_daemon(r)
+        wait_until(field.each_function_flown_once, WAIT, "each function executed once")
+        if field.all_fly_their_function():
+            return field, own
+        field.close()
+    raise AssertionError(f"{START_TRIES} starts in a row moved a function at the start")
+
+
 def test_a_daemon_killed_and_restarted_after_a_takeover_releases_its_robot(
-        field: Field) -> None:
+        tmp_path: Path, domain: int) -> None:
     """Robot 2's daemon is SIGKILLed while holding f2; standby 4 takes f2; the daemon
     restarts (now a standby) and tells its robot to release before anything else:
     exactly one stack executes f2 at the end."""
-    field.start_stacks(1, 2, 3, 4)
-    for r in (1, 2, 3, 4):
-        field.start_daemon(r)
-    wait_until(field.all_fly_their_function, WAIT, "every stack executes its function")
+    field, _ = started(tmp_path, domain)
+    try:
+        _kill_and_restart_daemon(field)
+    finally:
+        field.close()
+
+
+def _kill_and_restart_daemon(field: Field) -> None:
     field.kill(field.daemons[2])
     wait_until(lambda: any(e["event"] == "takeover" and e["function"] == "f2"
                            for e in field.events(4)), WAIT, "robot 4 takes f2")
@@ -214,19 +244,15 @@ def test_a_stack_restarted_at_once_gets_one_consistent_assignment(
     in one message (function, action, seq, boot, lease) and executes f2 again. A
     Python stack takes about 2 s to start here, so health_timeout is 6 s (docs/ros2.md:
     above the time the stack takes to restart)."""
-    field = Field(tmp_path, domain, health_timeout=6.0)
+    field, two = started(tmp_path, domain, health_timeout=6.0, alone=2)
     try:
-        _restart_stack(field)
+        assert two is not None
+        _restart_stack(field, two)
     finally:
         field.close()
 
 
-def _restart_stack(field: Field) -> None:
-    field.start_stacks(1, 3, 4)
-    two = field.start_stacks(2)
-    for r in (1, 2, 3, 4):
-        field.start_daemon(r)
-    wait_until(field.all_fly_their_function, WAIT, "every stack executes its function")
+def _restart_stack(field: Field, two: subprocess.Popen[bytes]) -> None:
     field.kill(two)
     before = len(field.record(2))
     time.sleep(0.2)

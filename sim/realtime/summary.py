@@ -11,6 +11,7 @@ from sim.shared.summary import (
     Summary,
     lateness_figures,
     lateness_warning,
+    restart_delays,
     slow_starts,
     summarize,
 )
@@ -51,6 +52,9 @@ def summarize_realtime(
                                 f"{result.duration:g} s: a partial run")
         summary.extra["interrupted"] = {"signal": result.interrupted, "at": round(end, 3)}
     summary.extra["startup_s"] = round(result.startup_s, 2)
+    restarts = restart_delays(result.events, faults)
+    if restarts:
+        summary.extra["restart_s"] = {str(r): ds for r, ds in restarts.items()}
     summary.extra["lateness_ms"] = figures
     summary.extra["loadavg"] = [round(x, 2) for x in os.getloadavg()]
     return summary

@@ -320,6 +320,25 @@ def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
                         for f in faults)}
 
 
+def restart_delays(events: Sequence[Mapping[str, Any]],
+                   faults: Sequence[Fault]) -> dict[int, list[float]]:
+    """robot -> for each `restart` fault of it, how long after the fault its new node
+    logged `started` (a real process takes its start-up time; a bound that runs from the
+    robot's return runs from then)."""
+    starts: dict[int, list[float]] = {}
+    for t, robot, event in _typed(events):
+        if isinstance(event, Started):
+            starts.setdefault(robot, []).append(t)
+    out: dict[int, list[float]] = {}
+    for f in faults:
+        if f.kind is FaultKind.RESTART:
+            r = f.robots[0]
+            back = next((t for t in starts.get(r, ()) if t >= f.at), None)
+            if back is not None:
+                out.setdefault(r, []).append(round(back - f.at, 3))
+    return out
+
+
 def render_summary(summary: Summary, console: Console) -> None:
     """The human form of the summary (rich tables)."""
     table = Table(title=f"swarmd sim ({summary.mode}): {summary.robots} robots, "
