@@ -79,13 +79,7 @@ def parse_launch(text: str, name: str = "<launch>") -> list[LaunchRobot]:
             key, value = p.get("name"), p.get("value")
             if key is None or value is None:
                 raise LaunchError(f"{label}: <param> needs both name and value attributes")
-            if "$(" in value:
-                raise LaunchError(f"{label}: param {key}: substitution args ({value!r}) "
-                                  "are not supported; write the value out")
-            if key in params:  # ROS takes the last one: a silent surprise, refuse it
-                raise LaunchError(f"{label}: param {key} is given twice "
-                                  f"({params[key]!r} and {value!r})")
-            params[key] = value
+            _add_param(params, key, value, label)
         robots.append(_robot(params, label))
     if not robots:
         raise LaunchError(f"{name}: no <node> elements: nothing to import")
@@ -116,18 +110,25 @@ def parse_yaml_launch(text: str, name: str = "<launch>") -> list[LaunchRobot]:
         for p in entries:
             if not isinstance(p, dict) or "name" not in p or "value" not in p:
                 raise LaunchError(f"{label}: each param needs a name and a value")
-            key, value = str(p["name"]), _yaml_value(p["value"], label, str(p["name"]))
-            if "$(" in value:
-                raise LaunchError(f"{label}: param {key}: substitutions ({value!r}) are "
-                                  "not supported; write the value out")
-            if key in params:
-                raise LaunchError(f"{label}: param {key} is given twice "
-                                  f"({params[key]!r} and {value!r})")
-            params[key] = value
+            key = str(p["name"])
+            _add_param(params, key, _yaml_value(p["value"], label, key), label)
         robots.append(_robot(params, label))
     if not robots:
         raise LaunchError(f"{name}: no `node` entries: nothing to import")
     return robots
+
+
+def _add_param(params: dict[str, str], key: str, value: str, label: str) -> None:
+    """One node's param, as either launch format gives it: a substitution (`$(...)`)
+    would need ROS's launch system to evaluate, and a param given twice is one ROS takes
+    the last of (a silent surprise): both are refused."""
+    if "$(" in value:
+        raise LaunchError(f"{label}: param {key}: substitutions ({value!r}) are not "
+                          "supported; write the value out")
+    if key in params:
+        raise LaunchError(f"{label}: param {key} is given twice "
+                          f"({params[key]!r} and {value!r})")
+    params[key] = value
 
 
 def _yaml_nodes(entries: list[Any], out: list[Any], name: str) -> None:
