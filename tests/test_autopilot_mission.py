@@ -162,15 +162,24 @@ def test_clear_and_refusals_are_answered(flavour: str) -> None:
     assert nak.type == 3 and nak.mission_type == 1
 
 
-def test_an_unanswered_request_is_repeated_then_the_upload_cancelled() -> None:
-    g = Ground("px4")
+@both
+def test_an_unanswered_request_is_repeated_then_the_upload_given_up(flavour: str) -> None:
+    """ArduPilot cancels with MISSION_ACK OPERATION_CANCELLED; PX4 sends no MISSION_ACK,
+    only its critical "Operation timeout" text (`mavlink_mission.cpp`)."""
+    g = Ground(flavour)
     [request] = g.send(g.gcs.mission_count_encode(1, 1, 2))
     assert request.seq == 0
     g.run(1.2)
     assert [m.seq for m in g.kinds("MISSION_REQUEST_INT")] == [0, 0, 0]  # asked again
     g.run(6.0)
-    [cancel] = g.kinds("MISSION_ACK")
-    assert cancel.type == 15  # OPERATION_CANCELLED
+    texts = [(m.severity, m.text) for m in g.kinds("STATUSTEXT")]
+    if flavour == "px4":
+        assert g.kinds("MISSION_ACK") == [] and (2, "Operation timeout") in texts
+    else:
+        [cancel] = g.kinds("MISSION_ACK")
+        assert cancel.type == 15  # OPERATION_CANCELLED
+    [nak] = g.send(g.item(0, 16, alt=3.0))  # too late: no upload going on
+    assert nak.get_type() == "MISSION_ACK" and nak.type == 1
 
 
 def test_ardupilot_partial_upload_and_download() -> None:
@@ -264,6 +273,32 @@ def test_mission_mode_needs_a_mission_and_arducopter_a_takeoff_first() -> None:
     assert apm.command(300, 0, 0) == FAILED  # armed on the ground, no NAV_TAKEOFF first
     assert apm.command(300, 1, 0) == DENIED  # ArduPilot takes no first / last item
     assert any(b"Missing Takeoff" in m.text.encode() for m in apm.core.outbox)
+
+
+def said(g: Ground) -> list[str]:
+    return [m.text for m in g.core.outbox if m.get_type() == "STATUSTEXT"]
+
+
+def test_px4_mission_start_arms_and_flies_from_the_ground() -> None:
+    """PX4's Commander takes MISSION_START as Mission mode and arming at once: a ground
+    station (MAVProxy's `long MISSION_START`) starts a mission with it alone."""
+    g = Ground("px4")
+    assert g.command(300, 0, 0) == DENIED  # no mission
+    assert "Mission start denied! No valid mission" in said(g)
+    items = g.plan()
+    assert g.upload(items).type == 0
+    assert g.command(300, len(items), 0) == DENIED  # no such item
+    assert g.command(300, NAN, 0) == DENIED
+    assert not g.core.armed and g.core.mode != "mission"
+    g.core.refuse_arm = True
+    assert g.command(300, 0, 0) == TEMPORARILY_REJECTED  # arming checks failed
+    assert not g.core.armed and g.core.mode == "mission"  # the mode changed all the same
+    g.core.refuse_arm = False
+    assert g.command(300, 0, 0) == ACCEPTED
+    assert g.core.armed and g.core.mode == "mission"
+    g.run_until(lambda: not g.core.armed, 60.0)
+    assert [m.seq for m in g.kinds("MISSION_ITEM_REACHED")] == list(range(len(items)))
+    assert g.core.robot.mode is Mode.PARKED
 
 
 # -- parameters ---------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from sim.physics.mavlink_defs import (
     FRAME_GLOBAL_RELATIVE_ALT,
     FRAME_GLOBAL_RELATIVE_ALT_INT,
     MESSAGE_IDS,
+    TEMPORARILY_REJECTED,
     UNSUPPORTED,
     Command,
     command_int,
@@ -295,18 +296,34 @@ class AutopilotCore(AutopilotFlight):
         return (x, y, z)
 
     def _mission_start(self, first: float, last: float, t: float) -> int:
-        """MAV_CMD_MISSION_START: the mission mode (PX4 from item param1 if given;
-        ArduPilot armed only, and refuses first and last items, `GCS_Mavlink.cpp`
-        handle_command_mission_start)."""
-        if self.flavour == "ardupilot":
-            if first != 0 or last != 0:
-                return DENIED
-            if not self.armed:
-                return FAILED  # ArduCopter starts a mission armed only
-            return ACCEPTED if self._enter("auto", t) == ACCEPTED else FAILED
-        if math.isfinite(first) and first >= 0:
+        """MAV_CMD_MISSION_START: AUTO for ArduPilot, armed only, and it refuses first and
+        last items (`GCS_Mavlink.cpp` handle_command_mission_start); PX4's as
+        `_px4_mission_start`."""
+        if self.flavour == "px4":
+            return self._px4_mission_start(first, t)
+        if first != 0 or last != 0:
+            return DENIED
+        if not self.armed:
+            return FAILED  # ArduCopter starts a mission armed only
+        return ACCEPTED if self._enter("auto", t) == ACCEPTED else FAILED
+
+    def _px4_mission_start(self, first: float, t: float) -> int:
+        """PX4's Commander (VEHICLE_CMD_MISSION_START): no mission to fly, or param1
+        not an item (nor -1, the current one), is DENIED; else Mission mode AND arming,
+        so the craft on the ground takes off by itself (a ground station starts a
+        mission with this one command). Arming refused: TEMPORARILY_REJECTED, the mode
+        already Mission. Navigator flies from item param1 when it is 0 or more."""
+        if not self.runner.flyable():
+            self.say("Mission start denied! No valid mission", 2)
+            return DENIED
+        if not (math.isfinite(first) and -1 <= first < len(self.mission.listed())):
+            return DENIED
+        if first >= 0:
             self.mission.set_current(int(first))
-        return self._enter("mission", t)
+        if self._enter("mission", t) != ACCEPTED or self._arm(1.0, 0.0, t) != ACCEPTED:
+            self.say("Switching to Mission is currently not available", 2)
+            return TEMPORARILY_REJECTED
+        return ACCEPTED
 
     def _change_speed(self, speed: float) -> int:
         """DO_CHANGE_SPEED param2 (m/s) for the legs of the present mode: PX4 in any mode

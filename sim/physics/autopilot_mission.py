@@ -7,7 +7,10 @@ MISSION_REQUEST_INT, ending with MISSION_ACK), download (MISSION_REQUEST_LIST, t
 MISSION_REQUEST_INT / MISSION_REQUEST per item), ArduPilot's partial upload and download
 (MISSION_WRITE_PARTIAL_LIST, MISSION_REQUEST_PARTIAL_LIST), MISSION_CLEAR_ALL and
 MISSION_SET_CURRENT. An unanswered request is sent again every `RETRY` s; after
-`TRIES` the transfer is cancelled (MISSION_ACK OPERATION_CANCELLED). ArduPilot's mission
+`TRIES` the transfer is given up as each firmware does: ArduPilot cancels it with
+MISSION_ACK OPERATION_CANCELLED (`MissionItemProtocol.cpp` update), PX4 says only
+"Operation timeout" in a critical STATUSTEXT and goes idle (`mavlink_mission.cpp` send:
+no MISSION_ACK, the client learns it from that text or its own timeout). ArduPilot's mission
 holds home as item 0 (a download returns home there whatever was uploaded); PX4's
 starts at the first item.
 
@@ -229,12 +232,15 @@ class MissionStore:
         return [self._ack(peer, OK)]
 
     def tick(self, t: float) -> list[Any]:
-        """Requests sent again, or the cancelled upload's MISSION_ACK."""
+        """Requests sent again, or what the firmware says when it gives the upload up
+        (the module docstring)."""
         up = self._upload
         if up is None or t - up.sent_at < RETRY:
             return []
         if up.tries >= TRIES:
             self._upload = None
+            if self.flavour == "px4":
+                return [self.mav.statustext_encode(2, b"Operation timeout")]
             return [self._ack(up.peer, CANCELLED)]
         up.sent_at, up.tries = t, up.tries + 1
         return [self.mav.mission_request_int_encode(*up.peer, up.next, 0)]
