@@ -46,7 +46,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from swarmd.base.notify import Notifier
 from swarmd.core import wire
@@ -56,7 +56,6 @@ from swarmd.core.events import Event, RoleName, Started
 from swarmd.core.node import Node, Snapshot
 from swarmd.core.roles import Health, Role
 from swarmd.link.base import RobotLink
-from swarmd.services.metrics import Metrics
 from swarmd.transport.base import (
     ChannelError,
     ChannelEvent,
@@ -65,6 +64,9 @@ from swarmd.transport.base import (
     Transport,
     describe,
 )
+
+if TYPE_CHECKING:
+    from swarmd.services.metrics import Metrics
 
 # The name an operator filters the JSON logs on ("logger", docs/daemon.md): it names the
 # component, not the file, so it stays when the module moves between folders.
