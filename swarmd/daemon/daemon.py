@@ -30,7 +30,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from swarmd.base import signals
+from swarmd.base import eventloop, signals
 from swarmd.base.eventlog import EventLog
 from swarmd.base.identity import Ed25519Signer, Keyring
 from swarmd.base.notify import Notifier
@@ -340,7 +340,8 @@ class Daemon:
             "robot": cfg.robot, "swarm": self._swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
             "restored": persisted.to_json() if persisted is not None else None,
-            "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode})
+            "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode,
+            "event_loop": eventloop.describe(loop)})
         await self._runtime.start()
         rt = self._runtime
         self._waiting = loop.create_task(report_waiting(

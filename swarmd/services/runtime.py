@@ -48,6 +48,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
+from swarmd.base.eventloop import timer_slack
 from swarmd.base.notify import Notifier
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
@@ -175,6 +176,8 @@ class Runtime:
         self._watchdog: asyncio.TimerHandle | None = None
         self._running = False
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._slack = 0.0
+        """How much after the node's deadline the timer is armed (`timer_slack`)."""
 
     def _init_persistence(self, state_writer: StateWriter | None, persist_after: float,
                           seq_write_at: int) -> None:
@@ -213,6 +216,7 @@ class Runtime:
         (its deadline right after construction is `now`). Raises what the transport or
         link raise on set-up (bad device, socket path taken): the daemon reports it."""
         self._loop = asyncio.get_running_loop()
+        self._slack = timer_slack(self._loop)
         self._running = True
         try:
             await self._transport.start(self._on_frame, self._on_transport_event)
@@ -417,7 +421,7 @@ class Runtime:
             self._timer = None
         self._armed_at = deadline
         if deadline is not None:
-            self._timer = self.loop.call_at(deadline, self._on_timer)
+            self._timer = self.loop.call_at(deadline + self._slack, self._on_timer)
 
     def _on_timer(self) -> None:
         self._timer = None
