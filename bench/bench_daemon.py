@@ -16,15 +16,19 @@ worktree` and measures it and this tree alternately (`--runs` times each, in one
 both see the same machine load), then prints the median of each tree and their ratio
 (this tree / REV) for robot 1's CPU, the standby's and RSS, with the load average. Each
 tree's own code makes its keys and runs its daemons (`--tree PATH` measures another
-checkout). `--profile FILE` runs robot 1 under cProfile, CPU time, from READY until it
-is told to stop, writes the stats to FILE and prints the top entries per frame.
+checkout). `--together` runs both trees' swarms at the same time instead, each on its own
+port, and measures them over the same seconds: on a machine shared with other jobs a load
+that comes and goes then weighs on both trees alike. `--profile FILE` runs robot 1
+under cProfile, CPU time, from READY until it is told to stop, writes the stats to FILE
+and prints the top entries per frame.
 `--floor` also measures a bare asyncio process that wakes for every frame on the group
 and at 10 Hz and does nothing else (bench/bare_listener.py): the part of robot 1's CPU
 that no change to swarmd's code removes, at the machine's current load.
 
     python bench/bench_daemon.py [--duration 10] [--alone | --failover]
                                  [--auth per-robot|shared|none]
-                                 [--compare REV [--runs 3]] [--profile FILE] [--floor]
+                                 [--compare REV [--runs 3] [--together]]
+                                 [--profile FILE] [--floor]
 """
 
 from __future__ import annotations
@@ -147,6 +151,9 @@ def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
         out = p.stdout
         assert out is not None
         threading.Thread(target=out.read, daemon=True).start()
+    if args.hold:  # `--together`: the parent starts every tree's measurement at once
+        print("ready", flush=True)
+        sys.stdin.readline()
     t0, c0 = time.monotonic(), cpu_seconds(proc.pid)
     s0 = cpu_seconds(standby.pid) if standby is not None else 0.0
     b0 = cpu_seconds(bare.pid) if bare is not None else 0.0
@@ -202,7 +209,8 @@ def compare(args: argparse.Namespace) -> int:
             raise SystemExit(f"cannot check out {args.compare!r} beside this tree: "
                              f"{made.stderr.strip()}")
         try:
-            results = _alternate(args, {args.compare: other, "this tree": ROOT})
+            trees = {args.compare: other, "this tree": ROOT}
+            results = _together(args, trees) if args.together else _alternate(args, trees)
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                             str(other)], check=False)
@@ -221,6 +229,40 @@ def _alternate(args: argparse.Namespace,
             lines = out.stdout.strip().splitlines()
             if not lines or not lines[-1].startswith("{"):
                 raise SystemExit(f"{name}: measurement failed:\n{out.stdout}{out.stderr}")
+            r = json.loads(lines[-1])
+            results[name].append(r)
+            floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
+            print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}%, standby "
+                  f"{r['standby_cpu_percent']:.2f}%{floor}, RSS {r['rss_mb']:.1f} MB, load "
+                  f"{os.getloadavg()[0]:.2f}", flush=True)
+    return results
+
+
+def _together(args: argparse.Namespace,
+              trees: dict[str, Path]) -> dict[str, list[dict[str, Any]]]:
+    """Each tree's swarm running at the same time, on its own port, `args.runs` times:
+    both measured over the same seconds, so a load that comes and goes on a shared
+    machine weighs on both alike (taking turns, it falls on one run of one tree)."""
+    results: dict[str, list[dict[str, Any]]] = {name: [] for name in trees}
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}",
+          flush=True)
+    for i in range(args.runs):
+        procs = {name: subprocess.Popen([*child_args(args, tree), "--hold"],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        text=True) for name, tree in trees.items()}
+        for name, p in procs.items():  # every swarm up before any measurement starts
+            assert p.stdout is not None
+            if p.stdout.readline() != "ready\n":
+                raise SystemExit(f"{name}: its swarm did not start")
+        for p in procs.values():
+            assert p.stdin is not None
+            p.stdin.write("go\n")
+            p.stdin.flush()
+        for name, p in procs.items():
+            out, _ = p.communicate()
+            lines = out.strip().splitlines()
+            if not lines or not lines[-1].startswith("{"):
+                raise SystemExit(f"{name}: measurement failed:\n{out}")
             r = json.loads(lines[-1])
             results[name].append(r)
             floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
@@ -268,6 +310,10 @@ def main() -> int:
                          "ratio of medians")
     ap.add_argument("--runs", type=int, default=3,
                     help="measurements of each tree with --compare (default 3)")
+    ap.add_argument("--together", action="store_true",
+                    help="with --compare: run both trees' swarms at the same time (each on "
+                         "its own port) instead of in turns")
+    ap.add_argument("--hold", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--tree", type=Path, default=ROOT,
                     help="the checkout whose daemons are measured (default this one)")
     ap.add_argument("--floor", action="store_true",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import os
 import subprocess
@@ -207,6 +208,44 @@ async def test_runtime_feeds_an_idle_robots_frame_at_once_and_queues_the_rest(
         assert node.drops["malformed"] == 4 and rt.stats()["received"] == 4
     finally:
         await rt.stop(handover=False)
+
+
+class CountingNode(Node):
+    """A node that counts the full snapshots its driver takes."""
+
+    snapshots = 0
+
+    def snapshot(self) -> Any:
+        self.snapshots += 1
+        return super().snapshot()
+
+
+async def test_runtime_ticks_without_a_snapshot_and_writes_state_when_due(
+        tmp_path: Path, udp_port: int) -> None:
+    """A tick that changes neither the role nor what is persisted takes no full snapshot
+    (it copies every table); the state file is still written each time seq reaches the
+    reservation the last write returned, with that moment's snapshot."""
+    cfg = robot_cfg(tmp_path, 1, udp_port)
+    loop = asyncio.get_running_loop()
+    node = CountingNode(1, cfg.swarm.to_plan(), cfg.swarm.params(), loop.time())
+    transport = MemoryTransport()
+    written: list[int] = []
+
+    def write(snap: Any) -> int:
+        written.append(snap.seq)
+        return int(snap.seq) + 4  # the next write is due 4 frames on
+
+    rt = Runtime(node, transport, NoneLink(), state_writer=write)
+    await rt.start()
+    try:
+        await wait_until(lambda: len(transport.sent) >= 16, 10.0, "sixteen frames out")
+    finally:
+        await rt.stop(handover=False)
+    ticks = rt.stats()["ticks"]
+    assert ticks >= 8 and node.snapshots <= len(written) + 2 < ticks
+    running = written[:-1]  # the last one is the stop's
+    assert len(running) >= 4 and running[0] == 0
+    assert all(b - a >= 4 for a, b in itertools.pairwise(running)), written
 
 
 class ExplodingLink(NoneLink):

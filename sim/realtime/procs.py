@@ -44,10 +44,14 @@ def forkserver_context(physics: bool) -> Any:
     Preloading swarmd in the forkserver makes each robot a cheap fork (~20 ms instead of
     a ~0.5 s interpreter start-up): 50 robots start within about a second. With physics,
     MuJoCo and the quadrotor link are preloaded too, or every robot imports them after
-    the fork (docs/physics.md: 30 flying robots start in 0.46 s preloaded, 7.4 s not). The
+    the fork (docs/physics.md: 30 flying robots start in 0.46 s preloaded, 7.4 s not).
+    uvloop, the daemons' event loop (swarmd/base/eventloop.py), is imported only when a
+    loop is made: preloaded, its pages are shared rather than copied into every robot
+    (about 1 MB each; the forkserver skips a module that is not installed). The
     forkserver is one per parent process and keeps the list it started with."""
     ctx = multiprocessing.get_context("forkserver")
-    preload = ["sim.realtime.robot_proc"] + (["sim.physics.link"] if physics else [])
+    preload = ["sim.realtime.robot_proc", "uvloop"] + (["sim.physics.link"] if physics
+                                                       else [])
     ctx.set_forkserver_preload(preload)
     return ctx
 

@@ -68,6 +68,7 @@ from sim.shared.faults import FaultKind
 from sim.shared.forge import CAPTURE, REPEATING, forged_frames
 from sim.shared.liar import liar_warnings
 from sim.shared.summary import counted_drops
+from swarmd.base import eventloop
 from swarmd.base.logs import setup_logging
 from swarmd.config import load_robot
 from swarmd.core.plan import SwarmPlan
@@ -523,7 +524,7 @@ def child_main(spec: RobotSpec, events: Connection, control: Connection) -> None
     code = 1
     try:
         robot = _Robot(spec, emit, control)
-        code = asyncio.run(robot.run())
+        code = eventloop.run(robot.run())
         _report_stats(robot.filter.stats, robot.liar.forged + robot.forger.sent, emit)
     except Exception as exc:  # a robot that cannot start says why, in its log and pipe
         emit(Failed(f"{type(exc).__name__}: {exc}"))
@@ -561,7 +562,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = RobotSpec(robot_id, str(cfg_path), "", loss=args.loss, seed=args.seed, t0=t0)
     robot = _Robot(spec, emit, None)
     try:
-        return asyncio.run(robot.run())
+        return eventloop.run(robot.run())
     finally:
         if out is not None:
             out.close()

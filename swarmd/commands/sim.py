@@ -48,6 +48,17 @@ class _SimGroup(TyperGroup):
 
     _SUB = "swarmd.sim.subcommand"
 
+    # The fault table under the options, built when help is shown rather than when the
+    # CLI is assembled: it imports the simulator's package, which a robot's daemon
+    # (`swarmd start`, the same CLI) never needs, and 1.5 MB of its memory with it.
+    @property
+    def epilog(self) -> str:
+        return _fault_kinds()
+
+    @epilog.setter
+    def epilog(self, value: str | None) -> None:
+        """Click's constructor sets it; the table above is the epilog."""
+
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.allow_interspersed_args = True  # options after SWARM, as before
@@ -156,7 +167,7 @@ def register(app: typer.Typer) -> None:
     from swarmd.commands import vehicle
 
     vehicle.register(sim_app)
-    sim_app.callback(epilog=_fault_kinds())(sim)
+    sim_app.callback()(sim)
 
 
 def sim(

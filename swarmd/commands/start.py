@@ -31,6 +31,14 @@ def _check_format(value: str | None) -> str | None:
     return value.lower() if value is not None else None
 
 
+def _check_loop(value: str | None) -> str | None:
+    from swarmd.base.eventloop import CHOICES
+
+    if value is not None and value.lower() not in CHOICES:
+        raise typer.BadParameter(f"{value!r} is not one of {', '.join(CHOICES)}")
+    return value.lower() if value is not None else None
+
+
 def register(app: typer.Typer) -> None:
     """Add the `start` command to the CLI."""
 
@@ -47,6 +55,10 @@ def register(app: typer.Typer) -> None:
             help="How log lines look on stdout: text (local time, robot, event, fields; "
             "for people) or json (one object a line, for journald and tools). Default: "
             "text on a terminal, json otherwise.")] = None,
+        event_loop: Annotated[str | None, typer.Option(
+            "--event-loop", callback=_check_loop,
+            help="auto (uvloop when installed, else asyncio's), uvloop or asyncio. "
+            "Default: $SWARMD_EVENT_LOOP, else auto.")] = None,
     ) -> None:
         """Run one robot's daemon until SIGTERM / SIGINT (what systemd runs).
 
@@ -62,14 +74,15 @@ def register(app: typer.Typer) -> None:
 
         Example: swarmd start --config /etc/swarmd/robot.yaml
         """
-        _start(config, log_level, log_format)
+        _start(config, log_level, log_format, event_loop)
 
 
-def _start(config: Path, log_level: str, log_format: str | None) -> None:
+def _start(config: Path, log_level: str, log_format: str | None,
+           event_loop: str | None = None) -> None:
     """`swarmd start`: load the robot file and run its daemon; raises typer.Exit."""
-    import asyncio
     import logging
 
+    from swarmd.base.eventloop import EventLoopError, run
     from swarmd.base.logs import LogFormat, default_format, setup_logging
     from swarmd.config import ConfigError, load_robot
     from swarmd.daemon.daemon import EXIT_CONFIG, run_daemon
@@ -89,5 +102,9 @@ def _start(config: Path, log_level: str, log_format: str | None) -> None:
     setup_logging(log_level, fmt=fmt, robot=cfg.robot)
     for warning in cfg.warnings:
         log.warning(str(warning))
-    code = asyncio.run(run_daemon(cfg, handle_signals=True, config_path=config))
+    try:
+        code = run(run_daemon(cfg, handle_signals=True, config_path=config), event_loop)
+    except EventLoopError as exc:
+        log.error(str(exc))
+        raise typer.Exit(1) from None
     raise typer.Exit(code)

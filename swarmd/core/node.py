@@ -39,7 +39,7 @@ from swarmd.core.limits import check_keys, check_restored
 from swarmd.core.moves import Moves
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.records import Holder, Restored, Snapshot
+from swarmd.core.records import Holder, Restored, Snapshot, Standing
 from swarmd.core.replay import ReplayFilter, header_seq
 from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
@@ -345,6 +345,11 @@ class Node(Hearing, Moves, Signed, Restart):
             candidates.append(self._rejoin.until)
         return min(candidates) if candidates else None
 
+    def standing(self) -> Standing:
+        """Role, slot table and seq, without copying the rest of the state (`snapshot`)."""
+        return Standing(self._role, self._function, self._epoch,
+                        tuple(sorted(self._known.items())), self._seq)
+
     def snapshot(self) -> Snapshot:
         return Snapshot(
             robot_id=self._robot_id, role=self._role, function=self._function,
@@ -386,4 +391,5 @@ class Node(Hearing, Moves, Signed, Restart):
         return out
 
 
-__all__ = ["Holder", "Node", "NodeError", "Restored", "Snapshot", "WatchState"]
+__all__ = ["Holder", "Node", "NodeError", "Restored", "Snapshot", "Standing",
+           "WatchState"]

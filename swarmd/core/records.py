@@ -18,6 +18,19 @@ class Holder(NamedTuple):
     epoch: int
 
 
+class Standing(NamedTuple):
+    """The part of a `Snapshot` a driver looks at on every tick, cheap to take (a
+    snapshot copies every table): the role, to report a change, and what decides
+    whether the state file is due."""
+
+    role: Role
+    function: str | None
+    epoch: int
+    known: tuple[tuple[str, Holder], ...]
+    """`Snapshot.known`'s entries, sorted by function."""
+    seq: int
+
+
 @dataclass(frozen=True, slots=True)
 class Restored:
     """What a restarted robot persisted (the runtime writes it atomically)."""

@@ -28,9 +28,9 @@ import signal
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from swarmd.base import signals
+from swarmd.base import eventloop, signals
 from swarmd.base.eventlog import EventLog
 from swarmd.base.identity import Ed25519Signer, Keyring
 from swarmd.base.notify import Notifier
@@ -46,11 +46,13 @@ from swarmd.link.base import RobotLink
 from swarmd.link.exec import run_command
 from swarmd.link.factory import make_link
 from swarmd.services import state as state_mod
-from swarmd.services.metrics import Metrics, MetricsServer
 from swarmd.services.revocation import EXIT_REVOKED, revoked_in
 from swarmd.services.runtime import ReceiveFilter, Runtime
 from swarmd.transport.base import Transport, TransportError
 from swarmd.transport.udp import UdpTransport
+
+if TYPE_CHECKING:
+    from swarmd.services.metrics import Metrics, MetricsServer
 
 log = logging.getLogger("swarmd.daemon")
 
@@ -153,7 +155,13 @@ class Daemon:
         self._extra_sink = event_sink
         self._time_origin = time_origin
         self._notifier = notifier if notifier is not None else Notifier.from_env()
-        self._metrics = Metrics(robot_id=cfg.robot, swarm_id=self._swarm_id)
+        self._metrics: Metrics | None = None
+        if cfg.metrics is not None:
+            # Imported only here: prometheus_client is about 5 MB of a robot's memory,
+            # and without an endpoint nobody reads the counters.
+            from swarmd.services.metrics import Metrics
+
+            self._metrics = Metrics(robot_id=cfg.robot, swarm_id=self._swarm_id)
         self._init_started()
         self._state_file = state_mod.StateFile(
             state_mod.state_path(cfg.state_dir, self._swarm_id, cfg.robot),
@@ -332,7 +340,8 @@ class Daemon:
             "robot": cfg.robot, "swarm": self._swarm_id, "transport": cfg.transport.kind,
             "link": getattr(cfg.link, "kind", "injected"), "seq_start": seq_start,
             "restored": persisted.to_json() if persisted is not None else None,
-            "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode})
+            "signed": bool(keys) or identity is not None, "auth": cfg.swarm.auth_mode,
+            "event_loop": eventloop.describe(loop)})
         await self._runtime.start()
         rt = self._runtime
         self._waiting = loop.create_task(report_waiting(
@@ -344,7 +353,7 @@ class Daemon:
         """Open the event log and start the metrics endpoint, if configured."""
         if cfg.event_log is not None:
             self._event_log = EventLog(cfg.event_log)
-        if cfg.metrics is not None:
+        if cfg.metrics is not None and self._metrics is not None:
             self._metrics_server = self._metrics.start_server(
                 cfg.metrics.host, cfg.metrics.port, allow_remote=cfg.metrics.allow_remote)
 
@@ -359,8 +368,8 @@ class Daemon:
             state_writer=self._state_file.write_snapshot,
             persist_after=persist_after,
             seq_write_at=seq_write_at,
-            # Without an endpoint nobody reads the counters: spare the per-frame cost.
-            metrics=self._metrics if self._cfg.metrics is not None else None,
+            # Without an endpoint there are none: spare the per-frame cost.
+            metrics=self._metrics,
             notifier=self._notifier,
             time_origin=self._time_origin,
         )

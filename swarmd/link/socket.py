@@ -57,7 +57,7 @@ import stat
 import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from swarmd.core.roles import Health
 from swarmd.link.base import CountedLog, HealthCallback
@@ -330,16 +330,18 @@ class _Connection(asyncio.Protocol):
         """Lines wait for a later turn (`SocketLink._wait`)."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        sock = transport.get_extra_info("socket")
-        self.transport = transport
+        # A stream transport; uvloop's has asyncio.Transport's methods without being a
+        # subclass of it, so this is a cast, not a check.
+        stream = cast(asyncio.Transport, transport)
+        sock = stream.get_extra_info("socket")
+        self.transport = stream
         self._fd = sock.fileno() if sock is not None else -1
         if not self.link._connected(self):
             self.transport, self._fd, self._lost = None, -1, True  # nothing of it is read
-            transport.abort()
+            stream.abort()
             return
         # It reads when its turn comes: a burst of new connections is read a few a turn.
-        transport.pause_reading()
+        stream.pause_reading()
         self._paused = True
         self.link._read_later(self)
 
