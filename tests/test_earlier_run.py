@@ -5,12 +5,13 @@ Run A: robot 2 reports a fault (its LEAVE of f2 at epoch 0) and standby 6 takes 
 (its CLAIM at epoch 1). Run B starts fresh (no state files) with the same keys, and an
 outsider plays run A's frames back once the robots have heard each other. A robot's
 seqs only rise, across restarts too, and within one run it never holds again an entry
-it left nor claims a slot it gave up; so a receiver that has heard 2 heartbeat f2 at
-epoch 0 at a seq above run A's LEAVE, and 6 heartbeat as a standby above run A's CLAIM,
-refuses both as `outdated` (`swarmd/core/words.py`) before they back, start or move
-anything: no epoch change, no fence, nobody executes f2 but 2. Per robot (the CERTs of
-the issue) and with a shared key alike; the check runs unsigned too, where an outsider
-can forge anything anyway.
+it left; so a receiver that has heard 2 heartbeat f2 at epoch 0 at a seq above run A's
+LEAVE refuses that LEAVE as `outdated` (`swarmd/core/words.py`), and one that has heard
+6 heartbeat as a standby above run A's heartbeat of 6 holding f2 refuses that heartbeat,
+before they back, start or move anything (run A's CLAIM is then uncertified): no epoch
+change, no fence, nobody executes f2 but 2. Per robot (the CERTs of the issue) and with
+a shared key alike; the check runs unsigned too, where an outsider can forge anything
+anyway.
 """
 
 from __future__ import annotations
@@ -132,9 +133,9 @@ def moved_nothing(n: Net) -> None:
 # ------------------------------------------------------------------ per robot
 def test_per_robot_a_recorded_takeover_moves_nothing(paper: Paper) -> None:
     """The issue's frames: two CERTs wrapping run A's LEAVE of 2 and CLAIM of 6, at run
-    B's start. Every receiver has heard 2's anchor at epoch 0 and 6's as a standby, both
-    above the recording's seqs: the LEAVE and the CLAIM are `outdated` and back nothing
-    (before, 2 refuted its own LEAVE and the slot's epoch moved 0 -> 2)."""
+    B's start. Every receiver has heard 2's anchor holding f2 at epoch 0 above the
+    recording's seqs: the LEAVE is `outdated` and backs nothing, so the CLAIM is
+    uncertified (before, 2 refuted its own LEAVE and the slot's epoch moved 0 -> 2)."""
     params = paper[1]
     n = played_at_run_b(paper, "per-robot", "leave", "claim", wrap=True)
     n.run_until(2.0 + 8 * params.t_max)

@@ -173,13 +173,15 @@ class NodeBase:
         reassertion above it, is kept as the void backer it is (`evidence.py`): that
         reassertion rests on the certificate the `LEAVE` backs, and every robot must
         verify it alike."""
-        if isinstance(msg, wire.Leave) and not self._words.knows(sender) \
+        if isinstance(msg, wire.Leave) and self._identity is not None \
+                and not self._words.knows(sender) \
                 and now - self._start_time < self._params.startup_grace:
-            # Within our start-up grace we may not have heard its anchor yet (one comes
-            # every `anchor_every`, half the grace): its LEAVE cannot be judged, and a
-            # recording taken here would split the views. After the grace, a robot we
-            # never heard is dead or cut off, and its LEAVE (relayed with the takeover
-            # it backs) counts.
+            # Per robot, within our start-up grace we may not have heard its anchor yet
+            # (one comes every `anchor_every`, half the grace): its LEAVE cannot be
+            # judged, and a recorded takeover it backs, taken here alone, would move the
+            # slot's epoch everywhere in the end (the holder's reassertion). After the
+            # grace, a robot we never heard is dead or cut off, and its LEAVE (relayed
+            # with the takeover it backs) counts.
             return True
         if not self._words.outdated(sender, seq, msg):
             return False
