@@ -254,6 +254,9 @@ def test_per_robot_a_leave_signed_by_the_holder_is_its_own_certificate(paper: Pa
     observer = Node(1, plan, params, 0.0, identity=ids[1])
     observer.tick(0.0)
     slot = plan.slot("f2")
+    # 2's anchor first: a LEAVE of a robot not heard yet is not judged within the
+    # receiver's start-up grace (DESIGN, "Every proof is bound to its run").
+    observer.receive(signed_beat(ids[2], plan.swarm_id, 2, 400, slot, 0), 0.9)
     observer.receive(_signed(ids[2], plan, 2, 500, wire.Leave(slot, 0, 0)), 1.0)
     observer.receive(_signed(ids[6], plan, 6, 900, wire.Claim(2, slot, 1)), 1.01)
     observer.receive(signed_beat(ids[6], plan.swarm_id, 6, 901, slot, 1), 1.2)
@@ -469,6 +472,7 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     node.tick(0.0)
     slot = plan.slot("f2")
     leave = _signed(res_ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
+    node.receive(signed_beat(res_ids[2], plan.swarm_id, 2, 600, slot, 0), 0.1)
     node.receive(leave, 1.0)
     node.tick(1.0 + params.claim_hold + 0.01)
     snap = node.snapshot()

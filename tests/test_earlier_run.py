@@ -1,16 +1,17 @@
 """Every proof is bound to its run (DESIGN section 2, "Who may say what"): frames recorded
 in an earlier run prove nothing.
 
-Run A: robot 2 reports a fault (its signed LEAVE of f2 at epoch 0) and standby 6 takes
-f2 over (its signed CLAIM at epoch 1). Run B starts fresh (no state files) with the
-same keys, and an outsider plays run A's frames back. Before, two CERTs wrapping that
-LEAVE and that CLAIM fenced live holder 2 at once: f2 ran nowhere for 0.9 s. Now robot
-2, which holds the very entry that LEAVE left, refutes its own LEAVE (within one run of
-a daemon a robot never holds again the entry it left), and that one signed frame voids
-the recorded takeover wherever it reaches: 2 holds f2 throughout.
-
-Unsigned or with a shared key a frame carries nothing of its run: the replay filter's
-memory is all these modes check (DESIGN, "Sequence numbers").
+Run A: robot 2 reports a fault (its LEAVE of f2 at epoch 0) and standby 6 takes f2 over
+(its CLAIM at epoch 1). Run B starts fresh (no state files) with the same keys, and an
+outsider plays run A's frames back once the robots have heard each other. A robot's
+seqs only rise, across restarts too, and within one run it never holds again an entry
+it left; so a receiver that has heard 2 heartbeat f2 at epoch 0 at a seq above run A's
+LEAVE refuses that LEAVE as `outdated` (`swarmd/core/words.py`), and one that has heard
+6 heartbeat as a standby above run A's heartbeat of 6 holding f2 refuses that heartbeat,
+before they back, start or move anything (run A's CLAIM is then uncertified): no epoch
+change, no fence, nobody executes f2 but 2. Per robot (the CERTs of the issue) and with
+a shared key alike; the check runs unsigned too, where an outsider can forge anything
+anyway.
 """
 
 from __future__ import annotations
@@ -101,96 +102,172 @@ def views_of_f2(n: Net) -> set[tuple[int, int]]:
             (n.nodes[r].snapshot().known["f2"] for r in hears)}
 
 
-# ------------------------------------------------------------------ per robot
-def test_per_robot_a_recorded_takeover_fences_no_live_holder(paper: Paper) -> None:
-    """The issue's frames: two CERTs wrapping run A's LEAVE of 2 and CLAIM of 6, at run
-    B's start. 2 refutes its own LEAVE (signed), so the recorded takeover is void at
-    every robot: 2 executes f2 throughout, nobody is fenced or takes over. Robots that
-    had already merged the recorded entry (6, 1) move forward to 2's reassertion (2, 2)
-    — the slot table only moves forward (DESIGN, "Convergence") — and all agree."""
-    plan, params = paper
-    ids = fake_identities(plan.robots)
-    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
-    n = swarm(paper, "per-robot", RUN_B, ids)
-    n.run_until(2.0)
-    play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
-    n.run_until(2.0 + 8 * params.t_max)
-    assert n.named("fenced") == [] and n.named("takeover") == []
-    assert held_throughout(n, 2, "f2")
-    assert any(e["subject"] == 2 for e in n.named("refute", 2))
-    assert views_of_f2(n) == {(2, 2)}
+def outdated(n: Net) -> int:
+    return sum(n.nodes[r].drops["outdated"] for r in n.alive)
 
 
-def test_per_robot_a_recorded_takeover_naming_a_live_standby_gets_f2_a_holder(
-        paper: Paper) -> None:
-    """The same frames just after 2 died in run B: the swarm learns that 6 holds f2,
-    which 6 does not. 6 hears the warnings about itself and, as f2's standby, takes it
-    over at the next epoch (it used to ignore them: f2 was left to nobody while 6
-    lived)."""
-    plan, params = paper
-    ids = fake_identities(plan.robots)
-    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
-    n = swarm(paper, "per-robot", RUN_B, ids)
-    n.run_until(2.0)
-    n.crash(2)
-    play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
-    n.run_until(2.0 + params.claim_horizon + params.takeover_bound(lossy=False))
-    assert [(e["robot"], e["epoch"], e["replaced"]) for e in n.named("takeover")] == [
-        (6, 2, 6)]
-    assert n.nodes[6].snapshot().function == "f2" and views_of_f2(n) == {(6, 2)}
-
-
-@pytest.mark.parametrize("auth", MODES)
-def test_a_recorded_leave_played_at_a_fresh_start_replaces_nobody(paper: Paper,
-                                                                  auth: str) -> None:
-    """Run A's LEAVE of 2 played raw at run B's start, to receivers that have not heard
-    64 of 2's frames yet (no floor: DESIGN, "Sequence numbers"): standby 6 starts a
-    claim, and 2, alive, stops it (rule 4: its heartbeat, and per robot the refute of
-    its own LEAVE). In every mode, 2 executes f2 throughout."""
-    plan, params = paper
-    ids = fake_identities(plan.robots) if auth == "per-robot" else {}
+def played_at_run_b(paper: Paper, auth: str, *names: str, wrap: bool = False,
+                    dead: int | None = None) -> Net:
+    """Run A recorded, run B started fresh with the same keys and settled for 2 s (the
+    robots heard each other's anchors), then run A's frames `names` played (inside
+    CERTs with `wrap`), `dead` crashed just before."""
+    plan = paper[0]
+    ids = fake_identities(plan.robots) if auth == "per-robot" else None
     tape = run_a(swarm(paper, auth, RUN_A, ids))
     n = swarm(paper, auth, RUN_B, ids)
     n.run_until(2.0)
-    play(n, tape["leave"])
-    n.run_until(2.0 + 4 * params.t_max)
-    assert n.named("takeover") == [] and n.named("fenced") == []
-    assert held_throughout(n, 2, "f2")
-    assert len(views_of_f2(n)) == 1
+    if dead is not None:
+        n.crash(dead)
+    play(n, *(cert(plan, tape[k]) if wrap else tape[k] for k in names))
+    return n
 
 
-def test_per_robot_a_recorded_heartbeat_moves_no_view(paper: Paper) -> None:
-    """Run A's heartbeat of 6 as f2's holder at epoch 1 (an anchor, signed): per robot a
-    heartbeat never moves an epoch or a holder without its certificate (`uncertified`)."""
-    plan = paper[0]
-    ids = fake_identities(plan.robots)
-    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
-    n = swarm(paper, "per-robot", RUN_B, ids)
-    n.run_until(2.0)
-    play(n, tape["beat"])
-    n.run_until(3.0)
-    assert n.named("fenced") == [] and held_throughout(n, 2, "f2")
+def moved_nothing(n: Net) -> None:
+    """Nobody fenced, claimed or took over; 2 executes f2 throughout, 6 never; every view
+    of f2 still at epoch 0."""
+    assert n.named("fenced") == [] and n.named("takeover") == [] and n.named("claim") == []
+    assert held_throughout(n, 2, "f2") and n.outputs[6] == []
     assert views_of_f2(n) == {(2, 0)}
 
 
-@pytest.mark.parametrize("auth", ["shared", "none"])
-def test_without_robot_keys_a_recording_is_checked_by_the_filters_memory_only(
+# ------------------------------------------------------------------ per robot
+def test_per_robot_a_recorded_takeover_moves_nothing(paper: Paper) -> None:
+    """The issue's frames: two CERTs wrapping run A's LEAVE of 2 and CLAIM of 6, at run
+    B's start. Every receiver has heard 2's anchor holding f2 at epoch 0 above the
+    recording's seqs: the LEAVE is `outdated` and backs nothing, so the CLAIM is
+    uncertified (before, 2 refuted its own LEAVE and the slot's epoch moved 0 -> 2)."""
+    params = paper[1]
+    n = played_at_run_b(paper, "per-robot", "leave", "claim", wrap=True)
+    n.run_until(2.0 + 8 * params.t_max)
+    moved_nothing(n)
+    assert outdated(n) > 0
+
+
+def test_per_robot_a_recorded_takeover_just_after_the_holder_died_is_refused(
+        paper: Paper) -> None:
+    """The same frames just after 2 died in run B: 2's last anchor still says it held f2
+    at epoch 0 after run A's LEAVE, so the recording backs nothing and f2 is taken over
+    as a silent robot's slot, at epoch 1, replacing 2 (before: the recording named 6 as
+    f2's holder, the watchers warned about 6, and 6 took f2 at epoch 2)."""
+    params = paper[1]
+    n = played_at_run_b(paper, "per-robot", "leave", "claim", wrap=True, dead=2)
+    n.run_until(2.0 + params.claim_horizon + params.takeover_bound(lossy=False))
+    assert [(e["robot"], e["epoch"], e["replaced"]) for e in n.named("takeover")] == [
+        (6, 1, 2)]
+    assert n.nodes[6].snapshot().function == "f2" and views_of_f2(n) == {(6, 1)}
+
+
+def test_per_robot_a_receiver_that_started_after_the_last_anchor_converges(
+        paper: Paper) -> None:
+    """A receiver that restarted just before the recording was played has heard no
+    anchor of 2 since (nothing to tell it by): it takes the recorded takeover, 2 refutes
+    its own LEAVE and reasserts, and the robots that refused the LEAVE take it back as
+    the void backer of 2's reassertion once they hold 2's refute (`_outdated`): f2 is
+    never fenced nor taken over, and every view agrees within the convergence bound."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
+    n = swarm(paper, "per-robot", RUN_B, ids)
+    n.run_until(1.95)
+    n.crash(6)
+    n.boot(6, seq_start=RUN_B + 10**6)
+    n.run_until(2.0)
+    play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
+    n.run_until(2.0 + params.claim_horizon + 16 * params.t_max)
+    assert n.named("fenced") == [] and n.named("takeover") == []
+    assert held_throughout(n, 2, "f2") and n.outputs[6] == []
+    assert len(views_of_f2(n)) == 1
+
+
+def test_per_robot_a_receiver_that_missed_every_anchor_of_the_holder_converges(
+        paper: Paper) -> None:
+    """What is left: standby 6 hears nothing of 2 for its whole start-up grace (2 -> 6
+    cut until 3 s), so at 2.5 s it cannot tell run A's LEAVE from a live one and takes
+    the recorded takeover; 2 refutes its LEAVE, which moves 6 on to 2's reassertion
+    (2, 2). Once it hears 2 again, 6 shows 2 its view with a signed doubt (`_older_beat`);
+    2 then reasserts, and the robots that refused the LEAVE take it as the void backer
+    of that reassertion: f2 is never fenced nor taken over, and every view ends at
+    (2, 2)."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
+    n = Net(plan, params, ids=[], keys=(KEY,), identities=ids)
+    n.cuts.append((2, 6, 0.0, 3.0))
+    for r in sorted(plan.robots):
+        n.boot(r, seq_start=RUN_B + 1000 * r)
+    n.run_until(2.5)
+    play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
+    n.run_until(2.5 + params.claim_horizon + 30 * params.t_max)
+    assert n.named("fenced") == [] and n.named("takeover") == []
+    assert held_throughout(n, 2, "f2") and n.outputs[6] == []
+    assert views_of_f2(n) == {(2, 2)}
+
+
+def test_per_robot_a_recorded_anchor_moves_no_view(paper: Paper) -> None:
+    """Run A's anchor of 6 as f2's holder at epoch 1, played raw: 6's later anchor says
+    it is a standby, so it is `outdated` (it was `uncertified` before: a heartbeat never
+    moves an epoch without its certificate)."""
+    n = played_at_run_b(paper, "per-robot", "beat")
+    n.run_until(3.0)
+    assert n.named("fenced") == [] and held_throughout(n, 2, "f2")
+    assert views_of_f2(n) == {(2, 0)} and outdated(n) > 0
+
+
+# ------------------------------------------------------------------ every mode
+@pytest.mark.parametrize("auth", MODES)
+def test_a_recorded_takeover_played_raw_at_a_fresh_start_moves_nothing(
         paper: Paper, auth: str) -> None:
-    """Unsigned or with a shared key, what a receiver can check of an old frame is its
-    replay filter's memory. Run A's heartbeat of 6 at epoch 1, played at run B's start:
-    a robot that has heard fewer than 64 of 6's frames takes it and 2 is fenced (what
-    these modes cannot check, DESIGN "Who can still do what"); a robot whose state file
-    remembers 6 (its floor) drops it as a replay; with a shared key, a new key for the
-    new run makes the recording worthless (`auth`)."""
+    """Run A's LEAVE of 2, CLAIM of 6 and 6's first heartbeat as f2's holder at epoch 1,
+    played raw at run B's start to receivers that have heard fewer than 64 of their
+    senders' frames (no replay floor yet: DESIGN, "Sequence numbers"). Before, with a
+    shared key or none, the heartbeat fenced live holder 2 at once and the LEAVE started
+    6's claim; now all three are `outdated` in every mode."""
+    params = paper[1]
+    n = played_at_run_b(paper, auth, "leave", "claim", "beat")
+    n.run_until(2.0 + 8 * params.t_max)
+    moved_nothing(n)
+    assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_leave_of_this_run_still_hands_over(paper: Paper, auth: str) -> None:
+    """What a robot says in its current run is its latest word: 2's LEAVE in run B,
+    above every heartbeat it sent before it, hands f2 to 6 at once, in every mode."""
+    n = swarm(paper, auth, RUN_B)
+    n.run_until(2.0)
+    n.inject(2, n.nodes[2].robot_health(Health.FAULTY, n.now))
+    n.run_until(4.0)
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    assert outdated(n) == 0 and views_of_f2(n) == {(6, 1)}
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_robot_restarted_legitimately_is_heard_in_its_new_run(paper: Paper,
+                                                                 auth: str) -> None:
+    """A new run of a robot starts above anything it sent before (its seq reservation):
+    6 crashes and restarts with no state file in run B, and its new frames are its
+    word; then 2's LEAVE hands f2 to it as before."""
+    n = swarm(paper, auth, RUN_B)
+    n.run_until(2.0)
+    n.crash(6)
+    n.run_until(2.5)
+    n.boot(6, seq_start=RUN_B + 10**6)
+    n.run_until(5.0)
+    n.inject(2, n.nodes[2].robot_health(Health.FAULTY, n.now))
+    n.run_until(7.0)
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    assert outdated(n) == 0
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_without_robot_keys_a_receiver_that_remembers_drops_a_recording_as_a_replay(
+        paper: Paper, auth: str) -> None:
+    """Unsigned or with a shared key, a receiver whose state file remembers 6 (its
+    floor) drops run A's heartbeat of 6 as a replay before anything else; with a shared
+    key, a new key for the new run makes the recording worthless (`auth`)."""
     plan, params = paper
     tape = run_a(swarm(paper, auth, RUN_A))
     fresh = swarm(paper, auth, RUN_B)
-    fresh.run_until(2.0)
-    play(fresh, tape["beat"])
-    fresh.run_until(2.1)
-    assert [e["robot"] for e in fresh.named("fenced")] == [2]
-    # A receiver that remembers 6 (its state file's peer_seq, from the run that sent
-    # the recording).
     from swarmd.core.node import Node, Restored
     from swarmd.core.replay import header_seq
 
@@ -231,8 +308,9 @@ async def test_a_recorded_takeover_fences_no_live_holder_on_real_daemons(
     """Six `run_daemon` tasks over UDP on loopback, started fresh with the keys run A
     used ten minutes before (its frames made here with the same key files, counters
     from its clock then). Once they settle, robot 5's radio plays the two CERTs: holder
-    2 keeps f2 (its link is never released), nobody is fenced or takes over, and every
-    daemon that hears f2 ends at 2's reassertion."""
+    2 keeps f2 (its link is never released), nobody is fenced, claims or takes over,
+    every daemon that hears f2 keeps it at epoch 0, and those that heard the CERTs count
+    them `outdated`."""
     swarm_file, keys = signed_paper(tmp_path)
     plan, params = paper
     then = wire.seq_seed(time.time() - 600)
@@ -255,6 +333,11 @@ async def test_a_recorded_takeover_fences_no_live_holder_on_real_daemons(
         return {tuple(daemons[r].runtime.snapshot().known["f2"])  # type: ignore[union-attr]
                 for r in (1, 2, 3, 5, 6)}
 
+    def outdated_at(robots: tuple[int, ...]) -> int:
+        counts = [rt.drop_counts().get("outdated", 0) for r in robots
+                  if (rt := daemons[r].runtime) is not None]
+        return sum(counts)
+
     try:
         await _until(lambda: len(daemons) == 6, 20.0, "six daemons ready")
         await asyncio.sleep(3 * params.startup_grace / 2)
@@ -263,10 +346,11 @@ async def test_a_recorded_takeover_fences_no_live_holder_on_real_daemons(
         assert radio is not None
         for raw in (tape["leave"], tape["claim"]):
             assert radio.send_raw(cert(plan, raw))
-        await _until(lambda: views() == {(2, 2)}, 10.0, "views of f2 at 2's reassertion")
-        await asyncio.sleep(params.t_max)
+        await _until(lambda: outdated_at((1, 3, 6)) >= 2, 10.0, "the CERTs outdated")
+        await asyncio.sleep(4 * params.t_max)
         got = [(e["robot"], e["event"], e.get("function")) for e in events]
-        assert not [e for e in got if e[1] in ("fenced", "takeover")], got
+        assert not [e for e in got if e[1] in ("fenced", "takeover", "claim")], got
+        assert views() == {(2, 0)}
         assert links[2].function == "f2"
         assert ("release", "f2", None) not in links[2].history
     finally:

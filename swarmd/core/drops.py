@@ -41,6 +41,10 @@ class DropReason(StrEnum):
     """A warning from a robot that does not watch the slot (rule 3)."""
     STALE_CLAIM = "stale_claim"
     """A claim heard again after it stopped being believed (rule 10)."""
+    OUTDATED = "outdated"
+    """A robot's older frame that its own later heartbeat contradicts: a LEAVE of the
+    entry it holds since, a claim or hold it gave up since (a recording of an earlier
+    run, or a reordered frame; DESIGN, "Every proof is bound to its run")."""
 
 
 __all__ = ["DropReason"]

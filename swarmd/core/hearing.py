@@ -33,7 +33,7 @@ class Hearing(NodeBase):
             return
         known, entry = self._known[f], Holder(sender, hb.epoch)
         if greater(known, entry):
-            self._older_beat(f, hb, known, now)
+            self._older_beat(f, sender, hb, known, now)
             return
         if entry != known and self._identity is not None \
                 and not self._ev.is_certified(f, sender, hb.epoch):
@@ -58,7 +58,8 @@ class Hearing(NodeBase):
             return
         self._holder_heard(f, sender, hb.epoch, known, now)
 
-    def _older_beat(self, f: str, hb: wire.Heartbeat, known: Holder, now: float) -> None:
+    def _older_beat(self, f: str, sender: int, hb: wire.Heartbeat, known: Holder,
+                    now: float) -> None:
         """A heartbeat for f older than our view of it (`known`): its sender missed a
         takeover, or lost a race at the same epoch; show it what it missed."""
         # A stale holder (e.g. back from a pause): if it is our slot, answer at once
@@ -76,7 +77,13 @@ class Hearing(NodeBase):
             # Per-robot mode, a takeover it missed whose new holder may be gone:
             # whoever certified it shows the stale holder the evidence against it
             # (it fences itself, or refutes and keeps its slot everywhere).
-            self._relay_view(f, now)
+            if self._relay_view(f, now) and sender == known.robot \
+                    and self._ev.reasserted(f, sender, known.epoch) is not None:
+                # Its own hold, below the reassertion our view holds: it refuted a
+                # recorded takeover that we took before its word reached us and did not
+                # reassert (DESIGN, "Every proof is bound to its run"). A signed doubt
+                # (no standby counts it) tells it so; on our next relay it reasserts.
+                self._send(wire.Warn(sender, hb.function, known.epoch, 0))
         elif not self._ears.heard_lately(f, known.robot, known.epoch, now,
                                          self._params.t_max) \
                 and self._ev.relay_due(f, now):
@@ -159,6 +166,11 @@ class Hearing(NodeBase):
         f = self._slot(w.function)
         if f is None:
             return
+        if self._identity is not None and w.suspect == self._robot_id and self._holds(f) \
+                and w.epoch > self._epoch:
+            # A live robot took a recorded takeover of our hold before our word reached
+            # it (DESIGN, "Every proof is bound to its run"): ours must be provable.
+            self._shown_newer.add(f)
         # A warning below the suspicion level is a watcher's doubt (DESIGN "Detection"):
         # the suspect answers it (rule 4), views move on it, but it is nobody's evidence
         # and no standby counts it (Fig. 9 counts accusations).

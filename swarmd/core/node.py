@@ -48,6 +48,7 @@ from swarmd.core.state import Active, Fenced, Standby
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import WatchState
 from swarmd.core.witness import Ears
+from swarmd.core.words import LatestWords
 
 
 class Node(Hearing, Moves, Signed, Restart):
@@ -81,6 +82,7 @@ class Node(Hearing, Moves, Signed, Restart):
         self._beat = HeartbeatClock(params, now)
         self._chain = OwnChain(robot_id, self._signer, seq_start) if self._signer else None
         self._chains = PeerChains(1 / params.heartbeat_interval)
+        self._words, self._shown_newer = LatestWords(), set()
         self._anchor_every, self._resync_after = anchor_every(params), resync_after(params)
         self._armed = now
         self._stopped = self._started = False
@@ -208,6 +210,10 @@ class Node(Hearing, Moves, Signed, Restart):
         reason = self._replay.check(sender, frame.seq, now)
         if reason is not None:
             return self._drop(reason)
+        if self._outdated(sender, frame.seq, msg, now):
+            # Its own later heartbeat says otherwise: a recording of an earlier run, or
+            # a frame reordered behind it (DESIGN, "Every proof is bound to its run").
+            return self._drop(DropReason.OUTDATED)
         self._frames_in += 1
         self._peer_back(sender, now)
         self._heard_at[sender] = now
@@ -217,6 +223,7 @@ class Node(Hearing, Moves, Signed, Restart):
                     self._chains.commit(sender, hb.n, hb.link, frame.seq, now,
                                         anchor=hb.anchor)
                 self._on_heartbeat(sender, hb, now)
+                self._heard_word(sender, frame.seq, hb)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
             case wire.Claim() as c:
@@ -239,6 +246,22 @@ class Node(Hearing, Moves, Signed, Restart):
         if frame.seq < self._seq_start:
             return self._drop(DropReason.REPLAY)
         return self._drop(DropReason.OWN)
+
+    def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat) -> None:
+        """A heartbeat we believed sets its sender's latest word (`words.py`) if its seq
+        is bound to it (a swarm key's tag, per robot an anchor, or unsigned anything) and
+        it is the top of the sender's own run (`ReplayFilter.top`: not a lone frame far
+        ahead, which would make the sender's own next frames `outdated`). A hold we did
+        not believe (uncertified, outranked) sets nothing: an insider's own anchor at a
+        forged epoch must not make its real heartbeats `outdated`."""
+        if not (hb.anchor or self._keys or self._verifier is None):
+            return
+        self._words.held(sender, hb)
+        f = self._plan.function_at(hb.function) if hb.function else None
+        top = self._replay.top(sender)
+        if (top is None or seq >= top) and (
+                hb.function == 0 or (f is not None and self._known[f] == (sender, hb.epoch))):
+            self._words.heard(sender, seq, hb)
 
     def tick(self, now: float) -> list[Action]:
         """Fire every deadline that is due at `now`."""
@@ -322,7 +345,9 @@ class Node(Hearing, Moves, Signed, Restart):
         Their frames no longer verify, and what this node knew of their heartbeat chains
         is forgotten, so from now on they are silent to it: their slots are taken over
         as a dead robot's (DESIGN, "Who may say what")."""
-        self._chains.forget(robots)
+        gone = tuple(robots)
+        self._chains.forget(gone)
+        self._words.forget(gone)
 
     def next_deadline(self) -> float | None:
         """When `tick` must be called next (absolute, same clock as `now`). Every entry

@@ -35,6 +35,7 @@ from swarmd.core.state import NO_WATCHES, Active, Claiming, Rejoining, RoleState
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import Ears
+from swarmd.core.words import LatestWords
 
 
 class NodeBase:
@@ -73,6 +74,13 @@ class NodeBase:
     """Per-robot mode: our heartbeats' hash chain (`chain.py`)."""
     _chains: PeerChains
     """Per-robot mode: where each peer's chain stands, as we verified it."""
+    _words: LatestWords
+    """What each peer last said of itself, to refuse its older word that contradicts it
+    (`words.py`)."""
+    _shown_newer: set[str]
+    """Per robot: slots we hold of which a live robot's signed warning named us at a
+    newer epoch than ours (it took a recorded takeover that our refute voids: our
+    reassertion must be verifiable, `Signed._record_evidence`)."""
     _anchor_every: float
     _resync_after: float
     _armed: float | None
@@ -158,6 +166,33 @@ class NodeBase:
             self._drops[DropReason.BAD_FUNCTION] += 1
         return f
 
+    def _outdated(self, sender: int, seq: int, msg: wire.Message, now: float) -> bool:
+        """`sender`'s frame number `seq` is older than its own later word, heard already,
+        that contradicts it (`words.py`: a recording of an earlier run, or a reordered
+        frame). Per robot, its `LEAVE` that it refuted itself, once it heartbeats a
+        reassertion above it, is kept as the void backer it is (`evidence.py`): that
+        reassertion rests on the certificate the `LEAVE` backs, and every robot must
+        verify it alike."""
+        if isinstance(msg, wire.Leave) and self._identity is not None \
+                and not self._words.knows(sender) \
+                and now - self._start_time < self._params.startup_grace:
+            # Per robot, within our start-up grace we may not have heard its anchor yet
+            # (one comes every `anchor_every`, half the grace): its LEAVE cannot be
+            # judged, and a recorded takeover it backs, taken here alone, would move the
+            # slot's epoch everywhere in the end (the holder's reassertion). After the
+            # grace, a robot we never heard is dead or cut off, and its LEAVE (relayed
+            # with the takeover it backs) counts.
+            return True
+        if not self._words.outdated(sender, seq, msg):
+            return False
+        if isinstance(msg, wire.Leave) and self._identity is not None \
+                and self._words.above(sender, msg.function, msg.epoch):
+            # Its signer refuted it and heartbeats a reassertion above it: somewhere the
+            # recording was taken, and this LEAVE is the void backer of that reassertion.
+            f = self._plan.function_at(msg.function)
+            return f is None or self._ev.refuted_up_to(f, sender, msg.epoch, sender) < seq
+        return True
+
     def _clear_votes(self) -> None:
         for v in self._votes.values():
             v.clear()
@@ -183,7 +218,7 @@ class NodeBase:
     def _learn_holder(self, f: str, new: Holder, now: float) -> None:
         raise NotImplementedError
 
-    def _relay_view(self, f: str, now: float, every: float | None = None) -> None:
+    def _relay_view(self, f: str, now: float, every: float | None = None) -> bool:
         raise NotImplementedError
 
     def _fence(self, epoch: int, now: float) -> None:

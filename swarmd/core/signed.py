@@ -64,6 +64,13 @@ class Signed(NodeBase):
             # hold we resumed after a restart (`evidence.py`): refuted alike, so that it
             # backs no takeover of the slot we execute.
             self._refute(f, witness, epoch, seq_of(raw), now)
+            if witness == suspect and self._holds(f) and epoch == self._epoch \
+                    and f not in self._shown_newer:
+                # Our own LEAVE of the entry we hold backs nothing here either: unless
+                # a live robot's warning showed that it took the recording (then our
+                # reassertion, resting on it, must be provable), nothing moves.
+                self._drops[DropReason.OUTDATED] += 1
+                return
         ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
         if ready is None:
             if suspect != self._robot_id:  # what we refuted ourselves is no news
@@ -104,6 +111,7 @@ class Signed(NodeBase):
         not a takeover (nobody new executes f)."""
         assert isinstance(self._state, Active)
         self._state.epoch = epoch
+        self._shown_newer.discard(f)
         self._emit(ev.Refute(subject=self._robot_id, function=f))
         self._pending.append(Assign(f, epoch))
         self._heartbeat_now(now)
@@ -158,6 +166,12 @@ class Signed(NodeBase):
         if f is None:
             return
         msg = cert.inner.msg
+        if self._outdated(cert.inner.sender, cert.inner.seq, msg, now):
+            # Its signer's own later heartbeat says otherwise: a recorded LEAVE of an
+            # earlier run backs nothing (DESIGN, "Every proof is bound to its run"),
+            # refused before it is kept as evidence.
+            self._drops[DropReason.OUTDATED] += 1
+            return
         if isinstance(msg, wire.Refute):
             self._on_refute(cert.inner.sender, msg, now, cert.raw)
             return
@@ -168,17 +182,19 @@ class Signed(NodeBase):
         if said is not None:
             self._record_evidence(f, *said, cert.raw, now)
 
-    def _relay_view(self, f: str, now: float, every: float | None = None) -> None:
+    def _relay_view(self, f: str, now: float, every: float | None = None) -> bool:
         """Someone's view of f is older than ours (it heartbeats f, or warns about f's
         holder, at an older epoch): if a certificate here backs our view, relay it
         whole, the signed CLAIM last (`EvidenceStore.view_frames`), at most once per
         T_max. Without it, a robot that missed a takeover whose new holder died before
         it heard a heartbeat would warn about the old holder for ever, the others
         about the new one, and the slot's standby would count no quorum (DESIGN,
-        "Convergence")."""
+        "Convergence"). True if it relayed anything."""
         holder, epoch = self._known[f]
-        for raw in self._ev.view_frames(f, holder, epoch, now, every):
+        frames = self._ev.view_frames(f, holder, epoch, now, every)
+        for raw in frames:
             self._send_cert(f, raw)
+        return bool(frames)
 
     def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
                           now: float) -> None:
@@ -193,8 +209,11 @@ class Signed(NodeBase):
         then the takeover was right. Our own claim relayed back acts on nothing here."""
         if claimant == self._robot_id:
             # Our own claim, relayed back with its certificate as the proof of the
-            # reassertion that outranks it: it must verify here as anywhere (no act).
-            self._ev.certify(f, claimant, c, self._known[f].epoch)
+            # reassertion that outranks it: it must verify here as anywhere (no act),
+            # and we keep it to show that proof in turn (a recorded claim of ours from
+            # an earlier run that we took: DESIGN, "Every proof is bound to its run").
+            if self._ev.certify(f, claimant, c, self._known[f].epoch):
+                self._ev.keep_claim(f, claimant, c.epoch, raw)
             return
         self._on_claim(claimant, c, now, raw)
         new = Holder(claimant, c.epoch)
