@@ -32,11 +32,13 @@ lint: $(STAMP)/python
 	$(PY) -m ruff check .
 	$(PY) -m mypy
 
-# On every core: `-n auto` starts one worker per CPU; `--dist loadfile` runs each module
-# on one worker, so a module fixture (a wheel's venv, a flown run) is made once
-# (docs/testing.md, "Parallel").
+# One worker per CPU and one more: the real-process modules spend most of their time
+# waiting on their daemons (about a seventh of a core), and the extra worker keeps the
+# cores busy meanwhile. `--dist loadfile` runs each module on one worker, so a module
+# fixture (a wheel's venv, a flown run) is made once (docs/testing.md, "Parallel").
+WORKERS := $(shell echo $$(( $$(nproc 2>/dev/null || echo 1) + 1 )))
 test: setup
-	$(PY) -m pytest -q -n auto --dist loadfile
+	$(PY) -m pytest -q -n $(WORKERS) --dist loadfile
 
 # The paper's swarm flown in MuJoCo, one process per robot; robot 2 crashes at 5 s and
 # standby 6 flies over to f2's slot. out/demo/: summary, event log, timeline.png,
