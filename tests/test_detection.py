@@ -134,6 +134,56 @@ def test_a_standby_counts_suspicions_not_doubts(paper_plan: SwarmPlan,
     assert [a for a in out if isinstance(a, ev.Claim)]
 
 
+def stopped_warning(radio: Radio, six: Node, *, heard: bool, cadence: float) -> list[Action]:
+    """Standby 6 (covers f2) hears witness 1 warn about robot 2 three times at `cadence`,
+    then, if `heard`, robot 1's own heartbeats and no warning (it heard robot 2 again);
+    witness 3 warns 0.6 s after 1's last warning, within the vote window."""
+    level = level_byte(radio.params.suspect_level)
+    out: list[Action] = []
+    t = 3.0
+    for _ in range(3):
+        out += run(six, t, t) + six.receive(radio.warn(1, 2, "f2", level), t)
+        last, t = t, round(t + cadence, 6)
+    for dt in (0.15, 0.25, 0.35, 0.45, 0.55):
+        t = round(last + dt, 6)
+        out += run(six, t, t) + six.receive(radio.beat(3, "f3"), t)
+        if heard:
+            out += six.receive(radio.beat(1, "f1"), t)
+    t = round(last + 0.6, 6)
+    return out + run(six, t, t) + six.receive(radio.warn(3, 2, "f2", level), t)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_witness_that_stopped_warning_is_no_vote(paper_plan: SwarmPlan,
+                                                   udp_params: Params, mode: str) -> None:
+    """A live robot faded to witness 1, then to witness 3, and to the standby all along:
+    1's vote must not meet 3's suspicion once 1 heard the robot again (DESIGN
+    "Detection", the standby's votes stand for witnesses silent now)."""
+    radio = Radio(paper_plan, udp_params, mode)
+    six = radio.node(6)
+    for rid, f in ((1, "f1"), (3, "f3")):  # both witnesses alive: rule 9 stays out
+        six.receive(radio.beat(rid, f), 2.95)
+    out = stopped_warning(radio, six, heard=True, cadence=udp_params.warn_interval)
+    assert not [a for a in out if isinstance(a, ev.Claim)]
+    assert six.snapshot().votes == {"f2": 1}
+
+
+@pytest.mark.parametrize(("heard", "cadence"), [(False, 0.1), (True, 0.5)],
+                         ids=["warnings lost", "an alerted witness, slower"])
+@pytest.mark.parametrize("mode", MODES)
+def test_a_witness_still_warning_keeps_its_vote(paper_plan: SwarmPlan, udp_params: Params,
+                                                mode: str, heard: bool,
+                                                cadence: float) -> None:
+    """Its warnings lost (and its heartbeats too), or sent slower after its alert (rule
+    8): the vote stays its window and the quorum meets."""
+    radio = Radio(paper_plan, udp_params, mode)
+    six = radio.node(6)
+    for rid, f in ((1, "f1"), (3, "f3")):
+        six.receive(radio.beat(rid, f), 2.95)
+    out = stopped_warning(radio, six, heard=heard, cadence=cadence)
+    assert [a for a in out if isinstance(a, ev.Claim)]
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_the_suspect_answers_a_doubt(paper_plan: SwarmPlan, udp_params: Params,
                                      mode: str) -> None:

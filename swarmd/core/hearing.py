@@ -24,6 +24,9 @@ from swarmd.core.witness import witnesses
 class Hearing(NodeBase):
     # ------------------------------------------------------------------ HEARTBEAT
     def _on_heartbeat(self, sender: int, hb: wire.Heartbeat, now: float) -> None:
+        for votes in self._votes.values():
+            # A witness heard, its warning overdue: it stopped suspecting (`votes.py`).
+            votes.witness_heard(sender, now)
         if hb.function == 0:
             if hb.role in (Role.STANDBY, Role.CLAIMING) and hb.health != Health.FAULTY:
                 self._ears.standby_beat(sender, now)
