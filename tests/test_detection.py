@@ -219,3 +219,50 @@ def test_a_swarm_learns_a_fading_robot_and_still_replaces_it_when_it_dies(
     net.crash(2)
     net.run_until(73.0 + params.takeover_bound(patience=params.t_max_bursty))
     assert [e for e in net.named("takeover") if e["function"] == "f2"]
+
+
+def two_silent(radio: Radio, six: Node, *, accused: bool) -> list[Action]:
+    """Standby 6 (covers f2; watchers: f1's holder 1, f3's holder 3) hears robots 1-4
+    until 2.5 s, then robots 2 and 3 fall silent to it while 1 and 4 go on; at 3.3 s
+    robot 1 warns about robot 2. If `accused`, robot 4 (a watcher of f3) warned about
+    robot 3 just before."""
+    out: list[Action] = []
+    level = level_byte(radio.params.suspect_level)
+    t = 0.0
+    while t < 3.3:
+        out += run(six, t, t)
+        for rid, f in ((1, "f1"), (2, "f2"), (3, "f3"), (4, "f4")):
+            if t < 2.5 or rid in (1, 4):
+                out += six.receive(radio.beat(rid, f), t)
+        t = round(t + radio.params.heartbeat_interval, 6)
+    if accused:
+        out += six.receive(radio.warn(4, 3, "f3", level), 3.25)
+    return out + run(six, 3.3, 3.3) + six.receive(radio.warn(1, 2, "f2", level), 3.3)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_watcher_faded_to_the_standby_is_no_dead_watcher(paper_plan: SwarmPlan,
+                                                           udp_params: Params,
+                                                           mode: str) -> None:
+    """Rule 9 counts the standby's own ears as a witness when the slot's watchers are
+    dead; watcher 3 silent to the standby is dead only if robot 4, which watches it and
+    which the standby hears, suspects it too (DESIGN "Detection"): else a third faded
+    link would stand in for a witness."""
+    radio = Radio(paper_plan, udp_params, mode)
+    out = two_silent(radio, radio.node(6), accused=False)
+    assert not [a for a in out if isinstance(a, (ev.Claim, ev.Vote))
+                and a.fields().get("from") != 1]
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_watcher_dead_to_its_own_watchers_makes_room_for_the_standby(
+        paper_plan: SwarmPlan, udp_params: Params, mode: str) -> None:
+    """Robots 2 and 3 crashed together (rule 9): robot 4 suspects 3, robot 1 suspects 2,
+    and the standby's own ears make the quorum for f2 (with both suspected, for the
+    first of the two it has the word of a live watcher about the other)."""
+    radio = Radio(paper_plan, udp_params, mode)
+    out = two_silent(radio, radio.node(6), accused=True)
+    claims = [a.fields() for a in out if isinstance(a, ev.Claim)]
+    assert [c["subject"] for c in claims] == [2]
+    votes = [a.fields() for a in out if isinstance(a, ev.Vote)]
+    assert [v["from"] for v in votes if v["function"] == "f2"] == [1, 6]
