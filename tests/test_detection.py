@@ -134,6 +134,56 @@ def test_a_standby_counts_suspicions_not_doubts(paper_plan: SwarmPlan,
     assert [a for a in out if isinstance(a, ev.Claim)]
 
 
+def stopped_warning(radio: Radio, six: Node, *, heard: bool, cadence: float) -> list[Action]:
+    """Standby 6 (covers f2) hears witness 1 warn about robot 2 three times at `cadence`,
+    then, if `heard`, robot 1's own heartbeats and no warning (it heard robot 2 again);
+    witness 3 warns 0.6 s after 1's last warning, within the vote window."""
+    level = level_byte(radio.params.suspect_level)
+    out: list[Action] = []
+    t = 3.0
+    for _ in range(3):
+        out += run(six, t, t) + six.receive(radio.warn(1, 2, "f2", level), t)
+        last, t = t, round(t + cadence, 6)
+    for dt in (0.15, 0.25, 0.35, 0.45, 0.55):
+        t = round(last + dt, 6)
+        out += run(six, t, t) + six.receive(radio.beat(3, "f3"), t)
+        if heard:
+            out += six.receive(radio.beat(1, "f1"), t)
+    t = round(last + 0.6, 6)
+    return out + run(six, t, t) + six.receive(radio.warn(3, 2, "f2", level), t)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_witness_that_stopped_warning_is_no_vote(paper_plan: SwarmPlan,
+                                                   udp_params: Params, mode: str) -> None:
+    """A live robot faded to witness 1, then to witness 3, and to the standby all along:
+    1's vote must not meet 3's suspicion once 1 heard the robot again (DESIGN
+    "Detection", the standby's votes stand for witnesses silent now)."""
+    radio = Radio(paper_plan, udp_params, mode)
+    six = radio.node(6)
+    for rid, f in ((1, "f1"), (3, "f3")):  # both witnesses alive: rule 9 stays out
+        six.receive(radio.beat(rid, f), 2.95)
+    out = stopped_warning(radio, six, heard=True, cadence=udp_params.warn_interval)
+    assert not [a for a in out if isinstance(a, ev.Claim)]
+    assert six.snapshot().votes == {"f2": 1}
+
+
+@pytest.mark.parametrize(("heard", "cadence"), [(False, 0.1), (True, 0.5)],
+                         ids=["warnings lost", "an alerted witness, slower"])
+@pytest.mark.parametrize("mode", MODES)
+def test_a_witness_still_warning_keeps_its_vote(paper_plan: SwarmPlan, udp_params: Params,
+                                                mode: str, heard: bool,
+                                                cadence: float) -> None:
+    """Its warnings lost (and its heartbeats too), or sent slower after its alert (rule
+    8): the vote stays its window and the quorum meets."""
+    radio = Radio(paper_plan, udp_params, mode)
+    six = radio.node(6)
+    for rid, f in ((1, "f1"), (3, "f3")):
+        six.receive(radio.beat(rid, f), 2.95)
+    out = stopped_warning(radio, six, heard=heard, cadence=cadence)
+    assert [a for a in out if isinstance(a, ev.Claim)]
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_the_suspect_answers_a_doubt(paper_plan: SwarmPlan, udp_params: Params,
                                      mode: str) -> None:
@@ -169,3 +219,50 @@ def test_a_swarm_learns_a_fading_robot_and_still_replaces_it_when_it_dies(
     net.crash(2)
     net.run_until(73.0 + params.takeover_bound(patience=params.t_max_bursty))
     assert [e for e in net.named("takeover") if e["function"] == "f2"]
+
+
+def two_silent(radio: Radio, six: Node, *, accused: bool) -> list[Action]:
+    """Standby 6 (covers f2; watchers: f1's holder 1, f3's holder 3) hears robots 1-4
+    until 2.5 s, then robots 2 and 3 fall silent to it while 1 and 4 go on; at 3.3 s
+    robot 1 warns about robot 2. If `accused`, robot 4 (a watcher of f3) warned about
+    robot 3 just before."""
+    out: list[Action] = []
+    level = level_byte(radio.params.suspect_level)
+    t = 0.0
+    while t < 3.3:
+        out += run(six, t, t)
+        for rid, f in ((1, "f1"), (2, "f2"), (3, "f3"), (4, "f4")):
+            if t < 2.5 or rid in (1, 4):
+                out += six.receive(radio.beat(rid, f), t)
+        t = round(t + radio.params.heartbeat_interval, 6)
+    if accused:
+        out += six.receive(radio.warn(4, 3, "f3", level), 3.25)
+    return out + run(six, 3.3, 3.3) + six.receive(radio.warn(1, 2, "f2", level), 3.3)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_watcher_faded_to_the_standby_is_no_dead_watcher(paper_plan: SwarmPlan,
+                                                           udp_params: Params,
+                                                           mode: str) -> None:
+    """Rule 9 counts the standby's own ears as a witness when the slot's watchers are
+    dead; watcher 3 silent to the standby is dead only if robot 4, which watches it and
+    which the standby hears, suspects it too (DESIGN "Detection"): else a third faded
+    link would stand in for a witness."""
+    radio = Radio(paper_plan, udp_params, mode)
+    out = two_silent(radio, radio.node(6), accused=False)
+    assert not [a for a in out if isinstance(a, (ev.Claim, ev.Vote))
+                and a.fields().get("from") != 1]
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_watcher_dead_to_its_own_watchers_makes_room_for_the_standby(
+        paper_plan: SwarmPlan, udp_params: Params, mode: str) -> None:
+    """Robots 2 and 3 crashed together (rule 9): robot 4 suspects 3, robot 1 suspects 2,
+    and the standby's own ears make the quorum for f2 (with both suspected, for the
+    first of the two it has the word of a live watcher about the other)."""
+    radio = Radio(paper_plan, udp_params, mode)
+    out = two_silent(radio, radio.node(6), accused=True)
+    claims = [a.fields() for a in out if isinstance(a, ev.Claim)]
+    assert [c["subject"] for c in claims] == [2]
+    votes = [a.fields() for a in out if isinstance(a, ev.Vote)]
+    assert [v["from"] for v in votes if v["function"] == "f2"] == [1, 6]

@@ -36,3 +36,28 @@ def test_count_ages_out_and_clear_resets() -> None:
     v.clear()
     assert (v.subject, v.epoch, v.witnesses) == (None, -1, {})
     assert v.add(3, 2, 0, 3.1) == 1
+
+
+def test_a_witness_heard_with_its_warning_overdue_loses_its_vote() -> None:
+    """A vote stands for a witness silent about the suspect now (`votes.py`): heard
+    (a heartbeat) past its cadence with no warning, it stopped suspecting."""
+    v = VoteCounter(window=1.0, cadence_floor=0.1)
+    v.add(1, 2, 0, 0.0)
+    v.add(1, 2, 0, 0.1)  # its cadence: 0.1 s
+    assert not v.witness_heard(1, 0.14)  # its next warning may still be on its way
+    assert v.witness_heard(1, 0.3)  # due at 0.2: it heard the suspect again
+    assert v.add(3, 2, 0, 0.5) == 1  # the window alone would have counted 2
+
+
+def test_a_vote_whose_cadence_is_unknown_or_slow_keeps_the_window() -> None:
+    v = VoteCounter(window=1.0, cadence_floor=0.1)
+    v.add(1, 2, 0, 0.0)
+    assert not v.witness_heard(1, 0.5)  # one warning: its cadence is unknown
+    v.add(1, 2, 0, 0.5)  # a witness that alerted warns slower (rule 8)
+    assert not v.witness_heard(1, 1.1)
+    assert v.add(3, 2, 0, 1.2) == 2
+    # A new suspicion of the same witness (past the window) forgets the old cadence.
+    v.add(4, 2, 0, 3.0)
+    v.add(4, 2, 0, 3.1)
+    v.add(4, 2, 0, 5.0)
+    assert not v.witness_heard(4, 5.4)

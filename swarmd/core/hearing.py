@@ -24,6 +24,9 @@ from swarmd.core.witness import witnesses
 class Hearing(NodeBase):
     # ------------------------------------------------------------------ HEARTBEAT
     def _on_heartbeat(self, sender: int, hb: wire.Heartbeat, now: float) -> None:
+        for votes in self._votes.values():
+            # A witness heard, its warning overdue: it stopped suspecting (`votes.py`).
+            votes.witness_heard(sender, now)
         if hb.function == 0:
             if hb.role in (Role.STANDBY, Role.CLAIMING) and hb.health != Health.FAULTY:
                 self._ears.standby_beat(sender, now)
@@ -181,6 +184,9 @@ class Hearing(NodeBase):
             return
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, w.epoch)
+        if strong and sender != w.suspect \
+                and sender in witnesses(self._plan, self._known, f):
+            self._ears.accused(w.suspect, sender, now)  # rule 9 asks it of a watcher
         if not strong or f not in self._covers or not self._standing_by():
             return
         if greater(Holder(holder, epoch), Holder(w.suspect, w.epoch)):

@@ -4,27 +4,68 @@ Counts *distinct* witnesses that warned about the same holder at the same epoch 
 `window` seconds. A later warning from the same witness refreshes its time but never
 counts twice. Warnings about another holder or epoch start a new count: the standby
 follows the slot, not a robot id (rule 1).
+
+A vote stands for a witness that is silent about the suspect *now*, not one that was
+(DESIGN "Detection", "The standby combines"): a suspecting witness warns at a steady
+cadence until it hears the suspect again, so a standby that keeps hearing the witness
+(its heartbeats) after its next warning was due, and no warning, has heard it stop. Its
+vote lapses then, rather than a whole window after its last warning, where it met the
+next witness's suspicion of a live robot whose link had faded to each in turn. The
+cadence is the one measured (the gap between the witness's last two warnings heard), so
+a witness that warns slower after its alert (rule 8) keeps its vote between warnings;
+a vote with no measured cadence keeps the window.
 """
 
 from __future__ import annotations
 
+LAPSE = 1.5
+"""Times the witness's cadence: how overdue its next warning may be, once its
+heartbeats show its link to us is up, before its vote lapses. Its warnings and
+heartbeats go out on separate schedules, each within a frame's jitter: half a period of
+slack lets the warning due arrive first whenever it was sent."""
+
 
 class VoteCounter:
-    __slots__ = ("epoch", "subject", "window", "witnesses")
+    __slots__ = ("_cadence", "_floor", "_warned", "epoch", "subject", "window", "witnesses")
 
-    def __init__(self, window: float) -> None:
+    def __init__(self, window: float, cadence_floor: float = 0.0) -> None:
         self.window = window
         self.subject: int | None = None
         self.epoch = -1
         self.witnesses: dict[int, float] = {}
+        """witness -> when its last warning was heard, for the votes that count."""
+        self._warned: dict[int, float] = {}
+        """witness -> when its last warning was heard, lapsed or not (its cadence)."""
+        self._cadence: dict[int, float] = {}
+        """witness -> the gap between its last two warnings heard, at least
+        `cadence_floor` (the swarm's `warn_interval`: no witness warns faster)."""
+        self._floor = cadence_floor
 
     def add(self, witness: int, subject: int, epoch: int, now: float) -> int:
         """Record a warning; return the number of distinct witnesses in the window."""
         if (subject, epoch) != (self.subject, self.epoch):
+            self.clear()
             self.subject, self.epoch = subject, epoch
-            self.witnesses = {}
+        before = self._warned.get(witness)
+        if before is not None and now - before <= self.window:
+            self._cadence[witness] = max(self._floor, now - before)
+        else:  # a new suspicion of this witness's: its old cadence says nothing
+            self._cadence.pop(witness, None)
+        self._warned[witness] = now
         self.witnesses[witness] = now
         return self.count(now)
+
+    def witness_heard(self, witness: int, now: float) -> bool:
+        """`witness` was heard at `now` (a heartbeat): its link to us is up. If its next
+        warning is overdue by its cadence, it stopped suspecting (it heard the suspect):
+        its vote lapses. True if it did. A vote whose cadence is not measured yet keeps
+        the window (it may be a witness that warns slowly after its alert)."""
+        last = self.witnesses.get(witness)
+        cadence = self._cadence.get(witness)
+        if last is None or cadence is None or now - last <= LAPSE * cadence:
+            return False
+        del self.witnesses[witness]
+        return True
 
     def count(self, now: float) -> int:
         horizon = now - self.window
@@ -33,3 +74,4 @@ class VoteCounter:
 
     def clear(self) -> None:
         self.subject, self.epoch, self.witnesses = None, -1, {}
+        self._warned, self._cadence = {}, {}
