@@ -184,9 +184,6 @@ class Hearing(NodeBase):
             return
         if self._rejoin is not None and self._rejoin.function == f:
             self._rejoin_superseded(f, w.epoch)
-        if strong and sender != w.suspect \
-                and sender in witnesses(self._plan, self._known, f):
-            self._ears.accused(w.suspect, sender, now)  # rule 9 asks it of a watcher
         if not strong or f not in self._covers or not self._standing_by():
             return
         if greater(Holder(holder, epoch), Holder(w.suspect, w.epoch)):

@@ -16,7 +16,6 @@ that robot is still no news (DESIGN "Detection"). Pure.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 
 from swarmd.core.belief import LEVEL_MAX, LinkBelief
@@ -32,8 +31,8 @@ def witnesses(plan: SwarmPlan, known: Mapping[str, Holder], f: str) -> set[int]:
 
 
 class Ears:
-    __slots__ = ("_accused", "_links", "_params", "_plan", "_robot_id", "_slot_heard",
-                 "_standby_at", "_start")
+    __slots__ = ("_links", "_params", "_plan", "_robot_id", "_slot_heard", "_standby_at",
+                 "_start")
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, start: float) -> None:
         self._robot_id = robot_id
@@ -44,8 +43,6 @@ class Ears:
         self._standby_at: dict[int, float] = {}
         self._links: dict[int, LinkBelief] = {}
         """robot -> its link's belief; one per robot of the plan at most."""
-        self._accused: dict[int, dict[int, float]] = {}
-        """robot -> {witness: when its last suspicion of it was heard} (rule 9)."""
 
     def slot_beat(self, f: str, holder: int, epoch: int, now: float) -> None:
         """A heartbeat of f's holder at `epoch` was accepted at `now`."""
@@ -128,37 +125,13 @@ class Ears:
         heard = self._slot_heard.get(f)
         if heard is not None and now - heard.at < self.patience(heard.holder):
             return False
-        suspect = known[f].robot
-        live = sum(1 for g in self._plan.watched_by(f)
-                   if self._heard_alive(g, known, now)
-                   or not self._watcher_dead(g, suspect, known, now))
+        live = 0
+        for g in self._plan.watched_by(f):
+            beat = self._slot_heard.get(g)
+            if beat is not None and beat.holder == known[g].robot \
+                    and now - beat.at < self.patience(beat.holder):
+                live += 1
         return live < p.quorum
-
-    def _heard_alive(self, g: str, known: Mapping[str, Holder], now: float) -> bool:
-        """Has this robot heard g's holder heartbeat within its patience for the link?"""
-        beat = self._slot_heard.get(g)
-        return beat is not None and beat.holder == known[g].robot \
-            and now - beat.at < self.patience(beat.holder)
-
-    def _watcher_dead(self, g: str, suspect: int, known: Mapping[str, Holder],
-                      now: float) -> bool:
-        """Rule 9, a watcher (g's holder) silent to this standby: dead, or its link to us
-        faded? Its own watchers tell: one that this standby hears alive (not `suspect`)
-        would suspect a dead watcher too, so its warning about it since we last heard it
-        is required; only with no such watcher left does silence alone decide (DESIGN
-        "Detection": else a third faded link stands in for a witness)."""
-        robot = known[g].robot
-        beat = self._slot_heard.get(g)
-        since = beat.at if beat is not None and beat.holder == robot else -math.inf
-        heard = self._accused.get(robot, {})
-        if any(at >= since for by, at in heard.items() if by != suspect):
-            return True
-        return not any(known[w].robot != suspect and self._heard_alive(w, known, now)
-                       for w in self._plan.watched_by(g))
-
-    def accused(self, robot: int, by: int, now: float) -> None:
-        """A warning of `by` (a witness of rule 3) suspecting `robot` was heard at `now`."""
-        self._accused.setdefault(robot, {})[by] = now
 
     def live_standby(self, f: str, subject: int, now: float) -> bool:
         """Is any robot that may take `f` over plausibly alive (rules 6, 8)? A standby
