@@ -114,6 +114,13 @@ def _slack(out: dict[str, Any]) -> float:
     return float(out.get("lateness_ms", {}).get("max_ms") or 0.0) / 1000.0
 
 
+def _what_happened(out: dict[str, Any]) -> dict[str, Any]:
+    """What a failed assertion shows of a run: its faults' rows, what the machine did."""
+    keys = ("faults", "holders", "false_suspicions", "lateness_ms", "loadavg", "slow_starts",
+            "restart_s", "startup_s", "warnings", "drops")
+    return {k: out.get(k) for k in keys}
+
+
 def _taken_over(out: dict[str, Any], fault: str) -> tuple[float, int]:
     row = next(f for f in out["faults"] if f["fault"] == fault)
     assert row["takeover_latency"] is not None, row
@@ -134,13 +141,14 @@ def test_per_robot_one_insider_breaks_nothing(runs: dict[tuple[str, str], Run],
     # Only the dead robot is replaced, by its standby, within the bound (+ one T_max).
     dead = {"claim": "crash:2@3", "replay": "crash:2@2.5", "ahead_all": "crash:2@3.5"}.get(
         attack)
-    if _slack(out) < T_MAX:
-        assert out["takeovers"] == (1 if dead else 0)
+    if _slack(out) < T_MAX and not out.get("slow_starts"):
+        assert out["takeovers"] == (1 if dead else 0), _what_happened(out)
         assert out["holders"] == {"f1": [1], "f2": [6 if dead else 2], "f3": [3], "f4": [4]}
     else:
-        # A robot's own event loop ran later than T_max (the run's lateness figure): a
-        # loaded machine, not the attack, can have got a live robot suspected there,
-        # and the checker (no violation above) judged what followed.
+        # A robot's own event loop ran later than T_max (the run's lateness figure), or a
+        # daemon started after the start-up grace (`slow_starts`, docs/sim.md): a loaded
+        # machine, not the attack, can have got a live robot suspected or taken for dead
+        # there, and the checker (no violation above) judged what followed.
         assert out["takeovers"] >= (1 if dead else 0)
     if dead is not None:
         latency, by = _taken_over(out, dead)
