@@ -7,6 +7,7 @@ property, no deadline because example cost depends on the drawn swarm) and "benc
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -15,6 +16,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from sim.realtime.ports import PortLease
+from swarmd.base.logs import JsonFormatter, TextFormatter
 from swarmd.config import load_swarm
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -61,3 +63,19 @@ def _own_ros_domains(monkeypatch: pytest.MonkeyPatch) -> None:
     shell that exports one would put every test's swarm in it, where they hear each
     other. Tests lease their own domains (`DomainLease`) or pass one explicitly."""
     monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+
+
+@pytest.fixture(autouse=True)
+def _swarmd_log_handlers_removed() -> Iterator[None]:
+    """A test that runs `swarmd start` in-process (CliRunner) leaves the root logger writing
+    to that run's captured stdout (`setup_logging`), closed once the run returns; a later
+    test in the same worker whose code logs then prints `--- Logging error ---` with a
+    traceback into its own captured output. Which tests share a worker depends on the
+    xdist split, so each test ends with swarmd's own handlers removed, and any handler
+    left writing to a closed stream."""
+    yield
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        dead = isinstance(h, logging.StreamHandler) and getattr(h.stream, "closed", False)
+        if dead or isinstance(h.formatter, JsonFormatter | TextFormatter):
+            root.removeHandler(h)
