@@ -19,12 +19,12 @@ $(PY):
 # MAVProxy (the suite's ground station from ArduPilot, tests/test_mavproxy_vehicle.py) goes
 # in without its declared OpenCV and VTK, some hundred MB a headless session never loads:
 # its runtime needs only pymavlink, pyserial and numpy, which the dev extra brings.
-# --no-compile: pip would byte-compile every module up front, pymavlink's generated MAVLink
-# dialects above all (24.6 s against 7.9 s for pymavlink and mujoco alone); Python compiles
-# the few modules a run imports when it first imports them, and caches them.
+# Not --no-compile, although pip's byte-compiling of pymavlink's generated dialects is most
+# of the install's time: where PYTHONDONTWRITEBYTECODE is set (this machine sets it), no
+# import would cache its compiling, and every robot process would compile them again.
 $(STAMP)/python: pyproject.toml | $(PY)
-	$(PIP) install -q --no-compile -e '.[sim,ros2,dev]'
-	$(PIP) install -q --no-compile --no-deps 'MAVProxy>=1.8.75'
+	$(PIP) install -q -e '.[sim,ros2,dev]'
+	$(PIP) install -q --no-deps 'MAVProxy>=1.8.75'
 	mkdir -p $(STAMP) && touch $@
 
 setup: $(STAMP)/system $(STAMP)/python

@@ -17,7 +17,7 @@ import pytest
 from sim.shared.faults import parse_fault
 
 ROOT = Path(__file__).resolve().parent.parent
-SEEDS = 100
+SEEDS = 50
 
 
 def _bench() -> ModuleType:
@@ -62,7 +62,7 @@ def test_dense_chaos_converges_in_every_auth_mode(auth: str) -> None:
     """`--dense` (4-8 faults within 1.5 s, mostly on neighbours) in each mode: a rule
     proven unsigned is not proven signed, nor the other way round."""
     bench = _bench()
-    seeds = [*range(40), *DENSE_FOUND]
+    seeds = [*range(25), *DENSE_FOUND]
     found = bench.chaos(seeds, max_robots=12, verbose=False, dense=True, auth=auth)
     hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
     assert hits == {}, hits

@@ -126,13 +126,13 @@ def check(case: Case, allow: frozenset[str] = frozenset()) -> None:
     assert bad == [], f"{[v.as_dict() for v in bad]}\n{case.describe()}"
 
 
-@settings(max_examples=60)
+@settings(max_examples=40)
 @given(cases(spaced=True))
 def test_spaced_random_faults_never_break_an_invariant(case: Case) -> None:
     check(case)
 
 
-@settings(max_examples=60)
+@settings(max_examples=40)
 @given(cases())
 def test_random_faults_never_break_an_invariant(case: Case) -> None:
     """Any schedule, overlapping faults included: correlated failures too (DESIGN
