@@ -557,12 +557,19 @@ async def run_daemon(
     daemon = Daemon(robot_cfg, transport=transport, link=link, receive_filter=receive_filter,
                     event_sink=event_sink, time_origin=time_origin, config_path=config_path)
     loop = asyncio.get_running_loop()
+    before = {sig: signal.getsignal(sig) for sig in signals.DEFERRED} if handle_signals else {}
     installed = _install_signals(loop, stop, daemon) if handle_signals else []
     try:
         return await _lifecycle(daemon, stop, on_ready, config_path)
     finally:
         for sig in installed:
-            loop.remove_signal_handler(sig)
+            loop.remove_signal_handler(sig)  # leaves the signal's default action: death
+            # Put back what was there: `swarmd start` records these signals from its first
+            # line (swarmd/base/signals.py), so one that lands between the stop and the
+            # process's exit (a reload burst) is no death and the exit status stays ours.
+            prior = before.get(sig)
+            if prior is not None:
+                signal.signal(sig, prior)
 
 
 async def _lifecycle(daemon: Daemon, stop: asyncio.Event,
