@@ -226,16 +226,22 @@ def _alternate(args: argparse.Namespace,
     for i in range(args.runs):
         for name, tree in trees.items():
             out = subprocess.run(child_args(args, tree), capture_output=True, text=True)
-            lines = out.stdout.strip().splitlines()
-            if not lines or not lines[-1].startswith("{"):
-                raise SystemExit(f"{name}: measurement failed:\n{out.stdout}{out.stderr}")
-            r = json.loads(lines[-1])
-            results[name].append(r)
-            floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
-            print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}%, standby "
-                  f"{r['standby_cpu_percent']:.2f}%{floor}, RSS {r['rss_mb']:.1f} MB, load "
-                  f"{os.getloadavg()[0]:.2f}", flush=True)
+            results[name].append(_measured(args, i, name, out.stdout, out.stderr))
     return results
+
+
+def _measured(args: argparse.Namespace, i: int, name: str, out: str,
+              err: str = "") -> dict[str, Any]:
+    """Run `i` of tree `name`: the figures its child printed last, echoed in one line."""
+    lines = out.strip().splitlines()
+    if not lines or not lines[-1].startswith("{"):
+        raise SystemExit(f"{name}: measurement failed:\n{out}{err}")
+    r: dict[str, Any] = json.loads(lines[-1])
+    floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
+    print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}%, standby "
+          f"{r['standby_cpu_percent']:.2f}%{floor}, RSS {r['rss_mb']:.1f} MB, load "
+          f"{os.getloadavg()[0]:.2f}", flush=True)
+    return r
 
 
 def _together(args: argparse.Namespace,
@@ -260,15 +266,7 @@ def _together(args: argparse.Namespace,
             p.stdin.flush()
         for name, p in procs.items():
             out, _ = p.communicate()
-            lines = out.strip().splitlines()
-            if not lines or not lines[-1].startswith("{"):
-                raise SystemExit(f"{name}: measurement failed:\n{out}")
-            r = json.loads(lines[-1])
-            results[name].append(r)
-            floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
-            print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}%, standby "
-                  f"{r['standby_cpu_percent']:.2f}%{floor}, RSS {r['rss_mb']:.1f} MB, load "
-                  f"{os.getloadavg()[0]:.2f}", flush=True)
+            results[name].append(_measured(args, i, name, out))
     return results
 
 
