@@ -311,10 +311,7 @@ def slow_starts(events: Sequence[Mapping[str, Any]], faults: Sequence[Fault],
     """robot -> run time its node first logged `started`, for the robots that started
     after the start-up grace (their watchers rightly took them for dead) and had no fault
     before (a restart starts late on purpose)."""
-    first: dict[int, float] = {}
-    for t, robot, event in _typed(events):
-        if isinstance(event, Started):
-            first.setdefault(robot, t)
+    first = {r: ts[0] for r, ts in _starts(events).items()}
     return {r: t for r, t in sorted(first.items()) if t > grace
             and not any(f.kind is not FaultKind.PARTITION and r in f.robots and f.at <= t
                         for f in faults)}
@@ -325,10 +322,7 @@ def restart_delays(events: Sequence[Mapping[str, Any]],
     """robot -> for each `restart` fault of it, how long after the fault its new node
     logged `started` (a real process takes its start-up time; a bound that runs from the
     robot's return runs from then)."""
-    starts: dict[int, list[float]] = {}
-    for t, robot, event in _typed(events):
-        if isinstance(event, Started):
-            starts.setdefault(robot, []).append(t)
+    starts = _starts(events)
     out: dict[int, list[float]] = {}
     for f in faults:
         if f.kind is FaultKind.RESTART:
@@ -337,6 +331,15 @@ def restart_delays(events: Sequence[Mapping[str, Any]],
             if back is not None:
                 out.setdefault(r, []).append(round(back - f.at, 3))
     return out
+
+
+def _starts(events: Sequence[Mapping[str, Any]]) -> dict[int, list[float]]:
+    """robot -> the run times its nodes logged `started`, in log order."""
+    starts: dict[int, list[float]] = {}
+    for t, robot, event in _typed(events):
+        if isinstance(event, Started):
+            starts.setdefault(robot, []).append(t)
+    return starts
 
 
 def render_summary(summary: Summary, console: Console) -> None:
