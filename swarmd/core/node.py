@@ -6,16 +6,19 @@ be called next. Nothing here does I/O, reads a clock or draws a random number.
 
 What happens where:
 - `receive`: decode and filter a frame (peer garbage becomes a counted drop, never an
-  exception), then the per-message rules (`hearing.py`; per-robot evidence `signed.py`).
-- `tick`: deadlines — own heartbeat, watchdogs (Fig. 7), claim hold (the wait state),
-  fence hold, rejoin hold (`moves.py`).
+  exception), then the per-message rules (`hearing.py`; WARN and CLAIM `episode.py`;
+  REFUTE `signed.py`).
+- `tick`: deadlines — own heartbeat (`nodebase.py`), watchdogs (Fig. 7) and claim hold
+  (the wait state; `episode.py`), fence hold, rejoin hold (`restart.py`).
 - `robot_health`: the robot's single input (Fig. 4); FAULTY sends LEAVE (rule 7).
 - `stop`: graceful stop, LEAVE when asked to hand over.
 - the constructor: the plan's holders, or what a restarted robot persisted
   (`restart.py`: its own hold resumed only after listening).
 
 Roles and transitions are the table in `roles.py`; every change of role goes through
-`NodeBase._to()`, which enforces it. The state is declared in `nodebase.py`.
+`NodeBase._to()`, which enforces it. The state is declared in `nodebase.py`. `Node` is
+the top layer: it sits on `Restart`, `Hearing`, `Episode`, `Signed`, `Views` and
+`NodeBase`, each on the next, each calling only itself and what is below it.
 """
 
 from __future__ import annotations
@@ -33,17 +36,14 @@ from swarmd.core.claims import ClaimMemory
 from swarmd.core.drops import DropReason
 from swarmd.core.errors import NodeError
 from swarmd.core.evidence import EvidenceStore
-from swarmd.core.hearing import Hearing
 from swarmd.core.heartbeat import HeartbeatClock
 from swarmd.core.limits import check_keys, check_restored
-from swarmd.core.moves import Moves
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder, Restored, Snapshot, Standing
 from swarmd.core.replay import ReplayFilter, header_seq
 from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
-from swarmd.core.signed import Signed
 from swarmd.core.state import Active, Fenced, Standby
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import WatchState
@@ -51,7 +51,7 @@ from swarmd.core.witness import Ears
 from swarmd.core.words import LatestWords
 
 
-class Node(Hearing, Moves, Signed, Restart):
+class Node(Restart):
     """One robot's protocol state. Its state is private: drivers read `snapshot()` and
     the few read-only properties below."""
 
@@ -295,9 +295,7 @@ class Node(Hearing, Moves, Signed, Restart):
         if health == Health.FAULTY:
             if self._role == Role.ACTIVE and self._function is not None:
                 f = self._function
-                self._emit(ev.Leave(function=f, reason=ev.LeaveCause.FAULT))
-                self._send(wire.Leave(self._plan.slot(f), self._epoch, wire.LeaveReason.FAULT),
-                           evidence=True)
+                self._leave(f, ev.LeaveCause.FAULT, wire.LeaveReason.FAULT)
                 self._pending.append(Release(f))
             if self._rejoin is not None and self._started:
                 # A faulty robot resumes nothing: it is a standby now.
@@ -317,9 +315,7 @@ class Node(Hearing, Moves, Signed, Restart):
             return self._drain()
         if self._role == Role.ACTIVE and self._function is not None:
             if handover:
-                self._emit(ev.Leave(function=self._function, reason=ev.LeaveCause.SHUTDOWN))
-                self._send(wire.Leave(self._plan.slot(self._function), self._epoch,
-                                      wire.LeaveReason.SHUTDOWN), evidence=True)
+                self._leave(self._function, ev.LeaveCause.SHUTDOWN, wire.LeaveReason.SHUTDOWN)
             self._pending.append(Release(self._function))
         self._emit(ev.Stopped())
         self._stopped = True
@@ -403,6 +399,15 @@ class Node(Hearing, Moves, Signed, Restart):
             self._beat.next = now
             self._stalled_at = now
             self._armed = None  # noticed once; `_drain` arms the next deadline
+
+    def _leave(self, f: str, cause: ev.LeaveCause, reason: wire.LeaveReason) -> None:
+        """We leave f, which we hold (rule 7): the event and a LEAVE. Per robot, our own
+        signed LEAVE is evidence for its handover like anyone's (`Hearing._on_leave`):
+        kept here too, so a certificate relayed from us can carry it."""
+        self._emit(ev.Leave(function=f, reason=cause))
+        data = self._send(wire.Leave(self._plan.slot(f), self._epoch, reason))
+        if self._identity is not None:
+            self._record_evidence(f, self._robot_id, self._robot_id, self._epoch, data)
 
     def _drop(self, reason: str) -> list[Action]:
         self._drops[reason] += 1

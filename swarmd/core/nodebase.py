@@ -1,11 +1,14 @@
-"""The state of one robot's node and the plumbing every rule uses (DESIGN section 2).
+"""The state of one robot's node and the plumbing every rule uses (DESIGN section 2):
+the role and its data, the one way a role changes (`_to`), sending, signing and events,
+the receive-side checks every message shares, and our own heartbeats and their schedule.
 
-`Node` (`node.py`) is assembled from this base and four rule modules: `hearing.py`
-(what a robot does with each message), `moves.py` (how its role changes), `signed.py`
-(per-robot evidence) and `restart.py` (what a restarted robot starts from). They share
-the state declared here, set up once by `Node.__init__`; drivers see it only through
-`Node.snapshot()`. The methods a rule module calls in another are declared here and
-defined there.
+`NodeBase` is the bottom layer of `Node` (`node.py`), which stacks one class on the
+next, each calling only methods defined in itself or below: `NodeBase` <- `Views`
+(`views.py`: a slot's view moves forward) <- `Signed` (`signed.py`: per-robot relays and
+refutes) <- `Episode` (`episode.py`: the takeover episode, suspicion to takeover) <-
+`Hearing` (`hearing.py`: heartbeats, LEAVE, CERT) <- `Restart` (`restart.py`: what a
+robot starts from) <- `Node` (the entry points). They share the state declared here,
+set up once by `Node.__init__`; drivers see it only through `Node.snapshot()`.
 """
 
 from __future__ import annotations
@@ -26,7 +29,6 @@ from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
 from swarmd.core.params import Params
 from swarmd.core.plan import Relevant, SwarmPlan
-from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
 from swarmd.core.replay import ReplayFilter
 from swarmd.core.roles import Health, Role, Trigger, transition
@@ -80,7 +82,7 @@ class NodeBase:
     _shown_newer: set[str]
     """Per robot: slots we hold of which a live robot's signed warning named us at a
     newer epoch than ours (it took a recorded takeover that our refute voids: our
-    reassertion must be verifiable, `Signed._record_evidence`)."""
+    reassertion must be verifiable, `Episode._record_evidence`)."""
     _anchor_every: float
     _resync_after: float
     _armed: float | None
@@ -136,17 +138,20 @@ class NodeBase:
         self._to(trigger, Standby())
 
     # ------------------------------------------------------------------ plumbing
-    def _send(self, msg: wire.Message, *, evidence: bool = False) -> bytes:
+    def _send(self, msg: wire.Message) -> bytes:
         self._seq = min(self._seq + 1, wire.SEQ_MAX)
         frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
         data = wire.encode(frame, self._keys[0] if self._keys else None, self._signer)
-        if evidence and self._identity is not None and isinstance(msg, wire.Leave):
-            f = self._plan.function_at(msg.function)
-            if f is not None:
-                self._record_evidence(f, self._robot_id, self._robot_id, msg.epoch, data)
         self._pending.append(Broadcast(data))
         self._frames_out += 1
         return data
+
+    def _sign_only(self, msg: wire.Message) -> bytes:
+        """A frame signed by this robot, for a certificate, not broadcast by itself."""
+        assert self._signer is not None
+        self._seq = min(self._seq + 1, wire.SEQ_MAX)
+        frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
+        return wire.encode(frame, None, self._signer)
 
     def _emit(self, event: Event) -> None:
         self._pending.append(event)
@@ -210,64 +215,35 @@ class NodeBase:
     def _heartbeating(self) -> bool:
         return not self._stopped and self._health != Health.FAULTY
 
-    # ------------------------------------------------------------------ across modules
-    # Defined in `hearing.py`, `moves.py` and `signed.py`.
-    def _on_claim(self, sender: int, c: wire.Claim, now: float, raw: bytes = b"") -> None:
-        raise NotImplementedError
+    # ------------------------------------------------------------------ heartbeats
+    def _send_heartbeat(self, now: float, *, extra: bool = False) -> None:
+        slot = self._plan.slot(self._function) if self._function is not None else 0
+        # A rejoining robot is a standby to the others until it resumes (rule 6).
+        role = Role.STANDBY if self._role == Role.REJOINING else self._role
+        epoch = self._epoch if slot else 0
+        hb = wire.Heartbeat(slot, epoch, int(role), int(self._health))
+        if self._chain is not None:
+            # Per-robot mode: the next link of our chain; an anchor (signed) where a
+            # receiver may have lost it (`chain.py`).
+            n, link, anchor = self._chain.next(now, (slot, epoch, int(role)),
+                                               self._anchor_every, extra=extra)
+            hb = wire.Heartbeat(slot, epoch, int(role), int(self._health), n, link, anchor)
+        self._send(hb)
+        self._beat.sent(now)
 
-    def _learn_holder(self, f: str, new: Holder, now: float) -> None:
-        raise NotImplementedError
-
-    def _relay_view(self, f: str, now: float, every: float | None = None) -> bool:
-        raise NotImplementedError
-
-    def _fence(self, epoch: int, now: float) -> None:
-        raise NotImplementedError
-
-    def _start_claim(self, f: str, failed: int, epoch: int, now: float,
-                     trigger: Trigger = Trigger.QUORUM) -> None:
-        raise NotImplementedError
-
-    def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
-        raise NotImplementedError
+    def _restart_heartbeats(self, now: float) -> None:
+        """Became ACTIVE: heartbeat now and every heartbeat_interval from now on."""
+        if self._heartbeating():
+            self._send_heartbeat(now)
+            self._beat.restart(now)
 
     def _heartbeat_now(self, now: float) -> bool:
-        raise NotImplementedError
-
-    def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
-                         raw: bytes, now: float | None = None) -> None:
-        raise NotImplementedError
-
-    def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
-        raise NotImplementedError
-
-    def _relay_refutes(self, f: str, now: float) -> None:
-        raise NotImplementedError
-
-    def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
-        raise NotImplementedError
-
-    def _sign_only(self, msg: wire.Message) -> bytes:
-        raise NotImplementedError
-
-    def _forward(self, f: str, new: Holder) -> Holder:
-        raise NotImplementedError
-
-    def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
-        raise NotImplementedError
-
-    def _reassert(self, f: str, epoch: int, now: float) -> None:
-        raise NotImplementedError
-
-    def _learn_reassertion(self, f: str, new: Holder, now: float) -> None:
-        raise NotImplementedError
-
-    def _verified_hold(self, f: str, epoch: int,
-                       restored: Restored) -> tuple[str, int] | None:
-        raise NotImplementedError
-
-    def _send_cert(self, f: str, raw: bytes) -> None:
-        raise NotImplementedError
+        """An extra heartbeat out of schedule (refutation, fencing a stale holder),
+        at most four per heartbeat period so a flood of warnings cannot amplify."""
+        if not self._heartbeating() or not self._beat.extra_allowed(now):
+            return False
+        self._send_heartbeat(now, extra=True)
+        return True
 
 
 __all__ = ["NodeBase"]

@@ -1,21 +1,27 @@
-"""A restarted robot's node (DESIGN rule 2 across a reboot): who holds each slot at start,
-from the plan or from what the robot persisted before it went down, and the hold it
-resumes only after listening (`rejoin.py`). `Restart` is that part of `Node`, called once
-from its constructor; the per-robot check of a restored hold is `signed.py`'s
-(`_verified_hold`).
+"""How a robot starts (DESIGN rule 2 across a reboot): who holds each slot at start, from
+the plan or from what a restarted robot persisted before it went down (its own hold only
+if it is provable, per robot); the hold it resumes only after listening (`rejoin.py`),
+and the first tick's `started`, which a rejoining robot says only once its hold is over.
+
+`Restart` is the layer of `Node` on `Hearing` (and so on `Episode`, `Signed`, `Views`,
+`NodeBase`): it calls only methods defined there or here. `Node`'s constructor calls
+`_views` and `_restore` once; `Node.tick` calls `_start` and `_finish_rejoin`.
 """
 
 from __future__ import annotations
 
+from swarmd.core import events as ev
+from swarmd.core.actions import Assign
 from swarmd.core.drops import DropReason
-from swarmd.core.nodebase import NodeBase
+from swarmd.core.hearing import Hearing
 from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
+from swarmd.core.roles import Role, Trigger
 from swarmd.core.slots import SlotTable
-from swarmd.core.state import Rejoining
+from swarmd.core.state import Rejoining, Standby
 
 
-class Restart(NodeBase):
+class Restart(Hearing):
     def _views(self, restored: Restored | None) -> SlotTable:
         """Who holds each slot at start: the plan's holders at epoch 0, or newer ones a
         restarted robot persisted (its own memory: what it had verified before it went
@@ -58,6 +64,40 @@ class Restart(NodeBase):
         if held is not None:
             self._state = Rejoining(Rejoin(self._robot_id, *held,
                                            now + self._params.rejoin_hold))
+
+    def _verified_hold(self, f: str, epoch: int,
+                       restored: Restored) -> tuple[str, int] | None:
+        """The hold of f at `epoch` a restarted robot read from its state file, if it is
+        provable as a received one would be — the plan's own holder at epoch 0, or a
+        certificate that verifies and backs it; otherwise None (it rejoins as a standby,
+        and the slot's watchers take it over if nobody holds it)."""
+        assert self._verifier is not None
+        if epoch == 0:
+            return (f, 0) if self._plan.initial_holder(f) == self._robot_id else None
+        if self._ev.restore(f, epoch, tuple(restored.certificate), self._verifier):
+            self._known.merge(f, Holder(self._robot_id, epoch))
+            return (f, epoch)
+        return None
+
+    # ------------------------------------------------------------------ start
+    def _start(self, now: float) -> None:
+        self._started = True
+        if self._rejoin is not None:
+            return  # `started` tells the outcome once the rejoin hold is over
+        self._emit(ev.Started(role=ev.RoleName.of(self._role), function=self._function))
+        if self._role == Role.ACTIVE and self._function is not None:
+            self._pending.append(Assign(self._function, self._epoch))
+
+    # ------------------------------------------------------------------ rejoin (rule 2)
+    def _finish_rejoin(self, now: float) -> None:
+        rejoin = self._rejoin
+        assert rejoin is not None
+        if not rejoin.resumes(self._known[rejoin.function]):
+            self._to(Trigger.OUTDATED, Standby())
+            self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
+            return
+        self._emit(ev.Started(role=ev.RoleName.ACTIVE, function=rejoin.function))
+        self._become_holder(Trigger.REJOIN, rejoin.function, rejoin.epoch, now)
 
 
 __all__ = ["Restart"]

@@ -1,23 +1,24 @@
 """Per-robot mode's part of the node (DESIGN section 2, "Who may say what" and
-"Convergence"): recording signed evidence, relaying certificates and refutes, signing
-refutes, undoing a takeover the refutes void, verifying a restored hold. The evidence
-itself — which claim a certificate backs — is `evidence.py`'s; `Signed` turns its
-answers into frames, events and role changes.
+"Convergence"): relaying certificates and refutes, signing refutes, undoing a takeover
+the refutes void. The evidence itself — which claim a certificate backs — is
+`evidence.py`'s; `Signed` turns its answers into frames, events and view changes.
+
+`Signed` is the layer of `Node` on `Views` (how a view moves forward) and `NodeBase`;
+it calls only methods defined there or here. Keeping a signed warning as evidence
+(`Episode._record_evidence`) and acting on a relayed claim are the takeover episode's,
+above it: a certificate completed or relayed is a claim heard.
 """
 
 from __future__ import annotations
 
 from swarmd.core import events as ev
 from swarmd.core import wire
-from swarmd.core.actions import Assign
-from swarmd.core.drops import DropReason
-from swarmd.core.evidence import cert_says, seq_of
 from swarmd.core.limits import EPOCH_MAX
-from swarmd.core.nodebase import NodeBase
-from swarmd.core.records import Holder, Restored
+from swarmd.core.records import Holder
 from swarmd.core.roles import Role, Trigger
 from swarmd.core.slots import greater
-from swarmd.core.state import Active, Standby
+from swarmd.core.state import Standby
+from swarmd.core.views import Views
 
 _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
@@ -28,57 +29,11 @@ once per this many T_max even unasked (4 s at udp, 16 s at radio), so every robo
 hears the slot holds the certificate of its holder within that bound."""
 
 
-class Signed(NodeBase):
-    def _verified_hold(self, f: str, epoch: int,
-                       restored: Restored) -> tuple[str, int] | None:
-        """The hold of f at `epoch` a restarted robot read from its state file, if it is
-        provable as a received one would be — the plan's own holder at epoch 0, or a
-        certificate that verifies and backs it; otherwise None (it rejoins as a standby,
-        and the slot's watchers take it over if nobody holds it)."""
-        assert self._verifier is not None
-        if epoch == 0:
-            return (f, 0) if self._plan.initial_holder(f) == self._robot_id else None
-        if self._ev.restore(f, epoch, tuple(restored.certificate), self._verifier):
-            self._known.merge(f, Holder(self._robot_id, epoch))
-            return (f, epoch)
-        return None
-
-    def _sign_only(self, msg: wire.Message) -> bytes:
-        """A frame signed by this robot, for a certificate, not broadcast by itself."""
-        assert self._signer is not None
-        self._seq = min(self._seq + 1, wire.SEQ_MAX)
-        frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
-        return wire.encode(frame, None, self._signer)
-
+class Signed(Views):
     def _send_cert(self, f: str, raw: bytes) -> None:
         # It has a seq of its own, but receivers do not replay-filter it: the wrapper is
         # unauthenticated, what it relays is signed and judged on its own.
         self._send(wire.Cert(self._plan.slot(f), _NO_FRAME, raw))
-
-    def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
-                         raw: bytes, now: float | None = None) -> None:
-        if suspect == self._robot_id and now is not None:
-            # Evidence against us, relayed in a certificate (we may have missed the
-            # warning itself): while we hold the slot, we refute it (rule 4). Our own
-            # LEAVE of the very entry we hold is a recording, of an earlier run or of a
-            # hold we resumed after a restart (`evidence.py`): refuted alike, so that it
-            # backs no takeover of the slot we execute.
-            self._refute(f, witness, epoch, seq_of(raw), now)
-            if witness == suspect and self._holds(f) and epoch == self._epoch \
-                    and f not in self._shown_newer:
-                # Our own LEAVE of the entry we hold backs nothing here either: unless
-                # a live robot's warning showed that it took the recording (then our
-                # reassertion, resting on it, must be provable), nothing moves.
-                self._drops[DropReason.OUTDATED] += 1
-                return
-        ready = self._ev.record(f, witness, suspect, epoch, raw, self._known[f].epoch, now)
-        if ready is None:
-            if suspect != self._robot_id:  # what we refuted ourselves is no news
-                self._drops[DropReason.STALE_EVIDENCE] += 1
-            return
-        for claimant, claim, signed in ready:
-            assert now is not None  # `record` readies a claim only with a `now`
-            self._on_claim(claimant, claim, now, signed)
 
     def _forward(self, f: str, new: Holder) -> Holder:
         """The entry the signed frames held here make of `new`: itself, or, per robot,
@@ -102,19 +57,6 @@ class Signed(NodeBase):
         if watch is not None and watch.suspecting and self._known[f] == new:
             watch.heard(now)
             self._emit(ev.Refute(subject=new.robot, function=f))
-
-    def _reassert(self, f: str, epoch: int, now: float) -> None:
-        """We hold f, and a takeover of our hold that our refutes void reached us: we
-        hold f on at the reassertion's epoch (`_forward`), tell the robot, and heartbeat
-        it at once (an anchor: the epoch changed) so the others move forward too. The log
-        says `refute` about ourselves: the suspicion of us ended refuted (rule 4); it is
-        not a takeover (nobody new executes f)."""
-        assert isinstance(self._state, Active)
-        self._state.epoch = epoch
-        self._shown_newer.discard(f)
-        self._emit(ev.Refute(subject=self._robot_id, function=f))
-        self._pending.append(Assign(f, epoch))
-        self._heartbeat_now(now)
 
     def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
         """Per robot: we hold f one epoch below a certified claim of it that replaces us,
@@ -161,27 +103,6 @@ class Signed(NodeBase):
                                           every):
             self._send_cert(self._function, raw)
 
-    def _on_cert(self, cert: wire.Cert, now: float) -> None:
-        f = self._slot(cert.function)
-        if f is None:
-            return
-        msg = cert.inner.msg
-        if self._outdated(cert.inner.sender, cert.inner.seq, msg, now):
-            # Its signer's own later heartbeat says otherwise: a recorded LEAVE of an
-            # earlier run backs nothing (DESIGN, "Every proof is bound to its run"),
-            # refused before it is kept as evidence.
-            self._drops[DropReason.OUTDATED] += 1
-            return
-        if isinstance(msg, wire.Refute):
-            self._on_refute(cert.inner.sender, msg, now, cert.raw)
-            return
-        if isinstance(msg, wire.Claim):
-            self._on_relayed_claim(f, cert.inner.sender, msg, cert.raw, now)
-            return
-        said = cert_says(cert)
-        if said is not None:
-            self._record_evidence(f, *said, cert.raw, now)
-
     def _relay_view(self, f: str, now: float, every: float | None = None) -> bool:
         """Someone's view of f is older than ours (it heartbeats f, or warns about f's
         holder, at an older epoch): if a certificate here backs our view, relay it
@@ -195,34 +116,6 @@ class Signed(NodeBase):
         for raw in frames:
             self._send_cert(f, raw)
         return bool(frames)
-
-    def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
-                          now: float) -> None:
-        """A signed CLAIM relayed inside a CERT (`_relay_view`): heard as a claim (rule
-        10 bounds what a repeat does), and, if the evidence here certifies it and its
-        entry is greater than our view of f, our view moves forward to it
-        (`_learn_holder`) — as far as a heartbeat of its claimant would have moved it,
-        since a robot relays only the entry its own view holds. Holding f below it, we
-        fence (rule 2), as that heartbeat would have fenced us — unless the claim
-        replaces our own live hold: then we refute it (`Hearing._on_claim`) and the
-        entry we move to is our reassertion (`_forward`), unless we were stalled, and
-        then the takeover was right. Our own claim relayed back acts on nothing here."""
-        if claimant == self._robot_id:
-            # Our own claim, relayed back with its certificate as the proof of the
-            # reassertion that outranks it: it must verify here as anywhere (no act),
-            # and we keep it to show that proof in turn (a recorded claim of ours from
-            # an earlier run that we took: DESIGN, "Every proof is bound to its run").
-            if self._ev.certify(f, claimant, c, self._known[f].epoch):
-                self._ev.keep_claim(f, claimant, c.epoch, raw)
-            return
-        self._on_claim(claimant, c, now, raw)
-        new = Holder(claimant, c.epoch)
-        if greater(new, self._known[f]) and self._ev.is_certified(f, claimant, c.epoch):
-            ahead = self._forward(f, new)
-            if ahead == new:
-                self._learn_holder(f, new, now)
-            else:
-                self._learn_reassertion(f, ahead, now)
 
     # ------------------------------------------------------------------ refutes
     # A holder's signed word that it was alive after a warning voids that warning
