@@ -15,6 +15,7 @@ the fault kinds drawn and the violations by kind, each with the command that rep
     python bench/bench_chaos.py --seeds 1000 --auth none  # unsigned (also: shared)
     python bench/bench_chaos.py --seed 1234 --verbose     # replay one seed
     python bench/bench_chaos.py --seeds 600 --wide        # compound link faults too
+    python bench/bench_chaos.py --seeds 500 --first 40000 --wide   # fresh seeds
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
 `--ring8`: configs/ring8.yaml (eight actives in a ring, three standbys covering all
@@ -403,7 +404,10 @@ def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", type=int, default=200, help="seeds 0..N-1 (default 200)")
+    ap.add_argument("--seeds", type=int, default=200,
+                    help="how many seeds, from --first (default 200)")
+    ap.add_argument("--first", type=int, default=0,
+                    help="the first seed (default 0): fresh seeds for a tree tuned on others")
     ap.add_argument("--seed", type=int, default=None, help="replay this one seed")
     ap.add_argument("--max-robots", type=int, default=60)
     ap.add_argument("--verbose", action="store_true", help="print the swarm and its log")
@@ -426,7 +430,7 @@ def main() -> None:
     if a.ring8:
         print_ring8(a.phases)
         return
-    seeds = range(a.seed, a.seed + 1) if a.seed is not None else range(a.seeds)
+    seeds = range(a.seed, a.seed + 1) if a.seed is not None else range(a.first, a.first + a.seeds)
     t0 = time.perf_counter()
     if a.jobs > 1 and len(seeds) > 1:
         found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth, a.wide)
