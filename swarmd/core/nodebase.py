@@ -139,9 +139,7 @@ class NodeBase:
 
     # ------------------------------------------------------------------ plumbing
     def _send(self, msg: wire.Message) -> bytes:
-        self._seq = min(self._seq + 1, wire.SEQ_MAX)
-        frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
-        data = wire.encode(frame, self._keys[0] if self._keys else None, self._signer)
+        data = self._next_frame(msg, self._keys[0] if self._keys else None)
         self._pending.append(Broadcast(data))
         self._frames_out += 1
         return data
@@ -149,9 +147,13 @@ class NodeBase:
     def _sign_only(self, msg: wire.Message) -> bytes:
         """A frame signed by this robot, for a certificate, not broadcast by itself."""
         assert self._signer is not None
+        return self._next_frame(msg, None)
+
+    def _next_frame(self, msg: wire.Message, key: bytes | None) -> bytes:
+        """`msg` as our next frame: every frame we make takes the next seq."""
         self._seq = min(self._seq + 1, wire.SEQ_MAX)
         frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
-        return wire.encode(frame, None, self._signer)
+        return wire.encode(frame, key, self._signer)
 
     def _emit(self, event: Event) -> None:
         self._pending.append(event)
