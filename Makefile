@@ -17,19 +17,20 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 
 # uv installs what pip would, from the same index, in parallel: a fresh machine's setup
-# takes about a third of pip's time (33 s against 137 s, measured side by side), which
-# counts against the suite's 10 minutes in CI. `--compile-bytecode` keeps pip's
-# byte-compiling: where PYTHONDONTWRITEBYTECODE is set (this machine sets it), no import
-# would cache its compiling, and every robot process would compile again (pymavlink's
-# generated dialects most of all).
+# takes a fraction of pip's time (cold caches, side by side on a loaded machine: 2.7 min
+# against 10.5), which counts against the suite's 10 minutes in CI. `--native-tls` trusts
+# the system's certificates, as pip does here (PIP_CERT). `--compile-bytecode` keeps
+# pip's byte-compiling: where PYTHONDONTWRITEBYTECODE is set (this machine sets it), no
+# import would cache its compiling, and every robot process would compile again
+# (pymavlink's generated dialects most of all). Should uv be unavailable, pip does it.
 # MAVProxy (the suite's ground station from ArduPilot, tests/test_mavproxy_vehicle.py) goes
 # in without its declared OpenCV and VTK, some hundred MB a headless session never loads:
 # its runtime needs only pymavlink, pyserial and numpy, which the dev extra brings.
-UV := $(PY) -m uv pip install -q --python $(PY) --compile-bytecode
+UV := $(PY) -m uv pip install -q --native-tls --python $(PY) --compile-bytecode
 $(STAMP)/python: pyproject.toml | $(PY)
-	$(PIP) install -q 'uv>=0.5'
-	$(UV) -e '.[sim,ros2,dev]'
-	$(UV) --no-deps 'MAVProxy>=1.8.75'
+	$(PIP) install -q 'uv>=0.5' && $(UV) -e '.[sim,ros2,dev]' \
+	  || $(PIP) install -q -e '.[sim,ros2,dev]'
+	$(UV) --no-deps 'MAVProxy>=1.8.75' || $(PIP) install -q --no-deps 'MAVProxy>=1.8.75'
 	mkdir -p $(STAMP) && touch $@
 
 setup: $(STAMP)/system $(STAMP)/python
