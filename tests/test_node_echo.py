@@ -120,3 +120,24 @@ def test_the_echo_memory_is_bounded(paper_plan: SwarmPlan, udp_params: Params,
     for data in frames:
         node.receive(data, now)
     assert checked == frames[:len(frames) - ECHO_MEMORY]
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_drop_keeps_the_deadline_armed_before(
+        paper_plan: SwarmPlan, udp_params: Params, mode: str) -> None:
+    """A refused frame moves nothing, so `receive` hands back the deadline worked out
+    at the end of the previous call without working it out again; after our own stall
+    (`_advance` re-plans everything) a refused frame is the call that arms the new one.
+    Checked against the deadline worked out anew after every frame."""
+    node = make(paper_plan, udp_params, mode)
+    frames = own_frames(node, 1.0)
+    garbage = [b"", b"\x11" * 30, frames[0][:-1] + bytes((frames[0][-1] ^ 1,))]
+    at = 1.0
+    for i, data in enumerate([*frames, *garbage] * 3):
+        # Every 7th frame comes after a stall (more than t_max / 2 past the deadline).
+        armed = node.next_deadline()
+        assert armed is not None
+        at = armed + udp_params.t_max if i % 7 == 3 else at + 0.001
+        node.receive(data, at)
+        assert node.next_deadline() == node._deadline()
+        assert node._armed == node._deadline()  # what `_advance` reads

@@ -425,7 +425,13 @@ class Node(Hearing, Moves, Signed, Restart):
             self._armed = None  # noticed once; `_drain` arms the next deadline
 
     def _drop(self, reason: str) -> list[Action]:
+        """Count a refused frame. A drop moves no state, so the deadline `_drain` worked
+        out at the end of the previous entry point still stands and is not worked out
+        again: unless `_advance` noticed our own stall in this call (it then cleared
+        `_armed`), or something is pending."""
         self._drops[reason] += 1
+        if self._armed is not None and not self._pending:
+            return []
         return self._drain()
 
     def _drain(self) -> list[Action]:
