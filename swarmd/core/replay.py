@@ -113,7 +113,9 @@ class _Seen:
         self.top = self._top_after(seq)
         self.seqs.add(seq)
         heapq.heappush(self.heap, seq)
-        self.high, self.stamp = max(self.high, seq), stamp
+        self.stamp = stamp
+        if seq > self.high:
+            self.high = seq
         if len(self.heap) <= WINDOW:
             return None
         low = heapq.heappop(self.heap)
@@ -194,6 +196,8 @@ class _Sender:
 
     def established(self) -> int:
         """The established top of the stretch that took the latest frame."""
+        if not self.holes:  # a sender nobody flooded in its name: every heartbeat asks
+            return self.main.established()
         latest = max([self.main, *self.holes], key=lambda h: h.stamp)
         return latest.established()
 
