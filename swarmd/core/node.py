@@ -29,7 +29,7 @@ from types import MappingProxyType
 
 from swarmd.core import events as ev
 from swarmd.core import wire
-from swarmd.core.actions import Action, Release
+from swarmd.core.actions import Action, Broadcast, Release
 from swarmd.core.auth import Identity
 from swarmd.core.chain import OwnChain, PeerChains, anchor_every, resync_after
 from swarmd.core.claims import ClaimMemory
@@ -49,6 +49,11 @@ from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import WatchState
 from swarmd.core.witness import Ears
 from swarmd.core.words import LatestWords
+
+ECHO_MEMORY = 64
+"""Frames this node sent lately, kept byte for byte (`Node._echoes`): a multicast
+channel hands each back within milliseconds; this is seconds of a robot's own traffic
+(10 Hz heartbeats and the warnings, claims and certificates of a failover)."""
 
 
 class Node(Restart):
@@ -88,6 +93,9 @@ class Node(Restart):
         self._armed = now
         self._stopped = self._started = False
         self._pending = []
+        self._echoes: dict[bytes, None] = {}
+        """The last `ECHO_MEMORY` frames sent, oldest first (an ordered set): `receive`
+        knows their echoes without decoding them again."""
         if restored is not None:
             self._restore(restored, now)
         elif (own := plan.robots[robot_id].function) is not None:
@@ -143,6 +151,14 @@ class Node(Restart):
         self._advance(now)
         if self._stopped:
             return self._drain()
+        if head is not None and head.sender == self._robot_id and data in self._echoes \
+                and head.mtype != wire.MsgType.CERT:
+            # Our own frame back from the channel, byte for byte as we sent it with the
+            # keys in force (`set_keys` and `revoke` forget what was sent before): it
+            # decodes, and `_accept` drops it as `own` (`_own_frame`, its seq is ours
+            # since the start), so the echo of every frame sent costs no second check
+            # of its tag or signature. A CERT goes to `_on_cert` whoever relays it.
+            return self._drop(DropReason.OWN)
         if head is not None and head.swarm_id == self._plan.swarm_id \
                 and head.sender != self._robot_id and head.sender in self._plan.robots \
                 and head.mtype != wire.MsgType.CERT:
@@ -336,6 +352,7 @@ class Node(Restart):
         `auth`. Raises `NodeError` (and changes nothing) for keys `limits.check_keys`
         refuses: turning signing off takes a restart."""
         self._keys = check_keys(keys, signing=bool(self._keys))
+        self._echoes.clear()  # a frame tagged with a key no longer listed is `auth` now
 
     def revoke(self, robots: Iterable[int]) -> None:
         """Per-robot mode: these robots' keys were revoked (SIGHUP; docs/operations.md).
@@ -345,6 +362,9 @@ class Node(Restart):
         gone = tuple(robots)
         self._chains.forget(gone)
         self._words.forget(gone)
+        # The keyring changed with this call (SIGHUP): our own key may be another now,
+        # and our echoes are checked again like any frame.
+        self._echoes.clear()
 
     def next_deadline(self) -> float | None:
         """When `tick` must be called next (absolute, same clock as `now`). Every entry
@@ -410,7 +430,13 @@ class Node(Restart):
             self._record_evidence(f, self._robot_id, self._robot_id, self._epoch, data)
 
     def _drop(self, reason: str) -> list[Action]:
+        """Count a refused frame. A drop moves no state, so the deadline `_drain` worked
+        out at the end of the previous entry point still stands and is not worked out
+        again: unless `_advance` noticed our own stall in this call (it then cleared
+        `_armed`), or something is pending."""
         self._drops[reason] += 1
+        if self._armed is not None and not self._pending:
+            return []
         return self._drain()
 
     def _drain(self) -> list[Action]:
@@ -419,7 +445,19 @@ class Node(Restart):
         if not self._stopped:
             self._armed = self._deadline()
         out, self._pending = self._pending, []
+        if out:
+            self._remember_sent(out)
         return out
+
+    def _remember_sent(self, actions: list[Action]) -> None:
+        """The frames among `actions` into `_echoes`, the oldest forgotten past
+        `ECHO_MEMORY`."""
+        echoes = self._echoes
+        for action in actions:
+            if isinstance(action, Broadcast):
+                echoes[action.frame] = None
+        while len(echoes) > ECHO_MEMORY:
+            del echoes[next(iter(echoes))]
 
 
 __all__ = ["Holder", "Node", "NodeError", "Restored", "Snapshot", "Standing",

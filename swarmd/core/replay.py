@@ -88,7 +88,7 @@ class _Seen:
     seen), the last `WINDOW` seqs accepted above it (a set for the test, a heap to
     forget the lowest first), and `end` (a hole's: only seqs below it belong here)."""
 
-    __slots__ = ("end", "floor", "heap", "marks", "seqs", "stamp", "top")
+    __slots__ = ("end", "floor", "heap", "high", "marks", "seqs", "stamp", "top")
 
     def __init__(self, floor: int, end: int | None = None, stamp: int = 0) -> None:
         self.floor, self.end, self.stamp = floor, end, stamp
@@ -97,7 +97,9 @@ class _Seen:
         """A hole's: seqs inside it accepted before it was a hole (`_Sender.add`)."""
         self.heap: list[int] = []
         self.top: int | None = floor
-        """`established()`, cached until the next accepted seq."""
+        """`established()`, cached; `add` keeps it when it can tell the new one at once."""
+        self.high = floor
+        """The highest seq in `seqs` (the floor while it is empty)."""
 
     def holds(self, seq: int) -> bool:
         return seq > self.floor and (self.end is None or seq < self.end)
@@ -108,9 +110,12 @@ class _Seen:
     def add(self, seq: int, stamp: int) -> _Seen | None:
         """Remember `seq`; the hole the floor jumped over to forget the lowest one, if
         it jumped over more than `WINDOW` seqs never accepted (`ReplayFilter.check`)."""
+        self.top = self._top_after(seq)
         self.seqs.add(seq)
         heapq.heappush(self.heap, seq)
-        self.top, self.stamp = None, stamp
+        self.stamp = stamp
+        if seq > self.high:
+            self.high = seq
         if len(self.heap) <= WINDOW:
             return None
         low = heapq.heappop(self.heap)
@@ -119,6 +124,20 @@ class _Seen:
             if self.floor != UNKNOWN and low - self.floor > WINDOW else None
         self.floor = low
         return hole
+
+    def _top_after(self, seq: int) -> int | None:
+        """`established()` once `seq` is added, where it follows without a sort; None
+        where it takes one. A sender's next frame (the common case: every heartbeat
+        heard asks for its sender's top, `Node._heard_word`) lands within `WINDOW`
+        above the top of the highest cluster, which was the largest: that cluster grows
+        by one and stays the largest (`add` then forgets the lowest seq, which shrinks
+        one cluster by one at most), so `seq` is the new top. The first seq of an empty
+        stretch is its own cluster."""
+        if not self.seqs:
+            return seq
+        top = self.top
+        return seq if top is not None and top == self.high and 0 < seq - top <= WINDOW \
+            else None
 
     def established(self) -> int:
         """The highest seq of the sender's own run as far as the seqs tell: the top of
@@ -177,6 +196,8 @@ class _Sender:
 
     def established(self) -> int:
         """The established top of the stretch that took the latest frame."""
+        if not self.holes:  # a sender nobody flooded in its name: every heartbeat asks
+            return self.main.established()
         latest = max([self.main, *self.holes], key=lambda h: h.stamp)
         return latest.established()
 

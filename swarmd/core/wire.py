@@ -450,7 +450,9 @@ def peek(data: bytes) -> Peek | None:
             return None
         slot = got[0]
     robot = (data[HEADER_LEN] << 8) | data[HEADER_LEN + 1] if at else 0
-    return Peek(swarm_id, sender, mtype, slot, robot)
+    # tuple.__new__ as `Peek._make` does: the named tuple's own __new__ is one more
+    # Python call per frame.
+    return tuple.__new__(Peek, (swarm_id, sender, mtype, slot, robot))
 
 
 def seq_seed(unix_time: float) -> int:

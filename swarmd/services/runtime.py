@@ -142,6 +142,8 @@ class Runtime:
         batch: int = BATCH,
     ) -> None:
         self._node = node
+        self._drops = node.drops
+        """The node's drop counts, a live view, taken once: `_feed` reads it every frame."""
         self._robot_id = node.robot_id
         self._transport = transport
         self._link = link
@@ -525,7 +527,7 @@ class Runtime:
 
     def _feed(self, data: bytes, now: float) -> None:
         """One frame to the node, its actions executed (the caller re-arms the timer)."""
-        drops = self._node.drops
+        drops = self._drops
         own = drops[DropReason.OWN]
         try:
             actions = self._node.receive(data, now)
