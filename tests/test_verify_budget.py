@@ -97,3 +97,19 @@ def test_past_the_budget_a_signed_frame_is_not_even_decoded(paper: Paper) -> Non
     assert not b.allows(anchor2) and b.allows(linked2) and b.allows(anchor3)
     clock.t = 1.0
     assert b.allows(anchor2)
+
+
+def test_our_own_echoes_take_no_credit_and_a_forgery_in_our_name_still_spends() -> None:
+    """A daemon hears every frame it sends back (multicast loopback) and its node drops
+    those unchecked: were they credited, the credits would pile up to the burst and let
+    one later flood forged in our name past the budget."""
+    clock = _Clock()
+    b = VerifyBudget(per_robot=10, per_robot_burst=10, total=100, total_burst=100,
+                     clock=clock, own=7)
+    anchor = bytes([0x08, 0, 0, 0, 7]) + bytes(80)  # signed bit, sender 7, signature-long
+    assert all(b.allows(anchor) for _ in range(50))  # our echoes, dropped unchecked
+    clock.t = 10.0  # long after: the bucket is full again
+    assert sum(b.take(7) for _ in range(100)) == 10  # a forged flood: the burst, no more
+    other = bytes([0x08, 0, 0, 0, 8]) + bytes(80)
+    assert all(b.allows(other) for _ in range(20))  # anyone else's: credited as before
+    assert sum(b.take(8) for _ in range(100)) == 10

@@ -51,7 +51,14 @@ class VerifyBudget:
 
     def __init__(self, *, per_robot: float = PER_ROBOT_RATE, per_robot_burst: float =
                  PER_ROBOT_BURST, total: float = TOTAL_RATE, total_burst: float =
-                 TOTAL_BURST, clock: Callable[[], float] = time.monotonic) -> None:
+                 TOTAL_BURST, clock: Callable[[], float] = time.monotonic,
+                 own: int | None = None) -> None:
+        """`own`: this daemon's robot id. Frames in its name are mostly the echoes of
+        what it sent (a multicast group loops them back), which the node drops unchecked
+        (`Node.receive`), so `allows` takes no credit for them: a credit never spent
+        would stay, and let a later flood forged in our name past the budget. One that
+        is checked (not an echo: a forgery) spends the budget at its check."""
+        self._own = own
         self._clock = clock
         self._per = (per_robot, per_robot_burst)
         self._total = _Bucket(total, total_burst, clock())
@@ -73,7 +80,7 @@ class VerifyBudget:
         if len(data) < SIGNED_MIN or not data[0] & 0x08:
             return True
         robot = int.from_bytes(data[3:5], "big")
-        if self._credits.get(robot, 0) >= self._per[1]:
+        if robot == self._own or self._credits.get(robot, 0) >= self._per[1]:
             return True
         if not self._spend(robot):
             return False

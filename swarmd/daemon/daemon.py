@@ -242,7 +242,7 @@ class Daemon:
         if material is None:
             return None
         self._signer = Ed25519Signer(cfg.robot, material.private_key)
-        self._keyring = Keyring(material.public_keys, material.revoked, VerifyBudget(),
+        self._keyring = Keyring(material.public_keys, material.revoked, VerifyBudget(own=cfg.robot),
                                 retired=material.retired)
         return Identity(self._signer, self._keyring)
 
