@@ -20,7 +20,7 @@ Pure data, no rules beyond the order.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import ItemsView, Iterable, Iterator, Mapping, ValuesView
 
 from swarmd.core.records import Holder
 
@@ -75,6 +75,17 @@ class SlotTable(Mapping[str, Holder]):
 
     def __len__(self) -> int:
         return len(self._entries)
+
+    # The dict's own read-only views: the same entries as Mapping's generic ones, without
+    # a lookup per entry (a daemon reads the table every tick: `Node.standing`).
+    def items(self) -> ItemsView[str, Holder]:
+        return self._entries.items()
+
+    def values(self) -> ValuesView[Holder]:
+        return self._entries.values()
+
+    def __contains__(self, f: object) -> bool:
+        return f in self._entries
 
     def __repr__(self) -> str:
         return f"SlotTable({self._entries!r})"
