@@ -301,11 +301,12 @@ class EvidenceStore:
             return ()
         return frames
 
-    def relay_due(self, f: str, now: float) -> bool:
-        """May this robot show another its view of f now? At most once per T_max per
-        slot, shared with `view_frames` (unsigned and shared-key modes relay a warning
-        instead of a certificate: `Hearing._older_beat`)."""
-        return self._due(self._evidence_relayed_at, f, now)
+    def relay_due(self, f: str, now: float, every: float | None = None) -> bool:
+        """May this robot show another its view of f now? At most once per `every`
+        (default T_max) per slot, shared with `view_frames` (unsigned and shared-key
+        modes relay a warning instead of a certificate, `Hearing._older_beat`, or a
+        holder's heartbeat, `Hearing._digest_heard`)."""
+        return self._due(self._evidence_relayed_at, f, now, every)
 
     def _due(self, stamps: dict[str, float], f: str, now: float,
              every: float | None = None) -> bool:
