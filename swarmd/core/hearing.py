@@ -68,8 +68,8 @@ class Hearing(Episode):
         """A heartbeat without a slot shows, in its epoch field, its sender's view of
         the slots it covers (`digest.py`). If it shows the slot we hold at an entry
         other than ours, one of us is behind: we answer at once with our entry (per
-        robot its certificate, `_relay_cert`; otherwise an extra heartbeat, whose entry
-        it merges), so a standby that missed a takeover learns it within one standby
+        robot its certificate, `_relay_cert`), and an extra heartbeat, whose entry it
+        merges (per robot an anchor: a robot that restarted has lost our chain), so a standby that missed a takeover learns it within one standby
         period rather than the unasked relay's RELAY_EVERY T_max (DESIGN,
         "Convergence"). If the sender is ahead, our own heartbeats, every period, are
         the stale ones it answers (`_older_beat`).
@@ -82,10 +82,14 @@ class Hearing(Episode):
                 or not digest.differs(shown, self._plan.covered(sender), f, self._epoch):
             return
         every = min(self._params.t_max, self._params.standby_heartbeat_interval / 2)
+        if not self._ev.answer_due(f, now, every):
+            return
         if self._identity is not None:
             self._relay_cert(f, now, every)
-        elif self._ev.relay_due(f, now, every):
-            self._heartbeat_now(now)
+        if not self._heartbeat_now(now) and self._chain is not None:
+            # Too soon after our last heartbeat for an extra one: the next one, within
+            # a heartbeat period, carries our entry, and per robot as an anchor.
+            self._chain.anchor_next()
 
     def _older_beat(self, f: str, sender: int, hb: wire.Heartbeat, known: Holder,
                     now: float) -> None:
