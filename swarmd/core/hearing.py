@@ -86,7 +86,10 @@ class Hearing(Episode):
         if not self._ev.answer_due(f, now, every):
             return
         if self._identity is not None:
-            self._relay_cert(f, now, every)
+            # The gate above bounds it: a relay of ours to someone else within T_max
+            # before (the unasked one, say) did not reach this robot, or it would not
+            # show an older view.
+            self._relay_cert(f, now, 0.0)
         if not self._heartbeat_now(now) and self._chain is not None:
             # Too soon after our last heartbeat for an extra one: the next one, within
             # a heartbeat period, carries our entry, and per robot as an anchor.
