@@ -65,6 +65,16 @@ def test_monitor_rows_show_role_function_epoch_health() -> None:
     assert state.alerts(10.25) == []
 
 
+def test_a_standby_row_shows_no_epoch_whatever_digest_its_heartbeat_carries() -> None:
+    """A heartbeat without a slot carries its sender's view digest in the epoch field
+    (DESIGN, "Convergence"): the monitor shows no epoch for it, not the digest."""
+    state = MonitorState(paper_plan(), params.udp())
+    tx = Sender()
+    state.feed(tx.hb(6, 0, epoch=0b0110, role=Role.STANDBY), 1.0)
+    row = {r["robot"]: r for r in state.rows(1.1)}[6]
+    assert (row["role"], row["function"], row["epoch"]) == ("STANDBY", None, None)
+
+
 def test_monitor_counts_garbage_replays_and_other_swarms_without_raising() -> None:
     state = MonitorState(paper_plan(), params.udp())
     tx = Sender()

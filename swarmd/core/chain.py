@@ -127,6 +127,12 @@ class OwnChain:
             self._last_anchor = now
         return self._n, link, anchor
 
+    def anchor_next(self) -> None:
+        """Our next heartbeat is an anchor: one we answer with could not go out as an
+        extra one (`heartbeat.py`'s limit), and whoever we answer may have lost our
+        chain. The caller bounds how often (`Hearing._digest_heard`)."""
+        self._anchor_due = max(self._anchor_due, 1)
+
     def reanchor(self, now: float, every: float) -> None:
         """A peer is back after a silence long enough to have lost our chain (a
         partition that healed cut it off from us too): our next `ANCHOR_RUN` heartbeats

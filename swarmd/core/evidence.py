@@ -77,6 +77,7 @@ class EvidenceStore:
         self._relayed_at: dict[str, float] = {}
         self._refutes_relayed_at: dict[str, float] = {}
         self._evidence_relayed_at: dict[str, float] = {}
+        self._digest_answered_at: dict[str, float] = {}
         self._mine_epoch: dict[str, int] = {}
         self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
 
@@ -306,6 +307,12 @@ class EvidenceStore:
         slot, shared with `view_frames` (unsigned and shared-key modes relay a warning
         instead of a certificate: `Hearing._older_beat`)."""
         return self._due(self._evidence_relayed_at, f, now)
+
+    def answer_due(self, f: str, now: float, every: float) -> bool:
+        """May the holder of f answer a view digest that shows f otherwise
+        (`Hearing._digest_heard`) now? At most once per `every` per slot, on a clock of
+        its own so that the relays it makes stay due."""
+        return self._due(self._digest_answered_at, f, now, every)
 
     def _due(self, stamps: dict[str, float], f: str, now: float,
              every: float | None = None) -> bool:

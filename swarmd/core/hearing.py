@@ -11,8 +11,8 @@ actions; none does I/O.
 
 from __future__ import annotations
 
+from swarmd.core import digest, wire
 from swarmd.core import events as ev
-from swarmd.core import wire
 from swarmd.core.belief import level_byte
 from swarmd.core.drops import DropReason
 from swarmd.core.episode import Episode
@@ -32,6 +32,7 @@ class Hearing(Episode):
         if hb.function == 0:
             if hb.role in (Role.STANDBY, Role.CLAIMING) and hb.health != Health.FAULTY:
                 self._ears.standby_beat(sender, now)
+            self._digest_heard(sender, hb.epoch, now)
             return
         f = self._slot(hb.function)
         if f is None:
@@ -62,6 +63,37 @@ class Hearing(Episode):
             self._fence(hb.epoch, now)
             return
         self._holder_heard(f, sender, hb.epoch, known, now)
+
+    def _digest_heard(self, sender: int, shown: int, now: float) -> None:
+        """A heartbeat without a slot shows, in its epoch field, its sender's view of
+        the slots it covers (`digest.py`). If it shows the slot we hold at an entry
+        other than ours, one of us is behind: we answer at once with our entry (per
+        robot its certificate, `_relay_cert`), and an extra heartbeat, whose entry it
+        merges (per robot an anchor: a robot that restarted has lost our chain). So a
+        standby that missed a takeover learns it within one standby period rather than
+        the unasked relay's RELAY_EVERY T_max (DESIGN, "Convergence"). If the sender
+        is ahead, our own heartbeats, every period, are the stale ones it answers
+        (`_older_beat`).
+
+        At most once per T_max per slot, or per half a standby period where that is
+        shorter: a standby shows a new digest once a standby period, so the gate never
+        skips its next one, and a forged digest makes us answer no faster."""
+        f = self._function
+        if f is None or not self._holds(f) \
+                or not digest.differs(shown, self._plan.covered(sender), f, self._epoch):
+            return
+        every = min(self._params.t_max, self._params.standby_heartbeat_interval / 2)
+        if not self._ev.answer_due(f, now, every):
+            return
+        if self._identity is not None:
+            # The gate above bounds it: a relay of ours to someone else within T_max
+            # before (the unasked one, say) did not reach this robot, or it would not
+            # show an older view.
+            self._relay_cert(f, now, 0.0)
+        if not self._heartbeat_now(now) and self._chain is not None:
+            # Too soon after our last heartbeat for an extra one: the next one, within
+            # a heartbeat period, carries our entry, and per robot as an anchor.
+            self._chain.anchor_next()
 
     def _older_beat(self, f: str, sender: int, hb: wire.Heartbeat, known: Holder,
                     now: float) -> None:

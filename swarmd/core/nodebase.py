@@ -16,8 +16,8 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping
 
+from swarmd.core import digest, wire
 from swarmd.core import events as ev
-from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.auth import Identity, Signer, Verifier
 from swarmd.core.chain import OwnChain, PeerChains
@@ -222,16 +222,24 @@ class NodeBase:
         slot = self._plan.slot(self._function) if self._function is not None else 0
         # A rejoining robot is a standby to the others until it resumes (rule 6).
         role = Role.STANDBY if self._role == Role.REJOINING else self._role
-        epoch = self._epoch if slot else 0
+        # Without a slot, the epoch field carries our view's digest (`digest.py`).
+        epoch = self._epoch if slot else self._digest()
         hb = wire.Heartbeat(slot, epoch, int(role), int(self._health))
         if self._chain is not None:
             # Per-robot mode: the next link of our chain; an anchor (signed) where a
-            # receiver may have lost it (`chain.py`).
-            n, link, anchor = self._chain.next(now, (slot, epoch, int(role)),
-                                               self._anchor_every, extra=extra)
+            # receiver may have lost it (`chain.py`). A change of digest is no change of
+            # what we say of ourselves: it is never believed as proof, so it needs no
+            # anchor of its own.
+            said = (slot, epoch if slot else 0, int(role))
+            n, link, anchor = self._chain.next(now, said, self._anchor_every, extra=extra)
             hb = wire.Heartbeat(slot, epoch, int(role), int(self._health), n, link, anchor)
         self._send(hb)
         self._beat.sent(now)
+
+    def _digest(self) -> int:
+        """Our view of the slots we cover, for a heartbeat without a slot: whoever holds
+        a greater entry for one of them sees it differs and sends it (`digest.py`)."""
+        return digest.make(self._plan.covered(self._robot_id), self._known)
 
     def _restart_heartbeats(self, now: float) -> None:
         """Became ACTIVE: heartbeat now and every heartbeat_interval from now on."""

@@ -57,6 +57,7 @@ class SwarmPlan:
     """function -> the functions whose holders its holder watches (neighbourhoods)."""
     _watchers: dict[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
     _covers: dict[str, tuple[int, ...]] = field(init=False, repr=False, compare=False)
+    _covered: dict[int, tuple[str, ...]] = field(init=False, repr=False, compare=False)
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
     _holders: dict[str, int] = field(init=False, repr=False, compare=False)
 
@@ -88,6 +89,11 @@ class SwarmPlan:
         object.__setattr__(self, "_holders", holders)
         object.__setattr__(self, "_watchers", {f: tuple(v) for f, v in watchers.items()})
         object.__setattr__(self, "_covers", {f: tuple(sorted(v)) for f, v in covers.items()})
+        covered: dict[int, list[str]] = {rid: [] for rid in self.robots}
+        for f in self.functions:  # plan order: a standby's digest lists them so
+            for rid in covers[f]:
+                covered[rid].append(f)
+        object.__setattr__(self, "_covered", {r: tuple(v) for r, v in covered.items()})
 
     def _check_robots(self, index: Mapping[str, int]) -> dict[str, int]:
         """Every robot's id, function and substitutes valid; function -> its holder."""
@@ -131,6 +137,12 @@ class SwarmPlan:
     def covered_by(self, function: str) -> tuple[int, ...]:
         """Robots allowed to take `function` over, lowest id first."""
         return self._covers[function]
+
+    def covered(self, robot_id: int) -> tuple[str, ...]:
+        """The slots `robot_id` may hold (its home slot and its `subs`), in plan order:
+        the order of its heartbeat's view digest (`digest.py`). Empty for a robot
+        outside the plan."""
+        return self._covered.get(robot_id, ())
 
     def initial_holder(self, function: str) -> int | None:
         return self._holders.get(function)

@@ -42,6 +42,8 @@ class Word(NamedTuple):
     role: int
     slot: int
     epoch: int
+    """Without a slot, the sender's view digest (`digest.py`): never read as an epoch
+    (`outdated` judges holds only)."""
 
 
 class LatestWords:

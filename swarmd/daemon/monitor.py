@@ -218,7 +218,9 @@ class MonitorState:
                       health: int) -> None:
         seen.role = _name(Role, role)
         seen.function = self.plan.function_at(function)
-        seen.epoch = epoch
+        # Without a slot the field is the sender's view digest (`core/digest.py`), not
+        # an epoch of its own: the row shows none.
+        seen.epoch = epoch if seen.function is not None else None
         seen.health = _name(Health, health)
         seen.unverified = seen.function is not None \
             and seen.role == Role.ACTIVE.name \
