@@ -8,12 +8,13 @@ Layout (big-endian)::
 - byte 0: version in the high nibble (1), message type in bits 0-2, bit 3 set when the
   frame carries a tag. A signed HEARTBEAT is 11 + 4 + 8 = 23 bytes (DESIGN: <= 24, so
   it fits any XBee broadcast payload: Zigbee 92 B, 802.15.4 100 B, DigiMesh 73 B).
-- body: HEARTBEAT `slot, epoch (16), role|health (8)`, per robot followed by `n (8),
-  link (8 bytes)` (its hash chain, `chain.py`: 24 bytes with no tag; an anchor carries
-  the sender's signature in place of the tag, 88 bytes); WARN `robot (16), slot, epoch
-  (16), belief (8)`; CLAIM `robot (16), slot, epoch (16)`; LEAVE `slot, epoch (16),
-  reason (8)`; REFUTE `witness (16), slot, epoch (16), the witness's seq (48)`; CERT
-  `slot, a relayed signed frame`.
+- body: HEARTBEAT `slot, epoch (16), role|health (8)` (with slot 0 the epoch field
+  carries the sender's view of the slots it covers instead, `digest.py`), per robot
+  followed by `n (8), link (8 bytes)` (its hash chain, `chain.py`: 24 bytes with no tag;
+  an anchor carries the sender's signature in place of the tag, 88 bytes); WARN
+  `robot (16), slot, epoch (16), belief (8)`; CLAIM `robot (16), slot, epoch (16)`;
+  LEAVE `slot, epoch (16), reason (8)`; REFUTE `witness (16), slot, epoch (16), the
+  witness's seq (48)`; CERT `slot, a relayed signed frame`.
 - slot: a function's wire index (0 = none, 1..65535), variable length so that a swarm
   of fewer than 128 functions pays one byte as it always did: `0xxxxxxx` is 0..127 in
   one byte; a first byte 0x80..0xFE carries 15 bits `1hhhhhhh llllllll` (128..0x7EFF,
