@@ -263,8 +263,10 @@ class Node(Hearing, Moves, Signed, Restart):
     # ------------------------------------------------------------------ vouching
     # A holder heard alive after a suspicion of it: its heartbeat relayed once (`vouch.py`).
     def _suspicion_heard(self, slot: int, suspect: int, epoch: int, now: float) -> None:
+        """Only about a slot whose frames this robot hears (DESIGN "What a robot hears"):
+        the frames a driver drops before the node (`_irrelevant`) arm nothing either."""
         f = self._plan.function_at(slot)
-        if f is not None and suspect != self._robot_id:
+        if f is not None and suspect != self._robot_id and slot in self._relevant.slots:
             self._vouches.suspected(f, Holder(suspect, epoch), now)
 
     def _suspecting(self, sender: int, hb: wire.Heartbeat) -> bool:
