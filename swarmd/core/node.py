@@ -222,6 +222,13 @@ class Node(Hearing, Moves, Signed, Restart):
             # Its own later heartbeat says otherwise: a recording of an earlier run, or
             # a frame reordered behind it (DESIGN, "Every proof is bound to its run").
             return self._drop(DropReason.OUTDATED)
+        self._on_message(frame, now, data)
+        return self._drain()
+
+    def _on_message(self, frame: wire.Frame, now: float, data: bytes) -> None:
+        """A frame through every receive filter: the per-message rules (`hearing.py`,
+        per robot `signed.py`), then what it makes us vouch for (`vouch.py`)."""
+        sender = frame.sender
         self._frames_in += 1
         self._peer_back(sender, now)
         self._heard_at[sender] = now
@@ -245,7 +252,6 @@ class Node(Hearing, Moves, Signed, Restart):
                 self._on_leave(sender, lv, now, frame.raw)
             case wire.Refute() as rf:
                 self._on_refute(sender, rf, now, frame.raw)
-        return self._drain()
 
     def _own_frame(self, frame: wire.Frame, now: float) -> list[Action]:
         """A verified frame sent as this robot. Multicast loopback echoes our own frames
