@@ -170,12 +170,15 @@ def test_the_virtual_medium_holds_overlapping_one_way_partitions() -> None:
     """`partition:1>2@1+2` and `partition:1>3@2+2` overlap over [2, 3): each cut holds
     over its own window only. Robot 2 stops hearing 1 at 1 s and hears it again at
     3 s, robot 3 from 2 s to 4 s: each suspects 1 one `t_max` into its cut and hears it
-    again (its `refute`) when its own cut heals, not when the other one does."""
+    again (its `refute`) when its own cut heals, not when the other one does. Per robot,
+    where a watcher hears a holder's heartbeat first-hand only: with a shared key or
+    unsigned, a robot that heard the warning relays the holder's next heartbeat
+    (DESIGN "Detection", `vouch.py`), and the cut robot hears it through that one."""
     from sim.virtual.explore import swarm
     from sim.virtual.simulator import run_virtual
 
     plan, params = swarm("four")
-    res = run_virtual(plan, params, duration=6.0,
+    res = run_virtual(plan, params, duration=6.0, auth="per-robot",
                       faults=[parse_fault("partition:1>2@1+2"),
                               parse_fault("partition:1>3@2+2")])
     heard = {(e["robot"], e["event"]): e["t"] for e in reversed(res.events)

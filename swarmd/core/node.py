@@ -31,6 +31,7 @@ from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast, Release
 from swarmd.core.auth import Identity
+from swarmd.core.belief import level_byte
 from swarmd.core.chain import OwnChain, PeerChains, anchor_every, resync_after
 from swarmd.core.claims import ClaimMemory
 from swarmd.core.drops import DropReason
@@ -46,6 +47,7 @@ from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.state import Active, Fenced, Standby
 from swarmd.core.votes import VoteCounter
+from swarmd.core.vouch import Vouches
 from swarmd.core.watchdog import WatchState
 from swarmd.core.witness import Ears
 from swarmd.core.words import LatestWords
@@ -59,6 +61,9 @@ channel hands each back within milliseconds; this is seconds of a robot's own tr
 class Node(Restart):
     """One robot's protocol state. Its state is private: drivers read `snapshot()` and
     the few read-only properties below."""
+
+    _vouches: Vouches
+    """Suspicions heard, whose suspect's next heartbeat we relay (`vouch.py`)."""
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, now: float, *,
                  keys: Sequence[bytes] = (), identity: Identity | None = None,
@@ -80,6 +85,7 @@ class Node(Restart):
         self._votes = {f: VoteCounter(params.vote_window, params.warn_interval)
                        for f in self._covers}
         self._heard_at = {}
+        self._vouches = Vouches(params.vote_window)
         self._ears = Ears(robot_id, plan, params, now)
         self._claims_seen = ClaimMemory(params)
         self._replay = ReplayFilter(seq_start, now)  # bounded by our own clock
@@ -171,7 +177,7 @@ class Node(Restart):
             frame = wire.decode(data, self._keys, self._verifier)
         except wire.CodecError as exc:
             return self._drop(exc.reason)
-        return self._accept(frame, now)
+        return self._accept(frame, now, data)
 
     def receive_frame(self, frame: wire.Frame, now: float) -> list[Action]:
         """A frame already decoded and verified with this swarm's keys. For simulators
@@ -205,7 +211,8 @@ class Node(Restart):
             return False  # a warning about us (rule 4), or a bad_function drop
         return slot not in self._relevant.slots
 
-    def _accept(self, frame: wire.Frame, now: float) -> list[Action]:
+    def _accept(self, frame: wire.Frame, now: float, data: bytes = b"") -> list[Action]:
+        """A decoded frame (`data`: the bytes as heard, when the driver has them)."""
         sender = frame.sender
         if frame.swarm_id != self._plan.swarm_id:
             return self._drop(DropReason.SWARM)
@@ -231,6 +238,13 @@ class Node(Restart):
             # Its own later heartbeat says otherwise: a recording of an earlier run, or
             # a frame reordered behind it (DESIGN, "Every proof is bound to its run").
             return self._drop(DropReason.OUTDATED)
+        self._on_message(frame, now, data)
+        return self._drain()
+
+    def _on_message(self, frame: wire.Frame, now: float, data: bytes) -> None:
+        """A frame through every receive filter: the per-message rules (`hearing.py`,
+        per robot `signed.py`), then what it makes us vouch for (`vouch.py`)."""
+        sender = frame.sender
         self._frames_in += 1
         self._peer_back(sender, now)
         self._heard_at[sender] = now
@@ -239,17 +253,21 @@ class Node(Restart):
                 if self._verifier is not None:
                     self._chains.commit(sender, hb.n, hb.link, frame.seq, now,
                                         anchor=hb.anchor)
+                own = self._suspecting(sender, hb)
                 self._on_heartbeat(sender, hb, now)
                 self._heard_word(sender, frame.seq, hb)
+                self._vouch(frame, hb, own, data, now)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
+                if w.belief >= level_byte(self._params.suspect_level):
+                    self._suspicion_heard(w.function, w.suspect, w.epoch, now)
             case wire.Claim() as c:
                 self._on_claim(sender, c, now, frame.raw)
+                self._suspicion_heard(c.function, c.failed, c.epoch - 1, now)
             case wire.Leave() as lv:
                 self._on_leave(sender, lv, now, frame.raw)
             case wire.Refute() as rf:
                 self._on_refute(sender, rf, now, frame.raw)
-        return self._drain()
 
     def _own_frame(self, frame: wire.Frame, now: float) -> list[Action]:
         """A verified frame sent as this robot. Multicast loopback echoes our own frames
@@ -263,6 +281,47 @@ class Node(Restart):
         if frame.seq < self._seq_start:
             return self._drop(DropReason.REPLAY)
         return self._drop(DropReason.OWN)
+
+    # ------------------------------------------------------------------ vouching
+    # A holder heard alive after a suspicion of it: its heartbeat relayed once (`vouch.py`).
+    def _suspicion_heard(self, slot: int, suspect: int, epoch: int, now: float) -> None:
+        """Only about a slot whose frames this robot hears (DESIGN "What a robot hears"):
+        the frames a driver drops before the node (`_irrelevant`) arm nothing either."""
+        f = self._plan.function_at(slot)
+        if f is not None and suspect != self._robot_id and slot in self._relevant.slots:
+            self._vouches.suspected(f, Holder(suspect, epoch), now)
+
+    def _suspecting(self, sender: int, hb: wire.Heartbeat) -> bool:
+        """Does our own watch of the slot `hb` names suspect `sender` at `hb`'s epoch
+        (before `hb`)? Not a new holder that ends a handover: it was suspected by
+        nobody."""
+        f = self._plan.function_at(hb.function) if hb.function else None
+        if f is None:
+            return False
+        watch = self._watches.get(f)
+        return watch is not None and watch.suspecting \
+            and self._known[f] == Holder(sender, hb.epoch)
+
+    def _vouch(self, frame: wire.Frame, hb: wire.Heartbeat, own: bool, data: bytes,
+               now: float) -> None:
+        """Relay `frame` (`hb`, as heard: `data`) if it answers a suspicion heard here of
+        its sender, the slot's holder as we know it. With a shared key or unsigned only:
+        per robot the holder's REFUTE is what others relay (`signed.py`), and a heartbeat
+        is a link of its sender's chain, not a frame to repeat. Only the top of the
+        sender's run: a frame reordered or played back behind a newer one vouches for
+        nothing now."""
+        f = self._plan.function_at(hb.function) if hb.function else None
+        entry = Holder(frame.sender, hb.epoch)
+        # Not while faulty: a faulty robot only leaves (rule 7).
+        if f is None or self._verifier is not None or not self._heartbeating() \
+                or self._known[f] != entry or self._replay.top(frame.sender) != frame.seq \
+                or not self._vouches.due(f, entry, now, own=own):
+            return
+        # The bytes heard, or (a driver that decoded the frame for us) the same frame
+        # encoded again: with a swarm key its tag is the same as the sender's.
+        raw = data or wire.encode(frame, self._keys[0] if self._keys else None, None)
+        self._pending.append(Broadcast(raw))
+        self._frames_out += 1
 
     def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat) -> None:
         """A heartbeat we believed sets its sender's latest word (`words.py`) if its seq
@@ -414,6 +473,7 @@ class Node(Restart):
                 w.refresh(now)
             self._ears.forget_gaps()  # the gap was ours: no sample of any link
             self._clear_votes()
+            self._vouches.clear()  # what we heard before it vouches for nothing now
             if self._claim is not None:
                 self._claim.until = max(self._claim.until, now + self._params.claim_hold)
             self._beat.next = now
