@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -16,6 +17,7 @@ from harness import Net
 
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import VirtualResult, run_virtual
+from swarmd.config import load_swarm
 from swarmd.core import wire
 from swarmd.core.params import Params, udp
 from swarmd.core.plan import RobotPlan, SwarmPlan
@@ -242,3 +244,26 @@ def test_repeated_claims_with_no_standby_left_end_in_an_alert(
     assert alert is not None
     assert alert["t"] - 3.0 <= params.t_max + params.claim_horizon + params.alert_after
     assert first(net, "suspect", function="f2") is not None
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+@pytest.mark.parametrize("heal", [10.28, 10.33, 10.38])
+def test_own_ears_give_up_a_claim_when_the_lost_watcher_is_heard_again(
+        auth: str, heal: float) -> None:
+    """Rule 9's premise is that the watchers silent to the standby failed with the
+    suspect. The paper swarm: robot 3's transmissions fade to witness 2 and standby 6,
+    and robot 4's (f3's other watcher) to 6 only, until `heal`, within 6's claim hold.
+    2 warns, 6 counts its own ears as the second witness and claims f3; then 6 hears
+    watcher 4 heartbeat again: its link had faded, 4 did not fail, and the claim rests
+    on 6's silence alone. 6 gives it up; nobody takes the live robot 3's slot over.
+    (Per robot this took f3 over at 10.44 s and fenced 3; with a shared key or unsigned
+    4's relay of 3's heartbeat, once heard, already stopped the claim.)"""
+    cfg = load_swarm(Path(__file__).resolve().parent.parent / "configs" / "paper.yaml")
+    faults = [parse_fault("partition:3>2,6@9.8+3"),
+              parse_fault(f"partition:4>6@9.5+{heal - 9.5:.2f}")]
+    res = run_virtual(cfg.to_plan(), cfg.params(), duration=16.0, faults=faults, seed=1,
+                      auth=auth)
+    claims = [e for e in res.events if e["event"] == "claim" and e["t"] > 9.0]
+    assert [(e["robot"], e["function"]) for e in claims] == [(6, "f3")]
+    assert not [e for e in res.events if e["event"] in ("takeover", "fenced")]
+    assert res.violations == []

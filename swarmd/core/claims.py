@@ -23,6 +23,9 @@ class WaitState:
     epoch: int
     until: float
     resend: float
+    lost: frozenset[tuple[str, int]] = frozenset()
+    """Rule 9: the watchers (slot, holder) silent to us when our own ears made the
+    quorum: the claim rests on their having failed with the suspect."""
 
 
 class ClaimMemory:

@@ -127,7 +127,9 @@ class Episode(Signed):
         # of a live robot so needs three links silent at once (DESIGN "Detection").
         if count >= self._params.quorum and not self._ears.alive_to_me(
                 f, w.suspect, w.epoch, now):
-            self._start_claim(f, w.suspect, w.epoch, now)
+            lost = self._ears.silent_watchers(f, self._known, now) \
+                if self._robot_id in self._votes[f].witnesses else frozenset()
+            self._start_claim(f, w.suspect, w.epoch, now, lost=lost)
 
     def _views_from_warn(self, f: str, sender: int, w: wire.Warn, raw: bytes,
                          now: float, *, evidence: bool = True) -> None:
@@ -232,12 +234,13 @@ class Episode(Signed):
 
     # ------------------------------------------------------------------ 4. claim
     def _start_claim(self, f: str, failed: int, epoch: int, now: float,
-                     trigger: Trigger = Trigger.QUORUM) -> None:
+                     trigger: Trigger = Trigger.QUORUM, *,
+                     lost: frozenset[tuple[str, int]] = frozenset()) -> None:
         # 65535 takeovers of one slot: saturate rather than wrap.
         new_epoch = min(epoch + 1, EPOCH_MAX)
         self._to(trigger, Claiming(WaitState(f, failed, epoch, new_epoch,
                                              now + self._params.claim_hold,
-                                             now + self._params.warn_interval)))
+                                             now + self._params.warn_interval, lost)))
         self._clear_votes()
         self._emit(ev.Claim(subject=failed, function=f, epoch=new_epoch))
         self._send_claim()
@@ -355,6 +358,15 @@ class Episode(Signed):
                 self._known[c.function].epoch, refutes=True):
             # Its certificate was refuted during the hold (or never complete): a takeover
             # no other robot would believe is none (DESIGN, "Convergence").
+            self._emit(ev.Refute(subject=c.failed, function=c.function))
+            self._to(Trigger.REFUTED, Standby())
+            return
+        if self._ears.heard_again(c.lost, c.until - self._params.claim_hold):
+            # Rule 9's premise failed during the hold: a watcher we took for lost with
+            # the suspect heartbeats, so it was our link to it that faded, and our
+            # silence is one robot's word. If the suspect is dead, its live watchers go
+            # on warning, and the claim comes again from them (a new holder of a watcher
+            # slot, after a takeover of its own, is not such a watcher).
             self._emit(ev.Refute(subject=c.failed, function=c.function))
             self._to(Trigger.REFUTED, Standby())
             return

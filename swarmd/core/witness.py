@@ -125,13 +125,29 @@ class Ears:
         heard = self._slot_heard.get(f)
         if heard is not None and now - heard.at < self.patience(heard.holder):
             return False
-        live = 0
+        live = len(self._plan.watched_by(f)) - len(self.silent_watchers(f, known, now))
+        return live < p.quorum
+
+    def silent_watchers(self, f: str, known: Mapping[str, Holder],
+                        now: float) -> frozenset[tuple[str, int]]:
+        """Rule 9's lost watchers: f's watcher slots, with their holders as we know
+        them, whose heartbeats we have not heard within that holder's patience."""
+        silent = set()
         for g in self._plan.watched_by(f):
             beat = self._slot_heard.get(g)
-            if beat is not None and beat.holder == known[g].robot \
-                    and now - beat.at < self.patience(beat.holder):
-                live += 1
-        return live < p.quorum
+            if beat is None or beat.holder != known[g].robot \
+                    or now - beat.at >= self.patience(beat.holder):
+                silent.add((g, known[g].robot))
+        return frozenset(silent)
+
+    def heard_again(self, watchers: frozenset[tuple[str, int]], since: float) -> bool:
+        """Was any of these watchers (slot, holder) heard heartbeating its slot after
+        `since`? A new holder of a watcher slot is not one of them."""
+        for g, robot in watchers:
+            beat = self._slot_heard.get(g)
+            if beat is not None and beat.holder == robot and beat.at > since:
+                return True
+        return False
 
     def live_standby(self, f: str, subject: int, now: float) -> bool:
         """Is any robot that may take `f` over plausibly alive (rules 6, 8)? A standby
