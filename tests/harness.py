@@ -15,6 +15,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from sim.shared.fakeid import fake_identities
 from swarmd.core import wire
 from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity
@@ -162,3 +163,43 @@ class _NoSigner:
 
     def sign(self, data: bytes) -> bytes:
         raise AssertionError("an unsigned per-robot heartbeat is never signed")
+
+
+MODE_KEY = bytes(32)
+"""The swarm key of `Radio`'s frames with a shared key, and alongside a signature per robot."""
+
+
+class Radio:
+    """Frames of a swarm's robots as each auth mode sends them (with a key: `MODE_KEY`;
+    per robot: fake identities), and nodes that hear them."""
+
+    def __init__(self, plan: SwarmPlan, params: Params, mode: str) -> None:
+        self.plan, self.params, self.mode = plan, params, mode
+        self.keys = (MODE_KEY,) if mode != "none" else ()
+        self.ids = fake_identities(plan.robots) if mode == "per-robot" else {}
+        self.seq = 1000
+
+    def node(self, rid: int) -> Node:
+        node = Node(rid, self.plan, self.params, 0.0, keys=self.keys,
+                    identity=self.ids.get(rid))
+        node.tick(0.0)
+        return node
+
+    def _next(self) -> int:
+        self.seq += 1
+        return self.seq
+
+    def beat(self, sender: int, f: str) -> bytes:
+        """`sender`'s heartbeat as holder of f at epoch 0 (per robot: an anchor)."""
+        slot, key = self.plan.slot(f), MODE_KEY if self.keys else None
+        if self.mode == "per-robot":
+            return signed_beat(self.ids[sender], self.plan.swarm_id, sender, self._next(),
+                               slot, 0, key=key)
+        return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(),
+                                      wire.Heartbeat(slot, 0, 1, 0)), key)
+
+    def warn(self, sender: int, suspect: int, f: str, belief: int) -> bytes:
+        msg = wire.Warn(suspect, self.plan.slot(f), 0, belief)
+        signer = self.ids[sender].signer if self.mode == "per-robot" else None
+        return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(), msg),
+                           MODE_KEY if self.keys else None, signer)

@@ -1,6 +1,7 @@
-"""Swarm files for tests: the paper's swarm (configs/paper.yaml) with the auth a test
-wants. The committed file is signed per robot with keys nobody committed, so a test that
-runs daemons from it says `auth: none` (signing is not what it tests) or makes keys."""
+"""Swarm files and plans for tests: the paper's swarm (configs/paper.yaml) with the auth a
+test wants, and small plans built in code. The committed file is signed per robot with
+keys nobody committed, so a test that runs daemons from it says `auth: none` (signing is
+not what it tests) or makes keys."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import re
 from pathlib import Path
 
 from swarmd.base.identity import private_key_path, write_identity
+from swarmd.core.plan import RobotPlan, SwarmPlan
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "configs" / "paper.yaml"
@@ -62,3 +64,12 @@ robots:
   - {{id: 3, state: active, function: f3, neighbors: [1, 2]}}
   - {{id: 4, state: standby, subs: [1, 2, 3]}}
 """
+
+
+def two_standbys() -> SwarmPlan:
+    """The paper's ring of four, with standbys 5 and 6 both covering f2 (rule 6)."""
+    fs = ("f1", "f2", "f3", "f4")
+    robots = {i + 1: RobotPlan(i + 1, f) for i, f in enumerate(fs)}
+    robots[5], robots[6] = RobotPlan(5, None, ("f2",)), RobotPlan(6, None, ("f2",))
+    return SwarmPlan(1544, fs, robots, {f: (fs[i - 1], fs[(i + 1) % 4])
+                                        for i, f in enumerate(fs)})

@@ -13,6 +13,7 @@ import itertools
 
 import pytest
 from harness import Net
+from swarms import two_standbys
 
 from sim.shared.fakeid import fake_identities
 from swarmd.core import wire
@@ -192,17 +193,6 @@ def test_a_handover_that_ends_past_alert_after_still_alerts(paper: Paper, auth: 
     alerts = [e for e in res.events if e["event"] == "alert" and e["robot"] == 4]
     assert [(e["function"], e["reason"]) for e in alerts] == [("f3", "no claim")]
     assert alerts[0]["t"] == pytest.approx(3.1 + pause_s)
-
-
-def two_standbys() -> SwarmPlan:
-    """The paper's ring of four, with standbys 5 and 6 both covering f2 (rule 6)."""
-    from swarmd.core.plan import RobotPlan
-
-    fs = ("f1", "f2", "f3", "f4")
-    robots = {i + 1: RobotPlan(i + 1, f) for i, f in enumerate(fs)}
-    robots[5], robots[6] = RobotPlan(5, None, ("f2",)), RobotPlan(6, None, ("f2",))
-    return SwarmPlan(1544, fs, robots, {f: (fs[i - 1], fs[(i + 1) % 4])
-                                        for i, f in enumerate(fs)})
 
 
 @pytest.mark.parametrize("auth", MODES)

@@ -8,7 +8,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
-from harness import Net, signed_beat
+from harness import MODE_KEY as KEY
+from harness import Net, Radio
 
 from sim.shared.fakeid import fake_identities
 from swarmd.core import events as ev
@@ -20,43 +21,6 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
 MODES = ["none", "shared", "per-robot"]
-KEY = bytes(32)
-
-
-class Radio:
-    """Frames of the paper swarm's robots as each auth mode sends them, and nodes that
-    hear them."""
-
-    def __init__(self, plan: SwarmPlan, params: Params, mode: str) -> None:
-        self.plan, self.params, self.mode = plan, params, mode
-        self.keys = (KEY,) if mode != "none" else ()
-        self.ids = fake_identities(plan.robots) if mode == "per-robot" else {}
-        self.seq = 1000
-
-    def node(self, rid: int) -> Node:
-        node = Node(rid, self.plan, self.params, 0.0, keys=self.keys,
-                    identity=self.ids.get(rid))
-        node.tick(0.0)
-        return node
-
-    def _next(self) -> int:
-        self.seq += 1
-        return self.seq
-
-    def beat(self, sender: int, f: str) -> bytes:
-        """`sender`'s heartbeat as holder of f at epoch 0 (per robot: an anchor)."""
-        slot, key = self.plan.slot(f), KEY if self.keys else None
-        if self.mode == "per-robot":
-            return signed_beat(self.ids[sender], self.plan.swarm_id, sender, self._next(),
-                               slot, 0, key=key)
-        return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(),
-                                      wire.Heartbeat(slot, 0, 1, 0)), key)
-
-    def warn(self, sender: int, suspect: int, f: str, belief: int) -> bytes:
-        msg = wire.Warn(suspect, self.plan.slot(f), 0, belief)
-        signer = self.ids[sender].signer if self.mode == "per-robot" else None
-        return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(), msg),
-                           KEY if self.keys else None, signer)
 
 
 def run(node: Node, until: float, now: float) -> list[Action]:

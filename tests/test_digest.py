@@ -15,27 +15,19 @@ from collections.abc import Sequence
 
 import pytest
 from harness import Net
+from swarms import two_standbys
 
 from sim.shared.fakeid import fake_identities
 from swarmd.core import digest, wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.node import Node, Restored
 from swarmd.core.params import Params
-from swarmd.core.plan import RobotPlan, SwarmPlan
+from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder
 
 KEY = b"d" * 32
 MODES = ("per-robot", "shared", "none")
 HEAL = 6.0
-
-
-def two_standbys() -> SwarmPlan:
-    """The paper's ring of four, standbys 5 and 6 both covering f2 (rule 6)."""
-    fs = ("f1", "f2", "f3", "f4")
-    robots = {i + 1: RobotPlan(i + 1, f) for i, f in enumerate(fs)}
-    robots[5], robots[6] = RobotPlan(5, None, ("f2",)), RobotPlan(6, None, ("f2",))
-    return SwarmPlan(1544, fs, robots, {f: (fs[i - 1], fs[(i + 1) % 4])
-                                        for i, f in enumerate(fs)})
 
 
 def net(plan: SwarmPlan, params: Params, auth: str) -> Net:

@@ -8,22 +8,18 @@ every check runs in every auth mode."""
 from __future__ import annotations
 
 import pytest
-from harness import signed_beat
+from harness import Radio
 
-from sim.shared.fakeid import fake_identities
 from sim.shared.faults import parse_fault
 from sim.virtual.simulator import run_virtual
-from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast
 from swarmd.core.belief import level_byte
-from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder
 from swarmd.core.vouch import Vouches
 
 MODES = ["none", "shared", "per-robot"]
-KEY = bytes(32)
 
 
 # ---------------------------------------------------------------------- the bookkeeping
@@ -42,40 +38,6 @@ def test_a_suspicion_heard_calls_for_one_relay_of_that_holder_within_the_hold() 
 
 
 # ---------------------------------------------------------------------- one node
-class Radio:
-    """Frames of the paper swarm's robots as each auth mode sends them."""
-
-    def __init__(self, plan: SwarmPlan, params: Params, mode: str) -> None:
-        self.plan, self.params, self.mode = plan, params, mode
-        self.keys = (KEY,) if mode != "none" else ()
-        self.ids = fake_identities(plan.robots) if mode == "per-robot" else {}
-        self.seq = 1000
-
-    def node(self, rid: int) -> Node:
-        node = Node(rid, self.plan, self.params, 0.0, keys=self.keys,
-                    identity=self.ids.get(rid))
-        node.tick(0.0)
-        return node
-
-    def _next(self) -> int:
-        self.seq += 1
-        return self.seq
-
-    def beat(self, sender: int, f: str) -> bytes:
-        slot, key = self.plan.slot(f), KEY if self.keys else None
-        if self.mode == "per-robot":
-            return signed_beat(self.ids[sender], self.plan.swarm_id, sender, self._next(),
-                               slot, 0, key=key)
-        return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(),
-                                      wire.Heartbeat(slot, 0, 1, 0)), key)
-
-    def warn(self, sender: int, suspect: int, f: str, belief: int) -> bytes:
-        msg = wire.Warn(suspect, self.plan.slot(f), 0, belief)
-        signer = self.ids[sender].signer if self.mode == "per-robot" else None
-        return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(), msg),
-                           KEY if self.keys else None, signer)
-
-
 def sent(actions: list[Action]) -> list[bytes]:
     return [a.frame for a in actions if isinstance(a, Broadcast)]
 
