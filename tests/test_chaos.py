@@ -118,7 +118,7 @@ clean since, in every mode (`test_wide_seeds_fixed_run_clean_in_every_mode`).
   f22), then hears it again without logging an answer: `warning_unresolved`."""
 
 WIDE_SMALL: tuple[int, ...] = (5, 50, 84, 99, 136, 144, 147, 172, 182, 195, 279, 321, 365,
-                                383, 1713)
+                                383, 1713, 73506)
 """Wide seeds on swarms of up to 12 robots (`python bench/bench_chaos.py --seed N --wide
 --max-robots 12 --verbose`) that broke an invariant per robot on the slot-table core as
 first merged, each a shape the table's proofs had to cover; clean in every mode since
@@ -135,7 +135,12 @@ first merged, each a shape the table's proofs had to cover; clean in every mode 
 - 1713: a robot that took a slot over unheard (a fade), left it faulty and restarted kept
   its state file's entry naming itself: an entry nobody could be shown a proof of, and
   views split for good (a restarted robot now keeps its own entry only for the slot it
-  held).
+  held);
+- 73506: a robot restarted within its start-up grace cannot judge the LEAVE behind the
+  slot's current entry yet, so it warns about the holder its stale view names, which a
+  greater entry had already fenced; it merges the entry once the grace ends. The checker
+  counted that warning unresolved: a warning about a fenced holder is now resolved by
+  the entry that fenced it, as one about a replaced holder is by the takeover.
 (Classic seed 25, run per robot here and in tests/test_attacks.py: a standby's own refuted claim,
 relayed back as part of a reassertion's proof, never certified at it.)"""
 

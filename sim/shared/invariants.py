@@ -181,7 +181,8 @@ class Checker:
     held_since: dict[tuple[str, int], float] = field(default_factory=dict)
     """(function, robot) -> when the robot last began to execute the function."""
     replaced_at: dict[tuple[str, int], float] = field(default_factory=dict)
-    """(function, robot) -> when a takeover last replaced the robot on the function."""
+    """(function, robot) -> when a takeover last replaced the robot on the function, or
+    the robot was fenced on it (a greater entry outranked its hold)."""
     expects: list[_Expect] = field(default_factory=list)
     takeovers: list[dict[str, Any]] = field(default_factory=list)
     false_takeovers: list[dict[str, Any]] = field(default_factory=list)
@@ -328,6 +329,7 @@ class Checker:
         epoch = int(rec["epoch"])
         for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
             del self.episodes[key]
+        self.replaced_at[(f, r)] = t
         if epoch and (f, epoch) not in self.epochs and (f, epoch - 1) not in self.epochs \
                 and (f, epoch - 1) not in self.claimed:
             # (One epoch above a takeover, or above a claim, is the reassertion of the
@@ -353,8 +355,10 @@ class Checker:
         key = (r, rec["function"])
         about = (str(rec["function"]), int(rec["subject"]))
         if self.replaced_at.get(about, -1.0) > self.held_since.get(about, -1.0):
-            # About a holder already replaced: this watcher had not heard the takeover
-            # yet (a partition, loss); the takeover it missed resolves the warning.
+            # About a holder already replaced or fenced: this watcher had not heard the
+            # greater entry yet (a partition, loss, a start-up that cannot judge its proof
+            # yet); the entry it missed resolves the warning, and invariant 8 holds its
+            # view to it.
             pass
         elif key not in self.episodes:
             self.episodes[key] = (t, int(rec["subject"]))
