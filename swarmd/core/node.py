@@ -253,10 +253,14 @@ class Node(Restart):
                 if self._verifier is not None:
                     self._chains.commit(sender, hb.n, hb.link, frame.seq, now,
                                         anchor=hb.anchor)
-                own = self._suspecting(sender, hb)
+                # Vouching is for a shared key or unsigned (`_vouch`): per robot no
+                # heartbeat pays for it.
+                vouching = self._verifier is None
+                own = vouching and self._suspecting(sender, hb)
                 self._on_heartbeat(sender, hb, now)
                 self._heard_word(sender, frame.seq, hb)
-                self._vouch(frame, hb, own, data, now)
+                if vouching:
+                    self._vouch(frame, hb, own, data, now)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
                 if w.belief >= level_byte(self._params.suspect_level):
@@ -288,7 +292,8 @@ class Node(Restart):
         """Only about a slot whose frames this robot hears (DESIGN "What a robot hears"):
         the frames a driver drops before the node (`_irrelevant`) arm nothing either."""
         f = self._plan.function_at(slot)
-        if f is not None and suspect != self._robot_id and slot in self._relevant.slots:
+        if f is not None and self._verifier is None and suspect != self._robot_id \
+                and slot in self._relevant.slots:
             self._vouches.suspected(f, Holder(suspect, epoch), now)
 
     def _suspecting(self, sender: int, hb: wire.Heartbeat) -> bool:
@@ -305,7 +310,8 @@ class Node(Restart):
     def _vouch(self, frame: wire.Frame, hb: wire.Heartbeat, own: bool, data: bytes,
                now: float) -> None:
         """Relay `frame` (`hb`, as heard: `data`) if it answers a suspicion heard here of
-        its sender, the slot's holder as we know it. With a shared key or unsigned only:
+        its sender, the slot's holder as we know it. With a shared key or unsigned only
+        (`_on_message` calls it there, and `_suspicion_heard` arms nothing per robot):
         per robot the holder's REFUTE is what others relay (`signed.py`), and a heartbeat
         is a link of its sender's chain, not a frame to repeat. Only the top of the
         sender's run: a frame reordered or played back behind a newer one vouches for
@@ -313,7 +319,7 @@ class Node(Restart):
         f = self._plan.function_at(hb.function) if hb.function else None
         entry = Holder(frame.sender, hb.epoch)
         # Not while faulty: a faulty robot only leaves (rule 7).
-        if f is None or self._verifier is not None or not self._heartbeating() \
+        if f is None or not self._heartbeating() \
                 or self._known[f] != entry or self._replay.top(frame.sender) != frame.seq \
                 or not self._vouches.due(f, entry, now, own=own):
             return
