@@ -21,9 +21,14 @@ port, and measures them over the same seconds: on a machine shared with other jo
 that comes and goes then weighs on both trees alike. `--profile FILE` runs robot 1
 under cProfile, CPU time, from READY until it is told to stop, writes the stats to FILE
 and prints the top entries per frame.
-`--floor` also measures a bare asyncio process that wakes for every frame on the group
-and at 10 Hz and does nothing else (bench/bare_listener.py): the part of robot 1's CPU
-that no change to swarmd's code removes, at the machine's current load.
+`--floor` also measures, beside robot 1 and the standby, a bare process for each on the
+daemon's event loop (bench/bare_listener.py) that wakes for every frame on the group and
+at that robot's heartbeat period, sends its heartbeats and does the checks `--auth` makes
+unavoidable for the frames it hears (Ed25519 anchors and chain links; the swarm key's
+tag), and nothing else: the part of their CPU that no change to swarmd's code removes
+without changing the frames on the wire, at the machine's current load. With
+`--compare` it prints each floor over REV's robot: above 0.5, halving REV's CPU is out
+of reach there.
 
     python bench/bench_daemon.py [--duration 10] [--alone | --failover]
                                  [--auth per-robot|shared|none]
@@ -131,30 +136,44 @@ def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
 
         others = [] if args.alone else [launch(r) for r in (2, 3, 4, 5, 6)]
         proc = launch(1)
-        group = importlib.import_module("swarmd.transport.addresses").DEFAULT_GROUP
-        bare = subprocess.Popen([sys.executable, str(BARE), group, str(port)],
-                                stdout=subprocess.PIPE, text=True) if args.floor else None
+        floors = [floor(args, port, Path(tmp), swarm, r)
+                  for r in ((1,) if args.alone else (1, 6))] if args.floor else []
         try:
-            return _measure_running(args, proc, others, bare)
+            return _measure_running(args, proc, others, floors)
         finally:
-            for p in (proc, *others, *([bare] if bare else [])):
+            for p in (proc, *others, *floors):
                 p.send_signal(signal.SIGTERM)
-            for p in (proc, *others, *([bare] if bare else [])):
+            for p in (proc, *others, *floors):
                 try:
                     p.wait(timeout=10)
                 except subprocess.TimeoutExpired:
                     p.kill()
 
 
+def floor(args: argparse.Namespace, port: int, tmp: Path, swarm: Path,
+          robot: int) -> subprocess.Popen[str]:
+    """The floor of `robot` (bench/bare_listener.py), always this tree's code: waking
+    for the same frames, and that robot's checks and sends in `args.auth`."""
+    group = importlib.import_module("swarmd.transport.addresses").DEFAULT_GROUP
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, str(BARE), group, str(port), "--as", str(robot),
+                             "--swarm", str(swarm), "--auth", args.auth,
+                             "--keys", str(tmp / "keys"), "--key", str(tmp / "swarm.key")],
+                            stdout=subprocess.PIPE, text=True, env=env)
+
+
 def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
                      others: list[subprocess.Popen[str]],
-                     bare: subprocess.Popen[str] | None) -> dict[str, Any] | None:
-    """Wait for robot 1's READY, then measure it (and robot 6, the standby, and the bare
-    listener with `--floor`)."""
+                     floors: list[subprocess.Popen[str]]) -> dict[str, Any] | None:
+    """Wait for robot 1's READY, then measure it (and robot 6, the standby, and with
+    `--floor` the floors of both)."""
     assert proc.stdout is not None
     standby = others[-1] if others else None
-    if bare is not None and (bare.stdout is None or bare.stdout.readline() != "ready\n"):
-        raise SystemExit("bench/bare_listener.py did not start")
+    for started in floors:
+        if started.stdout is None or started.stdout.readline() != "ready\n":
+            raise SystemExit("bench/bare_listener.py did not start")
+    bare = floors[0] if floors else None
+    standby_bare = floors[1] if len(floors) > 1 else None
     for line in proc.stdout:
         if json.loads(line)["msg"] == "ready":
             break
@@ -168,7 +187,7 @@ def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
     if args.hold:  # `--together`: the parent starts every tree's measurement at once
         print("ready", flush=True)
         sys.stdin.readline()
-    measured = [p for p in (proc, standby, bare) if p is not None]
+    measured = [p for p in (proc, standby, bare, standby_bare) if p is not None]
     t0, ticks0 = time.monotonic(), {p.pid: cpu_seconds(p.pid) for p in measured}
     exact0 = {p.pid: cpu_exact(p.pid) for p in measured}
     if args.failover:
@@ -185,7 +204,9 @@ def _measure_running(args: argparse.Namespace, proc: subprocess.Popen[str],
             "standby_cpu_percent": share(standby, ticks0, ticks1),
             "cpu_exact_percent": share(proc, exact0, exact1),
             "standby_cpu_exact_percent": share(standby, exact0, exact1),
-            **({"floor_cpu_percent": share(bare, ticks0, ticks1)} if bare is not None else {}),
+            **({"floor_cpu_percent": share(bare, exact0, exact1),
+                "standby_floor_cpu_percent": share(standby_bare, exact0, exact1)}
+               if bare is not None else {}),
             "rss_mb": round(status_kb(proc.pid, "VmRSS") / 1024, 1),
             "peak_rss_mb": round(status_kb(proc.pid, "VmHWM") / 1024, 1),
             "seconds": round(t1 - t0, 2), "auth": args.auth}
@@ -203,8 +224,9 @@ def report(args: argparse.Namespace, r: dict[str, Any]) -> int:
         print(f"daemon of robot 6, the standby taking f2 over: CPU "
               f"{r['standby_cpu_percent']:.2f}% of one core")
     if "floor_cpu_percent" in r:
-        print(f"bare asyncio listener on the same group (the floor): CPU "
-              f"{r['floor_cpu_percent']:.2f}% of one core")
+        print(f"the floor (bench/bare_listener.py: waking for the same frames, their "
+              f"checks in auth {args.auth}): robot 1 {r['floor_cpu_percent']:.3f}%, "
+              f"standby {r['standby_floor_cpu_percent']:.3f}% of one core")
     print(json.dumps(r))
     return 0 if r["cpu_percent"] < 1.0 and r["peak_rss_mb"] < 60 else 2
 
@@ -256,7 +278,8 @@ def _measured(args: argparse.Namespace, i: int, name: str, out: str,
     if not lines or not lines[-1].startswith("{"):
         raise SystemExit(f"{name}: measurement failed:\n{out}{err}")
     r: dict[str, Any] = json.loads(lines[-1])
-    floor = f", floor {r['floor_cpu_percent']:.2f}%" if args.floor else ""
+    floor = (f", floors {r['floor_cpu_percent']:.3f}% / "
+             f"{r['standby_floor_cpu_percent']:.3f}%") if args.floor else ""
     print(f"run {i + 1} {name:>10}: robot 1 {r['cpu_percent']:.2f}% "
           f"(exact {r['cpu_exact_percent']:.3f}%), standby {r['standby_cpu_percent']:.2f}% "
           f"(exact {r['standby_cpu_exact_percent']:.3f}%){floor}, RSS {r['rss_mb']:.1f} MB, "
@@ -303,8 +326,10 @@ def _print_comparison(args: argparse.Namespace,
     if args.floor:
         # What swarmd's own code costs: each run's robot 1 less the floor beside it.
         for r in (*old, *new):
-            r["above_floor_percent"] = round(r["cpu_percent"] - r["floor_cpu_percent"], 3)
+            r["above_floor_percent"] = round(r["cpu_exact_percent"] - r["floor_cpu_percent"],
+                                             3)
         keys += [("floor_cpu_percent", "floor CPU %"),
+                 ("standby_floor_cpu_percent", "standby floor %"),
                  ("above_floor_percent", "robot 1 - floor")]
     for key, label in keys:
         a = statistics.median(r[key] for r in old)
@@ -313,8 +338,30 @@ def _print_comparison(args: argparse.Namespace,
         print(f"{label:>15}: {rev} median {a:.3f}, this tree median {b:.3f}, "
               f"ratio {ratio:.2f}")
         summary[key] = {"rev": a, "this": b, "ratio": round(ratio, 3)}
+    if args.floor:
+        summary["floor_vs_rev"] = _floor_vs_rev(rev, old, new)
     print(json.dumps(summary))
     return 0
+
+
+def _floor_vs_rev(rev: str, old: list[dict[str, Any]],
+                  new: list[dict[str, Any]]) -> dict[str, float]:
+    """Each floor (the median of every run's, both trees': the floor is this tree's code
+    either way) over REV's own robot: at most 0.5, or halving REV's CPU is out of reach
+    without changing the frames on the wire."""
+    ratios: dict[str, float] = {}
+    for floor_key, key, label in (("floor_cpu_percent", "cpu_exact_percent", "robot 1"),
+                                  ("standby_floor_cpu_percent", "standby_cpu_exact_percent",
+                                   "standby")):
+        floor_median = statistics.median(r[floor_key] for r in (*old, *new))
+        rev_median = statistics.median(r[key] for r in old)
+        ratio = round(floor_median / rev_median, 3) if rev_median else float("nan")
+        verdict = ("the floor leaves room for half" if ratio <= 0.5
+                   else "half is out of reach with these frames")
+        print(f"{label + ' floor':>15}: median {floor_median:.3f}%, {rev}'s {label} "
+              f"{rev_median:.3f}%: ratio {ratio:.2f} ({verdict})")
+        ratios[label] = ratio
+    return ratios
 
 
 def main() -> int:
@@ -337,8 +384,9 @@ def main() -> int:
     ap.add_argument("--tree", type=Path, default=ROOT,
                     help="the checkout whose daemons are measured (default this one)")
     ap.add_argument("--floor", action="store_true",
-                    help="also measure a bare asyncio listener on the same group "
-                         "(bench/bare_listener.py): what waking up costs at this load")
+                    help="also measure the floor of robot 1 and of the standby "
+                         "(bench/bare_listener.py): waking for the same frames and their "
+                         "unavoidable checks, at this load")
     ap.add_argument("--profile", metavar="FILE",
                     help="run robot 1 under cProfile (CPU time, READY to stop); stats to FILE")
     args = ap.parse_args()
