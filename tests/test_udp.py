@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import logging
 import socket
+import struct
 from typing import Any
 
 import pytest
 from pydantic import ValidationError
 
 from swarmd.config.robot import UdpTransportConfig
+from swarmd.transport import echo_filter
 from swarmd.transport.base import ChannelEvent, SendError, SendFailure, TransportError
 from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport, UdpUp
 
@@ -39,14 +42,73 @@ async def test_udp_two_transports_exchange_frames_on_loopback(udp_port: int) -> 
         a.send(b"\x11hello")
         await asyncio.wait_for(sb.got.wait(), 2.0)
         assert sb.frames == [b"\x11hello"]
-        # Loopback on: the sender hears itself too (the core drops it by sender id).
+        b.send(b"\x11from b")
         await asyncio.wait_for(sa.got.wait(), 2.0)
-        assert sa.frames == [b"\x11hello"]
-        assert a.counters["sent"] == 1 and b.counters["received"] == 1
+        await asyncio.sleep(0.05)  # give our own echo, were it delivered, time to show up
+        # Loopback on, but our own datagrams are dropped in the kernel (echo_filter.py).
+        assert sa.frames == [b"\x11from b"]
+        assert a.counters["sent"] == 1 and a.counters["received"] == 1
         assert UdpUp(a.group, port, "127.0.0.1") in sa.events
     finally:
         await a.close()
         await b.close()
+
+
+def _send_as_someone_else(group: str, port: int, frame: bytes) -> None:
+    """`frame` to the group from a socket of its own (another daemon with our id)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+        s.sendto(frame, (group, port))
+
+
+async def test_udp_own_frames_are_filtered_but_the_same_bytes_from_another_socket_arrive(
+        udp_port: int) -> None:
+    # Only our sending socket's address and port are filtered: a second daemon with our
+    # id (or a forger) repeating our very bytes is still heard, for the core's `own`
+    # drop and the runtime's `duplicate_id` to judge.
+    t = UdpTransport(port=udp_port)
+    sink = Sink()
+    await t.start(sink.frame, sink.event)
+    try:
+        assert t.echoes_filtered
+        for _ in range(3):
+            t.send(b"\x11mine")
+        _send_as_someone_else(t.group, udp_port, b"\x11mine")
+        await asyncio.wait_for(sink.got.wait(), 2.0)
+        await asyncio.sleep(0.05)
+        assert sink.frames == [b"\x11mine"] and t.counters["sent"] == 3
+    finally:
+        await t.close()
+
+
+async def test_udp_without_a_socket_filter_hears_its_echoes_and_says_so(
+        udp_port: int, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    # Where the kernel refuses SO_ATTACH_FILTER the echoes come back as they always
+    # did (the core drops them as `own`), and the log says why.
+    monkeypatch.setattr(echo_filter, "attach", lambda sock, program: False)
+    t = UdpTransport(port=udp_port)
+    sink = Sink()
+    with caplog.at_level(logging.INFO, logger="swarmd.transport.udp"):
+        await t.start(sink.frame, sink.event)
+    try:
+        assert not t.echoes_filtered
+        t.send(b"\x11echo")
+        await asyncio.wait_for(sink.got.wait(), 2.0)
+        assert sink.frames == [b"\x11echo"]
+        assert any("SO_ATTACH_FILTER" in r.getMessage() for r in caplog.records)
+    finally:
+        await t.close()
+
+
+def test_udp_echo_filter_program_is_the_source_check() -> None:
+    # Six instructions: port, then address, of the datagram's source; drop only both.
+    program = echo_filter.drop_source_program("127.0.0.1", 40000)
+    insns = [struct.unpack_from("=HBBI", program, i) for i in range(0, len(program), 8)]
+    assert insns == [(0x28, 0, 0, 0), (0x15, 0, 3, 40000),
+                     (0x20, 0, 0, (echo_filter.SKF_NET_OFF + 12) & 0xFFFFFFFF),
+                     (0x15, 0, 1, 0x7F000001), (0x06, 0, 0, 0), (0x06, 0, 0, 0xFFFFFFFF)]
 
 
 async def test_udp_other_group_on_same_port_is_not_heard(udp_port: int) -> None:
@@ -58,7 +120,7 @@ async def test_udp_other_group_on_same_port_is_not_heard(udp_port: int) -> None:
     await b.start(sb.frame, sb.event)
     try:
         a.send(b"other group")
-        b.send(b"marker")
+        _send_as_someone_else(b.group, port, b"marker")  # b no longer hears its own
         await asyncio.wait_for(sb.got.wait(), 2.0)
         await asyncio.sleep(0.05)  # give a wrongly delivered datagram time to show up
         assert sb.frames == [b"marker"]
@@ -72,15 +134,20 @@ async def test_udp_socket_options_default_to_loopback_ttl_1(udp_port: int) -> No
     sink = Sink()
     await t.start(sink.frame, sink.event)
     try:
-        sock = t._sock
-        assert sock is not None
-        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 1
-        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP) == 1
-        iface = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)
-        assert socket.inet_ntoa(iface) == "127.0.0.1"
+        sock, out = t._sock, t._out
+        assert sock is not None and out is not None
+        # Both sockets: whichever sends, nothing leaves this host (DESIGN section 4).
+        for s in (sock, out):
+            assert s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 1
+            assert s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP) == 1
+            iface = s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)
+            assert socket.inet_ntoa(iface) == "127.0.0.1"
         assert sock.getsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT) == 1
+        assert sock.getsockname() == (t.group, udp_port)
+        assert out.getsockname()[0] == "127.0.0.1" and out.getsockname()[1] != udp_port
     finally:
         await t.close()
+    assert t._sock is None and t._out is None
 
 
 async def test_udp_send_errors_are_counted_not_raised(udp_port: int) -> None:
@@ -123,13 +190,13 @@ async def test_udp_os_errors_are_counted_by_a_few_classes(udp_port: int) -> None
               OSError(errno.EHOSTUNREACH, "No route to host"),
               OSError(errno.ENOBUFS, "No buffer space available"),
               PermissionError(errno.EPERM, "Operation not permitted")]
-    sock = t._sock
-    t._sock = _Refusing(list(errors))  # type: ignore[assignment]
+    out = t._out
+    t._out = _Refusing(list(errors))  # type: ignore[assignment]
     try:
         for _ in errors:
             t.send(b"frame")
     finally:
-        t._sock = sock
+        t._out = out
         await t.close()
     assert t.send_reasons == {"send_error:unreachable": 2, "send_error:no_buffer": 1,
                               "send_error:permission": 1}

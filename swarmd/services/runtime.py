@@ -30,7 +30,8 @@ takes the daemon down). A node exception is a bug; the timer is re-armed regardl
 heartbeats continue.
 
 Duplicate robot id. The core drops every frame carrying our own id as `own`: on UDP
-multicast those are our loopback echoes. But a second daemon started with this robot's
+multicast those are our loopback echoes, where the transport cannot drop them in the
+kernel first (swarmd/transport/udp.py). But a second daemon started with this robot's
 id (a copied robot file) is dropped the same way, silently, and two robots may then
 execute one function (DESIGN rule 2). The runtime remembers the digests of the last
 `SENT_MEMORY` frames it sent; an `own` frame that is not one of them is an impostor's:

@@ -1,14 +1,22 @@
 """UDP multicast transport: the channel for `sim`, tests and Wi-Fi swarms.
 
-One socket per daemon, bound to the group address so that it receives only this group's
-datagrams, with SO_REUSEADDR and SO_REUSEPORT so that many daemons on one host share the
-port (every one gets a copy of every multicast datagram). Sending goes to the group with
-IP_MULTICAST_IF, TTL and loopback taken from the config; the defaults (interface
-127.0.0.1, TTL 1, loopback on) keep every frame on this host (DESIGN section 4: nothing
-the project starts by default may send to another address).
+Two sockets per daemon. The receiving one is bound to the group address so that it
+receives only this group's datagrams, with SO_REUSEADDR and SO_REUSEPORT so that many
+daemons on one host share the port (every one gets a copy of every multicast datagram).
+The sending one is bound to the interface's address on a port of its own and sends to
+the group with IP_MULTICAST_IF, TTL and loopback taken from the config; the defaults
+(interface 127.0.0.1, TTL 1, loopback on) keep every frame on this host (DESIGN section
+4: nothing the project starts by default may send to another address). The receiving
+socket carries the same options, so nothing it could send would leave the host either.
 
-The transport never interprets frames; a daemon hears its own frames back (loopback) and
-the core drops them by sender id.
+With loopback on, the kernel hands every frame we send back to our receiving socket.
+Sent from a socket of its own, our frames carry its address and port as their source, and
+a filter on the receiving socket drops exactly those in the kernel (`echo_filter.py`,
+Linux), so our own heartbeats no longer wake the daemon. Where no filter can be attached
+(another platform, an interface of 0.0.0.0: no single source address) the echoes come
+back as before and the core drops them as `own`. A frame in our name from anyone else
+(another daemon with our id) is never filtered: the core and the runtime judge it.
+The transport never interprets frames.
 """
 
 from __future__ import annotations
@@ -20,6 +28,7 @@ import socket
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from swarmd.transport import echo_filter
 from swarmd.transport.addresses import (
     DEFAULT_GROUP,
     DEFAULT_INTERFACE,
@@ -104,6 +113,11 @@ class UdpTransport:
         self.counters: dict[str, int] = {"sent": 0, "received": 0, "send_errors": 0,
                                          "receive_errors": 0}
         self._sock: socket.socket | None = None
+        """The receiving socket, on the group."""
+        self._out: socket.socket | None = None
+        """The sending socket, on the interface's address and a port of its own."""
+        self.echoes_filtered = False
+        """Our own frames are dropped in the kernel (module docstring)."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
         self.send_reasons: dict[str, int] = {}
@@ -122,6 +136,7 @@ class UdpTransport:
         return MAX_PAYLOAD
 
     def _socket(self) -> socket.socket:
+        """The receiving socket: bound to the group, joined on the interface."""
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -132,17 +147,53 @@ class UdpTransport:
             iface = socket.inet_aton(self.interface)
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
                             socket.inet_aton(self.group) + iface)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, iface)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, self.ttl)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, int(self.loopback))
-            sock.setblocking(False)
+            self._multicast_options(sock)
         except OSError as exc:
             sock.close()
-            raise TransportError(
-                f"cannot open udp multicast {self.group}:{self.port} on interface "
-                f"{self.interface}: {exc}{_HINTS.get(exc.errno or 0, '')}"
-            ) from exc
+            raise self._open_error(exc) from exc
         return sock
+
+    def _sender(self) -> socket.socket:
+        """The sending socket: its own port on the interface's address, so that its
+        datagrams' source is ours alone (module docstring). It reads nothing: a filter
+        drops whatever reaches its port."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+        try:
+            sock.bind((self.interface, 0))
+            self._multicast_options(sock)
+        except OSError as exc:
+            sock.close()
+            raise self._open_error(exc) from exc
+        echo_filter.attach(sock, echo_filter.DROP_ALL)
+        return sock
+
+    def _multicast_options(self, sock: socket.socket) -> None:
+        """Where and how far a datagram sent on `sock` goes: the config's interface, TTL
+        and loopback (the defaults keep it on this host)."""
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                        socket.inet_aton(self.interface))
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, self.ttl)
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, int(self.loopback))
+        sock.setblocking(False)
+
+    def _open_error(self, exc: OSError) -> TransportError:
+        return TransportError(
+            f"cannot open udp multicast {self.group}:{self.port} on interface "
+            f"{self.interface}: {exc}{_HINTS.get(exc.errno or 0, '')}")
+
+    def _filter_echoes(self, sock: socket.socket, out: socket.socket) -> bool:
+        """Drop our own datagrams on `sock` in the kernel (module docstring); False, and
+        a log line saying why, where they come back to the core instead."""
+        address, port = out.getsockname()
+        if address == "0.0.0.0":
+            why = "interface 0.0.0.0 gives our frames no single source address"
+        elif echo_filter.attach(sock, echo_filter.drop_source_program(address, port)):
+            return True
+        else:
+            why = "this system refuses a socket filter (SO_ATTACH_FILTER)"
+        log.info("udp: our own frames come back through the multicast loopback and are "
+                 f"dropped by the core: {why}", extra={"source": f"{address}:{port}"})
+        return False
 
     async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
         """Open the socket, join the group, deliver datagrams to `on_frame`."""
@@ -150,6 +201,13 @@ class UdpTransport:
         self._events.callback = on_event
         self._loop = asyncio.get_running_loop()
         self._sock = self._socket()
+        try:
+            self._out = self._sender()
+        except TransportError:
+            self._sock.close()
+            self._sock = None
+            raise
+        self.echoes_filtered = self._filter_echoes(self._sock, self._out)
         # A plain reader rather than asyncio's datagram transport: that one allocates a
         # 256 KiB buffer per datagram, which dominates an idle daemon's CPU time
         # (bench/bench_daemon.py); our frames are tens of bytes.
@@ -174,7 +232,8 @@ class UdpTransport:
 
     def send(self, frame: bytes) -> None:
         """Broadcast one frame to the group; errors are counted and reported, never raised."""
-        if self._sock is None:
+        out = self._out
+        if out is None:
             self._fail_send(SendFailure.NOT_OPEN, "transport not open")
             return
         if len(frame) > MAX_PAYLOAD:
@@ -182,7 +241,7 @@ class UdpTransport:
                             limit=MAX_PAYLOAD)
             return
         try:
-            self._sock.sendto(frame, (self.group, self.port))
+            out.sendto(frame, (self.group, self.port))
         except BlockingIOError:
             # Socket buffer full: drop rather than queue. A heartbeat is only worth
             # sending now; the next one follows within a period.
@@ -205,9 +264,12 @@ class UdpTransport:
         self._events.emit(ChannelError("udp", str(exc), where))
 
     async def close(self) -> None:
-        """Leave the group and close the socket."""
+        """Leave the group and close both sockets."""
         if self._sock is not None:
             if self._loop is not None:
                 self._loop.remove_reader(self._sock.fileno())
             self._sock.close()
             self._sock = None
+        if self._out is not None:
+            self._out.close()
+            self._out = None
