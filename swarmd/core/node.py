@@ -441,9 +441,15 @@ class Node(Restart):
     def _deadline(self) -> float | None:
         if not self._started:
             return self._start_time
-        candidates = [w.deadline for w in self._watches.values()]
-        if self._heartbeating():
-            candidates.append(self._beat.next)
+        # Worked out at the end of every entry point (`_drain`), so once per frame heard:
+        # the common case (heartbeats and watchdogs only) is a plain loop, no list built.
+        best = self._beat.next if self._heartbeating() else None
+        for w in self._watches.values():
+            if best is None or w.deadline < best:
+                best = w.deadline
+        if self._claim is None and self._rejoin is None and not isinstance(self._state, Fenced):
+            return best
+        candidates = [] if best is None else [best]
         if self._claim is not None:
             candidates.append(min(self._claim.until, self._claim.resend))
         if isinstance(self._state, Fenced):

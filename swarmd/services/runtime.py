@@ -528,15 +528,18 @@ class Runtime:
 
     def _feed(self, data: bytes, now: float) -> None:
         """One frame to the node, its actions executed (the caller re-arms the timer)."""
+        # `get`, not `[]`: the drops are a Counter, whose `[]` of a reason never counted
+        # calls its Python `__missing__`, and `own` stays 0 where the transport drops our
+        # echoes in the kernel (udp.py): twice a frame for nothing.
         drops = self._drops
-        own = drops[DropReason.OWN]
+        own = drops.get(DropReason.OWN, 0)
         try:
             actions = self._node.receive(data, now)
         except Exception:
             self._counters["node_errors"] += 1
             log.exception("core node raised on a frame (a bug); frame dropped")
             return
-        if drops[DropReason.OWN] != own and hash(bytes(data)) not in self._sent_digests:
+        if drops.get(DropReason.OWN, 0) != own and hash(bytes(data)) not in self._sent_digests:
             self._duplicate_id()
         if actions:
             self._execute(actions)
