@@ -9,6 +9,9 @@ With `--as ROBOT` it also does the work of that robot that no change to the daem
 code removes without changing the frames on the wire (DESIGN section 2, "Who may say
 what"), for the frames that robot checks at all (its neighbourhood, `SwarmPlan.relevant`:
 the others it drops before any check):
+- it is not woken by the heartbeats that robot does not hear: the daemon's own socket
+  filter drops them in the kernel (`swarmd/transport/socket_filter.py`,
+  `SwarmPlan.unheard`), so the floor's socket carries the same one;
 - it sends a heartbeat-sized frame every period of that robot (active or standby), to a
   port nobody listens on, so the swarm hears nothing more;
 - `--auth per-robot`: Ed25519 verification of every anchor it hears (a heartbeat with its
@@ -48,6 +51,8 @@ from swarmd.base import eventloop, identity
 from swarmd.base.keys import load_key
 from swarmd.config.swarm_rules import load_swarm
 from swarmd.core import chain, wire
+from swarmd.core.plan import Unheard
+from swarmd.transport import socket_filter
 
 READ_BATCH = 32
 PERIOD = 0.1
@@ -64,6 +69,8 @@ class Work:
     period: float = PERIOD
     hear: frozenset[int] = frozenset()
     """Senders whose frames are checked (the robot's neighbourhood)."""
+    unheard: Unheard | None = None
+    """The heartbeats dropped in the kernel, as the daemon's socket drops them."""
     check: Callable[[int, bytes], None] | None = None
     sign: Callable[[bytes], bytes] | None = None
     anchor_every: float = float("inf")
@@ -138,8 +145,9 @@ def work_of(args: argparse.Namespace) -> Work:
     holders = {plan.initial_holder(f) for f in map(plan.function_at, near.slots) if f}
     hear = frozenset(r for r in holders | near.standbys if r and r != args.robot)
     standby = plan.robots[args.robot].function is None
-    work = Work(robot=args.robot, period=params.standby_heartbeat_interval if standby
-                else params.heartbeat_interval, hear=hear, send=True)
+    period = params.standby_heartbeat_interval if standby else params.heartbeat_interval
+    work = Work(robot=args.robot, period=period, hear=hear, unheard=plan.unheard(args.robot),
+                send=True)
     if args.auth == "per-robot":
         work.check = per_robot_check(args.keys, hear, work.links, work.counts)
         key = Ed25519PrivateKey.from_private_bytes(
@@ -155,6 +163,9 @@ def work_of(args: argparse.Namespace) -> Work:
 async def listen(group: str, port: int, work: Work) -> None:
     loop = asyncio.get_running_loop()
     sock = member(group, port)
+    made = socket_filter.program(None, work.unheard)
+    if made is not None and not socket_filter.attach(sock, made.code):
+        print("floor: no socket filter here; it wakes for every heartbeat", file=sys.stderr)
     out, out_port = sender_socket()
     frames: list[bytes] = []
     hear, check, counts = work.hear, work.check, work.counts

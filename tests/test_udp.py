@@ -6,14 +6,13 @@ import asyncio
 import errno
 import logging
 import socket
-import struct
 from typing import Any
 
 import pytest
 from pydantic import ValidationError
 
 from swarmd.config.robot import UdpTransportConfig
-from swarmd.transport import echo_filter
+from swarmd.transport import socket_filter
 from swarmd.transport.base import ChannelEvent, SendError, SendFailure, TransportError
 from swarmd.transport.udp import MAX_PAYLOAD, UdpTransport, UdpUp
 
@@ -45,7 +44,7 @@ async def test_udp_two_transports_exchange_frames_on_loopback(udp_port: int) -> 
         b.send(b"\x11from b")
         await asyncio.wait_for(sa.got.wait(), 2.0)
         await asyncio.sleep(0.05)  # give our own echo, were it delivered, time to show up
-        # Loopback on, but our own datagrams are dropped in the kernel (echo_filter.py).
+        # Loopback on, but our own datagrams are dropped in the kernel (socket_filter.py).
         assert sa.frames == [b"\x11from b"]
         assert a.counters["sent"] == 1 and a.counters["received"] == 1
         assert UdpUp(a.group, port, "127.0.0.1") in sa.events
@@ -87,7 +86,7 @@ async def test_udp_without_a_socket_filter_hears_its_echoes_and_says_so(
         caplog: pytest.LogCaptureFixture) -> None:
     # Where the kernel refuses SO_ATTACH_FILTER the echoes come back as they always
     # did (the core drops them as `own`), and the log says why.
-    monkeypatch.setattr(echo_filter, "attach", lambda sock, program: False)
+    monkeypatch.setattr(socket_filter, "attach", lambda sock, code: False)
     t = UdpTransport(port=udp_port)
     sink = Sink()
     with caplog.at_level(logging.INFO, logger="swarmd.transport.udp"):
@@ -100,33 +99,6 @@ async def test_udp_without_a_socket_filter_hears_its_echoes_and_says_so(
         assert any("SO_ATTACH_FILTER" in r.getMessage() for r in caplog.records)
     finally:
         await t.close()
-
-
-def test_udp_echo_filter_program_is_the_source_check() -> None:
-    # Six instructions: port, then address, of the datagram's source; drop only both.
-    program = echo_filter.drop_source_program("127.0.0.1", 40000)
-    insns = [struct.unpack_from("=HBBI", program, i) for i in range(0, len(program), 8)]
-    assert insns == [(0x28, 0, 0, 0), (0x15, 0, 3, 40000),
-                     (0x20, 0, 0, (echo_filter.SKF_NET_OFF + 12) & 0xFFFFFFFF),
-                     (0x15, 0, 1, 0x7F000001), (0x06, 0, 0, 0), (0x06, 0, 0, 0xFFFFFFFF)]
-
-
-async def test_udp_other_group_on_same_port_is_not_heard(udp_port: int) -> None:
-    port = udp_port
-    a = UdpTransport(port=port, group="239.255.77.8")
-    b = UdpTransport(port=port)
-    sa, sb = Sink(), Sink()
-    await a.start(sa.frame, sa.event)
-    await b.start(sb.frame, sb.event)
-    try:
-        a.send(b"other group")
-        _send_as_someone_else(b.group, port, b"marker")  # b no longer hears its own
-        await asyncio.wait_for(sb.got.wait(), 2.0)
-        await asyncio.sleep(0.05)  # give a wrongly delivered datagram time to show up
-        assert sb.frames == [b"marker"]
-    finally:
-        await a.close()
-        await b.close()
 
 
 async def test_udp_socket_options_default_to_loopback_ttl_1(udp_port: int) -> None:

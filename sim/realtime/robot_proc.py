@@ -77,6 +77,7 @@ from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.base import RobotLink
 from swarmd.link.none import NoneLink
 from swarmd.services.runtime import Runtime
+from swarmd.transport.udp import UdpTransport
 
 _PR_SET_PDEATHSIG = 1
 PROBE_PERIOD = 0.1
@@ -467,6 +468,10 @@ class _Robot:
         try:
             return await run_daemon(
                 self.cfg,
+                # The insider's radio hears every frame on the channel, its own and those
+                # of slots it does not hear (`Forger.hear`): no socket filter.
+                transport=UdpTransport.from_config(self.cfg.transport, kernel_filter=False)
+                if self.cfg.transport.kind == "udp" else None,
                 link=self.link,
                 receive_filter=self._hear,
                 event_sink=self._sink,

@@ -39,6 +39,20 @@ class Relevant:
 
 
 @dataclass(frozen=True, slots=True)
+class Unheard:
+    """The heartbeats one robot drops unread (`Node._irrelevant`), field by field of
+    the wire header, for a driver that drops them before they reach the node (the udp
+    transport's socket filter): of swarm `swarm_id`, from one of `senders` (every robot
+    of the plan but this one), about a slot of `slots`, or without a slot (a standby's)
+    from one of `standbys`."""
+
+    swarm_id: int
+    senders: frozenset[int]
+    slots: frozenset[int]
+    standbys: frozenset[int]
+
+
+@dataclass(frozen=True, slots=True)
 class RobotPlan:
     robot_id: int
     function: str | None
@@ -167,6 +181,15 @@ class SwarmPlan:
             near.update(self._watchers[c])
         standbys = {r for f in near for r in self._covers[f]}
         return Relevant(frozenset(self._index[f] for f in near), frozenset(standbys))
+
+    def unheard(self, robot_id: int) -> Unheard:
+        """The heartbeats `robot_id` never acts on, whatever role it has: the plan's
+        slots outside `relevant`, and the standby heartbeats of robots outside its
+        `standbys`, from any robot of the plan but itself (`Node._irrelevant`'s rule)."""
+        near = self.relevant(robot_id)
+        others = frozenset(self.robots) - {robot_id}
+        every_slot = frozenset(range(1, len(self.functions) + 1))
+        return Unheard(self.swarm_id, others, every_slot - near.slots, others - near.standbys)
 
     def standbys(self) -> tuple[int, ...]:
         return tuple(sorted(r for r, p in self.robots.items() if p.function is None))

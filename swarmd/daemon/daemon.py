@@ -39,6 +39,7 @@ from swarmd.config import ConfigError, RobotConfig, load_robot
 from swarmd.core.auth import Identity
 from swarmd.core.events import NAME_KEY, Alert, Event, Leave, LeaveCause
 from swarmd.core.node import Node
+from swarmd.core.plan import Unheard
 from swarmd.core.roles import Role
 from swarmd.core.wire import seq_seed
 from swarmd.daemon.waiting import Waiting, describe_channel, report_waiting
@@ -74,12 +75,14 @@ RecordSink = Callable[[dict[str, Any]], None]
 section 3): the simulator's and the tests' copy of the event log."""
 
 
-def make_transport(cfg: Any) -> Transport:
+def make_transport(cfg: Any, *, unheard: Unheard | None = None) -> Transport:
     """The transport the robot file asks for. Radios live in their own modules, loaded
-    only when configured (digi-xbee and pyserial are heavy imports)."""
+    only when configured (digi-xbee and pyserial are heavy imports). `unheard`: the
+    heartbeats the robot's core drops unread, which the udp transport can drop in the
+    kernel instead (swarmd/transport/udp.py)."""
     kind = getattr(cfg, "kind", "udp")
     if kind == "udp":
-        return UdpTransport.from_config(cfg)
+        return UdpTransport.from_config(cfg, unheard=unheard)
     modules = {"serial": ("swarmd.transport.serial", "SerialTransport"),
                "xbee": ("swarmd.transport.xbee", "XBeeTransport")}
     if kind not in modules:
@@ -328,7 +331,8 @@ class Daemon:
         except OSError as exc:  # StateWriteError names the file
             raise StartupError(f"state_dir {cfg.state_dir}: {exc}") from exc
         self._open_outputs(cfg)
-        transport = self._injected_transport or make_transport(cfg.transport)
+        transport = self._injected_transport or make_transport(
+            cfg.transport, unheard=node.plan.unheard(cfg.robot))
         link = self._injected_link or make_link(cfg.link)
         # A restored holder keeps `held` on disk until its rejoin hold is over.
         holding = restored is not None and restored.held is not None

@@ -11,12 +11,15 @@ socket carries the same options, so nothing it could send would leave the host e
 
 With loopback on, the kernel hands every frame we send back to our receiving socket.
 Sent from a socket of its own, our frames carry its address and port as their source, and
-a filter on the receiving socket drops exactly those in the kernel (`echo_filter.py`,
-Linux), so our own heartbeats no longer wake the daemon. Where no filter can be attached
-(another platform, an interface of 0.0.0.0: no single source address) the echoes come
-back as before and the core drops them as `own`. A frame in our name from anyone else
-(another daemon with our id) is never filtered: the core and the runtime judge it.
-The transport never interprets frames.
+a filter on the receiving socket drops exactly those in the kernel (`socket_filter.py`,
+Linux), so our own heartbeats no longer wake the daemon. A frame in our name from anyone
+else (another daemon with our id) is never filtered: the core and the runtime judge it.
+Given `unheard` (`SwarmPlan.unheard`), the same filter drops the heartbeats about slots
+this robot does not hear, which the core would drop first thing (DESIGN section 2, "What
+a robot hears"): the traffic of the rest of a swarm no longer wakes it either. Where no
+filter can be attached (another platform; for our echoes, an interface of 0.0.0.0, which
+gives our frames no single source address) those frames reach the core as before.
+The transport reads only those header fields, for that filter; it never interprets frames.
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ import socket
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from swarmd.transport import echo_filter
+from swarmd.core.plan import Unheard
+from swarmd.transport import socket_filter
 from swarmd.transport.addresses import (
     DEFAULT_GROUP,
     DEFAULT_INTERFACE,
@@ -92,6 +96,8 @@ class UdpTransport:
         interface: str = DEFAULT_INTERFACE,
         ttl: int = DEFAULT_TTL,
         loopback: bool = True,
+        unheard: Unheard | None = None,
+        kernel_filter: bool = True,
     ) -> None:
         try:
             multicast_group(group)
@@ -110,6 +116,10 @@ class UdpTransport:
         self.interface = interface
         self.ttl = ttl
         self.loopback = loopback
+        self.unheard = unheard
+        self.kernel_filter = kernel_filter
+        """False: no socket filter, every datagram on the group reaches `on_frame`, our
+        own too (a simulated insider's radio records all it hears: sim/realtime)."""
         self.counters: dict[str, int] = {"sent": 0, "received": 0, "send_errors": 0,
                                          "receive_errors": 0}
         self._sock: socket.socket | None = None
@@ -118,6 +128,8 @@ class UdpTransport:
         """The sending socket, on the interface's address and a port of its own."""
         self.echoes_filtered = False
         """Our own frames are dropped in the kernel (module docstring)."""
+        self.unheard_filtered = False
+        """The heartbeats of `unheard` are dropped in the kernel (module docstring)."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_frame: FrameCallback | None = None
         self.send_reasons: dict[str, int] = {}
@@ -126,10 +138,12 @@ class UdpTransport:
         self._events = ChannelEvents("udp", self.send_reasons, log)
 
     @classmethod
-    def from_config(cls, cfg: Any) -> UdpTransport:
-        """Build from the robot file's `transport: {kind: udp, ...}` model."""
+    def from_config(cls, cfg: Any, *, unheard: Unheard | None = None,
+                    kernel_filter: bool = True) -> UdpTransport:
+        """Build from the robot file's `transport: {kind: udp, ...}` model; `unheard`:
+        the heartbeats this robot's core drops unread (module docstring)."""
         return cls(group=cfg.group, port=cfg.port, interface=cfg.interface, ttl=cfg.ttl,
-                   loopback=cfg.loopback)
+                   loopback=cfg.loopback, unheard=unheard, kernel_filter=kernel_filter)
 
     @property
     def max_payload(self) -> int:
@@ -164,7 +178,7 @@ class UdpTransport:
         except OSError as exc:
             sock.close()
             raise self._open_error(exc) from exc
-        echo_filter.attach(sock, echo_filter.DROP_ALL)
+        socket_filter.attach(sock, socket_filter.DROP_ALL)
         return sock
 
     def _multicast_options(self, sock: socket.socket) -> None:
@@ -181,19 +195,23 @@ class UdpTransport:
             f"cannot open udp multicast {self.group}:{self.port} on interface "
             f"{self.interface}: {exc}{_HINTS.get(exc.errno or 0, '')}")
 
-    def _filter_echoes(self, sock: socket.socket, out: socket.socket) -> bool:
-        """Drop our own datagrams on `sock` in the kernel (module docstring); False, and
-        a log line saying why, where they come back to the core instead."""
+    def _filter(self, sock: socket.socket, out: socket.socket) -> None:
+        """Drop our own datagrams and the `unheard` heartbeats on `sock` in the kernel
+        (module docstring); where that cannot be, a log line says why."""
         address, port = out.getsockname()
-        if address == "0.0.0.0":
-            why = "interface 0.0.0.0 gives our frames no single source address"
-        elif echo_filter.attach(sock, echo_filter.drop_source_program(address, port)):
-            return True
-        else:
-            why = "this system refuses a socket filter (SO_ATTACH_FILTER)"
-        log.info("udp: our own frames come back through the multicast loopback and are "
-                 f"dropped by the core: {why}", extra={"source": f"{address}:{port}"})
-        return False
+        own = None if address == "0.0.0.0" else (address, port)
+        made = socket_filter.program(own, self.unheard)
+        attached = made is not None and socket_filter.attach(sock, made.code)
+        self.echoes_filtered = attached and own is not None
+        self.unheard_filtered = attached and made is not None and made.unheard
+        if not self.echoes_filtered:
+            why = ("interface 0.0.0.0 gives our frames no single source address"
+                   if own is None else "this system refuses a socket filter (SO_ATTACH_FILTER)")
+            log.info("udp: our own frames come back through the multicast loopback and are "
+                     f"dropped by the core: {why}", extra={"source": f"{address}:{port}"})
+        if self.unheard is not None and not self.unheard_filtered:
+            log.info("udp: the heartbeats of slots this robot does not hear reach the core, "
+                     "which drops them: no socket filter for them here")
 
     async def start(self, on_frame: FrameCallback, on_event: EventCallback) -> None:
         """Open the socket, join the group, deliver datagrams to `on_frame`."""
@@ -207,7 +225,8 @@ class UdpTransport:
             self._sock.close()
             self._sock = None
             raise
-        self.echoes_filtered = self._filter_echoes(self._sock, self._out)
+        if self.kernel_filter:
+            self._filter(self._sock, self._out)
         # A plain reader rather than asyncio's datagram transport: that one allocates a
         # 256 KiB buffer per datagram, which dominates an idle daemon's CPU time
         # (bench/bench_daemon.py); our frames are tens of bytes.
