@@ -346,14 +346,14 @@ def _print_comparison(args: argparse.Namespace,
 
 def _floor_vs_rev(rev: str, old: list[dict[str, Any]],
                   new: list[dict[str, Any]]) -> dict[str, float]:
-    """Each floor (the median of every run's, both trees': the floor is this tree's code
-    either way) over REV's own robot: at most 0.5, or halving REV's CPU is out of reach
-    without changing the frames on the wire."""
+    """Each floor of this tree (beside this tree's swarm: the frames it puts on the wire,
+    which REV's may not match) over REV's own robot: above 0.5, halving REV's CPU is out
+    of reach without changing those frames."""
     ratios: dict[str, float] = {}
     for floor_key, key, label in (("floor_cpu_percent", "cpu_exact_percent", "robot 1"),
                                   ("standby_floor_cpu_percent", "standby_cpu_exact_percent",
                                    "standby")):
-        floor_median = statistics.median(r[floor_key] for r in (*old, *new))
+        floor_median = statistics.median(r[floor_key] for r in new)
         rev_median = statistics.median(r[key] for r in old)
         ratio = round(floor_median / rev_median, 3) if rev_median else float("nan")
         verdict = ("the floor leaves room for half" if ratio <= 0.5

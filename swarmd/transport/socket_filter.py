@@ -10,7 +10,8 @@ drop it anyway before any check, so what a robot does is unchanged:
   receiving socket too. Only that address *and* port are dropped, which no other process
   can hold while we do: a frame in our name sent by anyone else (another daemon with our
   robot id, a forger) still arrives and is judged by the core (`own`, `duplicate_id`:
-  DESIGN section 2, "Sequence numbers"; docs/daemon.md).
+  DESIGN section 2, "Sequence numbers"; docs/daemon.md). A host that forges that very
+  source too loses its frame unseen, where the core would have dropped it as `own`.
 - heartbeats about what this robot does not hear (`SwarmPlan.unheard`; DESIGN section 2,
   "What a robot hears"): the frames `Node._irrelevant` drops first thing, before the tag, the
   signature, the replay filter or any state, judged by the same fields (swarm, type,
