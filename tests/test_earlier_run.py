@@ -33,6 +33,7 @@ from swarmd.config.auth import public_keys
 from swarmd.core import wire
 from swarmd.core.actions import Assign
 from swarmd.core.auth import Identity
+from swarmd.core.node import Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 from swarmd.core.roles import Health
@@ -227,6 +228,55 @@ def test_a_recorded_takeover_played_raw_at_a_fresh_start_moves_nothing(
     n.run_until(2.0 + 8 * params.t_max)
     moved_nothing(n)
     assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_recorded_hold_played_before_its_sender_is_heard_moves_nothing(
+        paper: Paper, auth: str) -> None:
+    """Run A's heartbeat of 6 holding f2 at epoch 1, played the moment run B starts,
+    before any robot has heard 6's own heartbeat (nothing to tell the recording by yet).
+    Before, with a shared key or none, it fenced live holder 2 at once and f2's epoch
+    moved 0 -> 2. Now a receiver within its start-up grace holds it (it would raise f2's
+    entry, from a sender it has not heard) until 6's own standby heartbeat, numbered
+    above it, makes it `outdated`. Per robot a heartbeat moves no entry without its
+    certificate: `uncertified`, as before."""
+    plan, params = paper
+    ids = fake_identities(plan.robots) if auth == "per-robot" else None
+    tape = run_a(swarm(paper, auth, RUN_A, ids))
+    n = swarm(paper, auth, RUN_B, ids)
+    play(n, tape["beat"])
+    n.run_until(params.startup_grace + 8 * params.t_max)
+    moved_nothing(n)
+    if auth != "per-robot":
+        assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_restarted_old_holder_learns_the_takeover_within_its_grace_and_never_resumes(
+        paper: Paper, auth: str) -> None:
+    """The cost of holding, bounded: 2 crashes, 6 takes f2 over at epoch 1, and 2
+    restarts on its state file (its hold of f2 at epoch 0). 6's heartbeats all raise
+    f2's entry at 2 and 6 has said nothing else there, so with a shared key or none 2
+    holds them until its start-up grace ends: its rejoin hold (shorter than the grace)
+    waits for them, so 2 never executes f2 again, and its view reaches (6, 1) within
+    the grace."""
+    plan, params = paper
+    n = swarm(paper, auth, RUN_B)
+    n.run_until(2.5)
+    snap = n.nodes[2].snapshot()
+    n.crash(2)
+    n.run_until(2.5 + params.claim_horizon + params.takeover_bound())
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    restart, before = n.now, len(n.outputs[2])
+    n.boot(2, seq_start=RUN_B + 10**6, restored=Restored(
+        known=dict(snap.known), held=("f2", 0), peer_seq=snap.peer_seq,
+        certificate=snap.certificate))
+    n.run_until(restart + params.startup_grace + params.heartbeat_interval)
+    assert n.nodes[2].snapshot().known["f2"] == (6, 1)
+    assert n.outputs[2][before:] == [] and n.named("fenced") == []
+    n.run_until(restart + params.startup_grace + 4 * params.t_max)
+    assert n.outputs[2][before:] == [] and views_of_f2(n) == {(6, 1)}
+    assert n.executing()[6] == "f2"
 
 
 @pytest.mark.parametrize("auth", MODES)
