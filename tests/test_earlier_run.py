@@ -260,7 +260,7 @@ def test_a_restarted_old_holder_learns_the_takeover_within_its_grace_and_never_r
     holds them until its start-up grace ends: its rejoin hold (shorter than the grace)
     waits for them, so 2 never executes f2 again, and its view reaches (6, 1) within
     the grace."""
-    plan, params = paper
+    params = paper[1]
     n = swarm(paper, auth, RUN_B)
     n.run_until(2.5)
     snap = n.nodes[2].snapshot()

@@ -216,6 +216,9 @@ def test_faulty_robot_leaves_and_goes_silent(paper_plan: SwarmPlan, udp_params: 
 def test_leave_heard_makes_the_covering_standby_claim_at_once(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 6)
+    # 2 heard first: within the start-up grace, a LEAVE of a sender not heard yet waits
+    # for its word (`held.py`).
+    node.receive(frame(paper_plan, 2, hb(paper_plan, "f2")), 0.2)
     leave = wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.SHUTDOWN))
     actions = node.receive(frame(paper_plan, 2, leave), 0.3)
     assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
@@ -237,6 +240,9 @@ def test_leave_from_a_non_holder_is_ignored(paper_plan: SwarmPlan, udp_params: P
 def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 2)
+    # 6 heard first (as a standby): within the start-up grace, a hold of a sender not
+    # heard yet waits for its word (`held.py`).
+    node.receive(frame(paper_plan, 6, hb(paper_plan, None, role=Role.STANDBY)), 0.04)
     actions = node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), 0.05)
     assert events(actions, ev.Fenced)[0].fields() == {"function": "f2", "epoch": 1}
     assert Release("f2") in actions
@@ -249,6 +255,7 @@ def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
 def test_older_epoch_does_not_fence_but_gets_an_answer(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 6)
+    node.receive(frame(paper_plan, 2, hb(paper_plan, "f2", epoch=0)), 0.05)
     node.receive(frame(paper_plan, 2, wire.Leave(2, 0, 0)), 0.1)
     node.tick(0.1 + udp_params.claim_hold)
     assert node.snapshot().function == "f2"

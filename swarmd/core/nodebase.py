@@ -27,6 +27,7 @@ from swarmd.core.errors import TransitionError
 from swarmd.core.events import Event
 from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
+from swarmd.core.held import HeldFrames
 from swarmd.core.params import Params
 from swarmd.core.plan import Relevant, SwarmPlan
 from swarmd.core.rejoin import Rejoin
@@ -79,6 +80,9 @@ class NodeBase:
     _words: LatestWords
     """What each peer last said of itself, to refuse its older word that contradicts it
     (`words.py`)."""
+    _held: HeldFrames
+    """Within the start-up grace, frames that would raise a view entry from senders not
+    heard yet, until they can be judged (`held.py`)."""
     _shown_newer: set[str]
     """Per robot: slots we hold of which a live robot's signed warning named us at a
     newer epoch than ours (it took a recorded takeover that our refute voids: our

@@ -79,6 +79,11 @@ class LatestWords:
         """Has `sender` said anything of itself here yet (an authenticated heartbeat)?"""
         return sender in self._heard
 
+    def seq(self, sender: int) -> int | None:
+        """The seq of `sender`'s word, if it said anything of itself that set it."""
+        last = self._last.get(sender)
+        return None if last is None else last.seq
+
     def above(self, sender: int, slot: int, epoch: int) -> bool:
         """Has `sender` heartbeat holding `slot` at an epoch above `epoch`?"""
         return self._top.get((sender, slot), -1) > epoch

@@ -1,0 +1,118 @@
+"""Frames held within a robot's start-up grace (`swarmd/core/held.py`; DESIGN section 2,
+"Every proof is bound to its run"): a frame that would raise a view entry, from a sender
+not heard yet, waits for that sender's word or for the grace's end. The store is bounded
+per sender and in total, and counts what it pushes out (`held_over`); a sender never
+heard within the grace has its frames taken as they would have been."""
+
+from __future__ import annotations
+
+import pytest
+
+from swarmd.core import wire
+from swarmd.core.held import HeldFrame, HeldFrames
+from swarmd.core.node import Node
+from swarmd.core.params import Params
+from swarmd.core.plan import SwarmPlan
+from swarmd.core.roles import Role
+
+Paper = tuple[SwarmPlan, Params]
+KEY = b"k" * 32
+
+
+def held(sender: int, seq: int, slot: int = 2) -> HeldFrame:
+    frame = wire.Frame(1, sender, seq, wire.Heartbeat(slot, 1, 1, 0))
+    return HeldFrame(sender, seq, slot, frame, b"")
+
+
+def test_a_sender_keeps_its_highest_numbered_frames() -> None:
+    """A flood of one sender's frames pushes out its lowest-numbered ones, counted: a
+    recording is numbered below its sender's live frames, so it pushes out itself."""
+    store = HeldFrames(per_sender=4, total=64)
+    pushed = sum(store.hold(held(6, seq)) for seq in [50, 10, 40, 30, 20, 60])
+    assert pushed == 2 and len(store) == 4
+    assert [h.seq for h in store.release_all()] == [50, 40, 30, 60]
+
+
+def test_the_total_is_bounded_whatever_the_senders() -> None:
+    """Past the total, the sender holding the most gives up its lowest-numbered frame."""
+    store = HeldFrames(per_sender=4, total=6)
+    pushed = sum(store.hold(held(s, seq)) for s in (5, 6) for seq in (3, 2, 1))
+    pushed += store.hold(held(4, 9))
+    assert pushed == 1 and len(store) == 6
+    assert sorted((h.sender, h.seq) for h in store.release_all()) == [
+        (4, 9), (5, 2), (5, 3), (6, 1), (6, 2), (6, 3)]
+
+
+def test_a_word_releases_only_what_is_numbered_below_it() -> None:
+    store = HeldFrames()
+    for h in (held(6, 10, slot=3), held(6, 30), held(5, 5)):
+        store.hold(h)
+    assert [h.seq for h in store.release(6, below=20)] == [10]
+    assert store.about(2) and not store.about(3) and len(store) == 2
+
+
+# ------------------------------------------------------------------ a node
+def node(paper: Paper, rid: int, auth: str) -> Node:
+    plan, params = paper
+    n = Node(rid, plan, params, 0.0, keys=(KEY,) if auth == "shared" else ())
+    n.tick(0.0)
+    return n
+
+
+def beat(paper: Paper, auth: str, sender: int, seq: int, f: str | None, epoch: int) -> bytes:
+    """`sender`'s heartbeat: holding f at `epoch`, or as a standby (f None)."""
+    plan = paper[0]
+    hb = wire.Heartbeat(plan.slot(f), epoch, int(Role.ACTIVE), 0) if f is not None \
+        else wire.Heartbeat(0, 0, int(Role.STANDBY), 0)
+    return wire.encode(wire.Frame(plan.swarm_id, sender, seq, hb),
+                       KEY if auth == "shared" else None)
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_a_flood_of_recorded_holds_is_bounded_and_outdated_by_the_live_word(
+        paper: Paper, auth: str) -> None:
+    """100 recorded heartbeats of 6 holding f2 at epoch 1, at holder 2's start: 8 held
+    (`PER_SENDER`), 92 pushed out and counted; 6's live standby heartbeat, numbered above
+    them, makes the 8 `outdated`. 2 keeps f2 at epoch 0 throughout."""
+    two = node(paper, 2, auth)
+    for i in range(100):
+        assert two.receive(beat(paper, auth, 6, 1000 + i, "f2", 1), 0.01 + i / 1000) == []
+    assert two.drops["held_over"] == 92 and two.snapshot().known["f2"] == (2, 0)
+    two.receive(beat(paper, auth, 6, 10**6, None, 0), 0.2)
+    assert two.drops["outdated"] == 8 and two.snapshot().known["f2"] == (2, 0)
+    assert two.snapshot().role == Role.ACTIVE
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_a_sender_never_heard_within_the_grace_is_taken_at_its_end(
+        paper: Paper, auth: str) -> None:
+    """6's heartbeat holding f2 at epoch 1, and nothing else of 6, within 2's start-up
+    grace: held, and taken when the grace ends (a deadline of its own), as it would have
+    been before: 2 is fenced then (rule 2), not at once."""
+    params = paper[1]
+    two = node(paper, 2, auth)
+    two.receive(beat(paper, auth, 6, 1000, "f2", 1), 0.1)
+    assert two.snapshot().role == Role.ACTIVE and two.snapshot().known["f2"] == (2, 0)
+    deadline = two.next_deadline()
+    assert deadline is not None and deadline <= params.startup_grace
+    t = 0.1
+    while (d := two.next_deadline()) is not None and d < params.startup_grace:
+        two.tick(d)
+        t = d
+    assert two.snapshot().role == Role.ACTIVE and t < params.startup_grace
+    two.tick(params.startup_grace)
+    assert two.snapshot().known["f2"] == (6, 1) and two.snapshot().role == Role.FENCED
+
+
+def test_per_robot_nothing_is_held(paper: Paper) -> None:
+    """Per robot a heartbeat moves no entry without its certificate: refused at once
+    (`uncertified`), never held."""
+    from harness import signed_beat
+
+    from sim.shared.fakeid import fake_identities
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    two = Node(2, plan, params, 0.0, identity=ids[2])
+    two.tick(0.0)
+    two.receive(signed_beat(ids[6], plan.swarm_id, 6, 1000, plan.slot("f2"), 1), 0.1)
+    assert two.drops["uncertified"] == 1 and two.drops["held_over"] == 0
