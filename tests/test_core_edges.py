@@ -52,6 +52,16 @@ def quorum_on(node: Driven, plan: SwarmPlan, suspect: int, f: str, epoch: int,
     return out
 
 
+def hear_witnesses(node: Driven, plan: SwarmPlan, f: str, t: float) -> None:
+    """f's witnesses heartbeat their own slots: said something of themselves here, their
+    warnings naming a newer entry than ours are not held within the start-up grace
+    (`held.py`)."""
+    for g in plan.watched_by(f):
+        w = plan.initial_holder(g)
+        assert w is not None
+        node.receive(frame(plan, w, hb(plan, g)), t)
+
+
 # ---------------------------------------------------------------------- construction
 def test_a_robot_outside_the_plan_is_misuse(paper_plan: SwarmPlan,
                                             udp_params: Params) -> None:
@@ -165,15 +175,18 @@ def test_a_heartbeat_at_the_claimed_epoch_supersedes_the_claim(
         shared_plan: SwarmPlan, udp_params: Params, epoch: int) -> None:
     # 5 and 6 both claimed f2 after 2 died; 6 lost 5's CLAIM but hears 5's first
     # heartbeat as the new holder: 6 backs off instead of executing f2 too (rule 2).
+    # Within 6's start-up grace 5 has said nothing else here, so that heartbeat is held
+    # (`held.py`), and 6's takeover waits for it: 6 backs off when the grace ends.
     node, _ = started(shared_plan, udp_params, 6)
     quorum_on(node, shared_plan, 2, "f2", 0, 0.1)
     assert node.snapshot().role is Role.CLAIMING
     out = node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=epoch)), 0.15)
+    out += node.run_to(udp_params.startup_grace)
     assert [e.fields() for e in events(out, ev.Backoff)] == [
         {"subject": 2, "function": "f2", "winner": 5}]
     assert node.snapshot().role is Role.STANDBY
     assert node.snapshot().known["f2"] == (5, epoch)
-    out = node.run_to(3.0)
+    out += node.run_to(3.0)
     assert not assigns(out) and not events(out, ev.Takeover)
 
 
@@ -183,6 +196,7 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
     # (5, epoch 1). Meanwhile 2, the holder before 5, comes back from a long pause and
     # heartbeats f2 at epoch 0. That is not the suspect answering: the claim goes on.
     node, _ = started(shared_plan, udp_params, 6)
+    hear_witnesses(node, shared_plan, "f2", 0.05)
     out = quorum_on(node, shared_plan, 5, "f2", 1, 0.1)
     assert events(out, ev.Claim)[0].fields() == {"subject": 5, "function": "f2", "epoch": 2}
     out = node.receive(frame(shared_plan, 2, hb(shared_plan, "f2", epoch=0)), 0.15)
@@ -197,6 +211,9 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
 def test_warnings_about_an_older_holder_are_not_counted(shared_plan: SwarmPlan,
                                                         udp_params: Params) -> None:
     node, _ = started(shared_plan, udp_params, 6)
+    # 5 heard first (as a standby): within the start-up grace, a hold of a sender not
+    # heard yet waits for its word (`held.py`).
+    node.receive(frame(shared_plan, 5, hb(shared_plan, None, role=Role.STANDBY)), 0.05)
     node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), 0.1)  # 5 took f2
     slot = shared_plan.slot("f2")
     # delayed warnings from before the takeover: about an entry below the slot's (the
@@ -218,6 +235,7 @@ def test_the_epoch_saturates_instead_of_wrapping(paper_plan: SwarmPlan,
     # standby 6 cannot outrank holder 2 there, so it backs off instead of taking over a
     # slot whose every view would fence it at once.
     node, _ = started(paper_plan, udp_params, 6)
+    hear_witnesses(node, paper_plan, "f2", 0.05)
     out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, 0.1)
     assert events(out, ev.Claim)[0].fields()["epoch"] == 0xFFFF
     assert sent(out) == [wire.Claim(2, paper_plan.slot("f2"), 0xFFFF)]

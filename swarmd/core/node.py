@@ -467,7 +467,8 @@ class Node(Restart):
         if self._heartbeating():
             candidates.append(self._beat.next)
         if self._claim is not None:
-            candidates.append(min(self._claim.until, self._claim.resend))
+            c = self._claim
+            candidates.append(min(self._after_held(c.function, c.until), c.resend))
         if isinstance(self._state, Fenced):
             candidates.append(self._state.until)
         if self._rejoin is not None:

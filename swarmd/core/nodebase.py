@@ -204,6 +204,15 @@ class NodeBase:
             return f is None or self._ev.refuted_up_to(f, sender, msg.epoch, sender) < seq
         return True
 
+    def _after_held(self, f: str, t: float) -> float:
+        """`t`, or the end of our start-up grace while frames about f are held until then
+        (`held.py`): an act on f's view — a takeover, a rejoin's resume — waits for them,
+        since they may show f held by another robot (rule 2; DESIGN, "Every proof is
+        bound to its run")."""
+        if self._held and self._held.about(self._plan.slot(f)):
+            return max(t, self._start_time + self._params.startup_grace)
+        return t
+
     def _clear_votes(self) -> None:
         for v in self._votes.values():
             v.clear()

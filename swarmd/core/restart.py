@@ -130,14 +130,12 @@ class Restart(Hearing):
 
     def _rejoin_until(self) -> float:
         """When our rejoin hold ends: not before the frames held about its slot are
-        judged (the grace's end), so that a takeover made while we were down, which they
+        judged (`_after_held`), so that a takeover made while we were down, which they
         may show, is known before we resume (rule 2 across a reboot). `rejoin_hold`
         (0.7 s at `udp()`) is shorter than the grace (2 s)."""
         rejoin = self._rejoin
         assert rejoin is not None
-        if self._held.about(self._plan.slot(rejoin.function)):
-            return max(rejoin.until, self._start_time + self._params.startup_grace)
-        return rejoin.until
+        return self._after_held(rejoin.function, rejoin.until)
 
     # ------------------------------------------------------------------ rejoin (rule 2)
     def _finish_rejoin(self, now: float) -> None:
