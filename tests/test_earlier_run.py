@@ -204,6 +204,74 @@ def test_per_robot_a_receiver_that_missed_every_anchor_of_the_holder_converges(
     assert views_of_f2(n) == {(2, 2)}
 
 
+def crashed_run_a(n: Net) -> list[bytes]:
+    """Run A where 2 crashes at 3 s: 1 and 3 warn, 6 takes f2 over on their warnings.
+    What an outsider recorded: 6's first CLAIM and the CERTs it sent before it (the
+    warnings that back it)."""
+    n.run_until(3.0)
+    n.crash(2)
+    n.run_until(6.0)
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    sent = [raw for _, s, raw in n.frames if s == 6]
+    claim = next(i for i, raw in enumerate(sent)
+                 if (head := wire.peek(raw)) is not None and head.mtype == wire.MsgType.CLAIM)
+    certs = [raw for raw in sent[:claim]
+             if (head := wire.peek(raw)) is not None and head.mtype == wire.MsgType.CERT]
+    assert len(certs) >= 2
+    return [*certs, sent[claim]]
+
+
+def test_per_robot_a_recorded_takeover_backed_by_warnings_moves_nothing(
+        paper: Paper) -> None:
+    """Run A's takeover backed by warnings (CERTs wrapping 1's and 3's warnings about 2,
+    then 6's CLAIM), at run B's start. A warning is no word of its signer about itself,
+    but the CLAIM is its claimant's: 6 heartbeats as a standby above it, so it backs no
+    takeover (`outdated`). Before, every receiver merged (6, 1) before 2's refutes, and
+    f2's epoch moved 0 -> 2 (2's reassertion)."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    tape = crashed_run_a(swarm(paper, "per-robot", RUN_A, ids))
+    n = swarm(paper, "per-robot", RUN_B, ids)
+    n.run_until(2.0)
+    play(n, *tape)
+    n.run_until(2.0 + 8 * params.t_max)
+    moved_nothing(n)
+    assert outdated(n) > 0
+
+
+def test_per_robot_a_certificate_outlives_its_signers_restarts(paper: Paper) -> None:
+    """A certificate is not voided by its signers' restarts: 2 crashes and 6 takes f2
+    over on 1's and 3's warnings; then 1, 3 and 6 restart on their state files (6 is a
+    standby, rejoining, for its rejoin hold) and 5 starts afresh with no state file.
+    Its certificate relayed to 5 while 6 still heartbeats as a standby is refused (6's
+    claim is below that word), but 6 resumes f2 at epoch 1, its claim counts again
+    above its hold's heartbeats, and every view reaches (6, 1)."""
+    plan, params = paper
+    n = swarm(paper, "per-robot", RUN_B, fake_identities(plan.robots))
+    n.run_until(2.5)
+    n.crash(2)
+    n.run_until(2.5 + params.claim_horizon + params.takeover_bound())
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    proof = [cert(plan, raw) for _, s, raw in n.frames if s == 6 and (
+        head := wire.peek(raw)) is not None and head.mtype == wire.MsgType.CLAIM][:1]
+    snaps = {r: n.nodes[r].snapshot() for r in (1, 3, 6)}
+    for r in (1, 3, 5, 6):
+        n.crash(r)
+    for r, snap in snaps.items():
+        n.boot(r, seq_start=RUN_B + 10**6 * r, restored=Restored(
+            known=dict(snap.known), held=(snap.function, snap.epoch) if snap.function else None,
+            peer_seq=snap.peer_seq, certificate=snap.certificate))
+    restart = n.now
+    n.boot(5, seq_start=RUN_B + 10**7)
+    n.run_until(restart + params.rejoin_hold - params.heartbeat_interval)
+    assert n.nodes[6].snapshot().function is None and proof
+    n.inject(5, n.nodes[5].receive(proof[0], n.now))
+    assert n.nodes[5].drops["outdated"] == 1
+    n.run_until(restart + params.startup_grace + 16 * params.t_max)
+    assert n.executing().get(6) == "f2" and n.named("fenced") == []
+    assert views_of_f2(n) == {(6, 1)}
+
+
 def test_per_robot_a_recorded_anchor_moves_no_view(paper: Paper) -> None:
     """Run A's anchor of 6 as f2's holder at epoch 1, played raw: 6's later anchor says
     it is a standby, so it is `outdated` (it was `uncertified` before: a heartbeat never

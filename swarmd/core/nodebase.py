@@ -183,7 +183,8 @@ class NodeBase:
         frame). Per robot, its `LEAVE` that it refuted itself, once it heartbeats a
         reassertion above it, is kept as the void backer it is (`evidence.py`): that
         reassertion rests on the certificate the `LEAVE` backs, and every robot must
-        verify it alike."""
+        verify it alike; so is a `CLAIM` its claimant gave up, below the reassertion of
+        the holder it named."""
         if isinstance(msg, wire.Leave) and self._identity is not None \
                 and not self._words.knows(sender) \
                 and now - self._start_time < self._params.startup_grace:
@@ -202,6 +203,13 @@ class NodeBase:
             # recording was taken, and this LEAVE is the void backer of that reassertion.
             f = self._plan.function_at(msg.function)
             return f is None or self._ev.refuted_up_to(f, sender, msg.epoch, sender) < seq
+        if isinstance(msg, wire.Claim) and self._identity is not None:
+            # The holder it named heartbeats a reassertion above it, or is us and a live
+            # robot's signed warning showed us that it took the claim (`_shown_newer`):
+            # the claim is the void backer of that reassertion, kept to verify it.
+            return not (self._words.above(msg.failed, msg.function, msg.epoch)
+                        or (msg.failed == self._robot_id
+                            and self._plan.function_at(msg.function) in self._shown_newer))
         return True
 
     def _after_held(self, f: str, t: float) -> float:
