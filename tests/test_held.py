@@ -19,9 +19,10 @@ Paper = tuple[SwarmPlan, Params]
 KEY = b"k" * 32
 
 
-def held(sender: int, seq: int, slot: int = 2) -> HeldFrame:
-    frame = wire.Frame(1, sender, seq, wire.Heartbeat(slot, 1, 1, 0))
-    return HeldFrame(sender, seq, slot, frame, b"")
+def held(sender: int, seq: int, slot: int = 2, epoch: int | None = None) -> HeldFrame:
+    """`sender`'s heartbeat holding `slot`, a distinct frame per seq unless `epoch`."""
+    hb = wire.Heartbeat(slot, seq if epoch is None else epoch, 1, 0)
+    return HeldFrame(sender, seq, slot, wire.Frame(1, sender, seq, hb), b"")
 
 
 def test_a_sender_keeps_its_highest_numbered_frames() -> None:
@@ -31,6 +32,14 @@ def test_a_sender_keeps_its_highest_numbered_frames() -> None:
     pushed = sum(store.hold(held(6, seq)) for seq in [50, 10, 40, 30, 20, 60])
     assert pushed == 2 and len(store) == 4
     assert [h.seq for h in store.release_all()] == [50, 40, 30, 60]
+
+
+def test_the_same_frame_again_takes_the_place_of_the_one_held() -> None:
+    """A new holder heartbeats the same entry ten times a second: one frame held, its
+    latest copy, and nothing counted as pushed out."""
+    store = HeldFrames(per_sender=4, total=64)
+    pushed = sum(store.hold(held(6, seq, epoch=1)) for seq in [10, 12, 11, 13])
+    assert pushed == 0 and [h.seq for h in store.release_all()] == [13]
 
 
 def test_the_total_is_bounded_whatever_the_senders() -> None:
@@ -71,12 +80,14 @@ def beat(paper: Paper, auth: str, sender: int, seq: int, f: str | None, epoch: i
 @pytest.mark.parametrize("auth", ["shared", "none"])
 def test_a_flood_of_recorded_holds_is_bounded_and_outdated_by_the_live_word(
         paper: Paper, auth: str) -> None:
-    """100 recorded heartbeats of 6 holding f2 at epoch 1, at holder 2's start: 8 held
-    (`PER_SENDER`), 92 pushed out and counted; 6's live standby heartbeat, numbered above
-    them, makes the 8 `outdated`. 2 keeps f2 at epoch 0 throughout."""
+    """100 recorded heartbeats of 6 holding f2 (each at another epoch, so that none
+    takes another's place), at holder 2's start: 8 held (`PER_SENDER`), 92 pushed out and
+    counted; 6's live standby heartbeat, numbered above them, makes the 8 `outdated`. 2
+    keeps f2 at epoch 0 throughout."""
     two = node(paper, 2, auth)
     for i in range(100):
-        assert two.receive(beat(paper, auth, 6, 1000 + i, "f2", 1), 0.01 + i / 1000) == []
+        raw = beat(paper, auth, 6, 1000 + i, "f2", 1 + i)
+        assert two.receive(raw, 0.01 + i / 1000) == []
     assert two.drops["held_over"] == 92 and two.snapshot().known["f2"] == (2, 0)
     two.receive(beat(paper, auth, 6, 10**6, None, 0), 0.2)
     assert two.drops["outdated"] == 8 and two.snapshot().known["f2"] == (2, 0)

@@ -24,8 +24,10 @@ from typing import NamedTuple
 from swarmd.core import wire
 
 PER_SENDER = 8
-"""Frames held per sender: more than a robot says in one start-up grace that would raise
-an entry (a LEAVE and a few heartbeats of a new holder)."""
+"""Distinct frames held per sender: more than a robot says in one start-up grace that
+would raise an entry (a LEAVE, a heartbeat of a new holder, a warning or two). The same
+frame again (a new holder heartbeats its entry ten times a second at `udp()`) takes the
+place of the one held, numbered higher, and is not counted."""
 
 TOTAL = 64
 """Frames held in all, whatever the swarm's size: a few kilobytes (a frame is at most a
@@ -57,7 +59,14 @@ class HeldFrames:
 
     def hold(self, held: HeldFrame) -> int:
         """Keep `held`; returns how many frames the bound pushed out (0 or 1: `held`
-        itself, when it is the lowest-numbered of its sender's)."""
+        itself, when it is the lowest-numbered of its sender's). A frame saying what one
+        held of its sender says replaces it if numbered higher: judged by its latest
+        copy, it stands or falls alike."""
+        for i, h in enumerate(self._frames):
+            if h.sender == held.sender and h.frame.msg == held.frame.msg:
+                if held.seq > h.seq:
+                    self._frames[i] = held
+                return 0
         self._frames.append(held)
         mine = [h for h in self._frames if h.sender == held.sender]
         if len(mine) > self._per_sender:
