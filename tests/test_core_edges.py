@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import pytest
-from test_node import Driven, events, frame, hb, sent, started
+from test_node import Driven, events, frame, hb, past_grace, sent, started
 
 from swarmd.core import events as ev
 from swarmd.core import wire
@@ -50,16 +50,6 @@ def quorum_on(node: Driven, plan: SwarmPlan, suspect: int, f: str, epoch: int,
         assert w is not None
         out += node.receive(frame(plan, w, warn), t + 0.01 * i)
     return out
-
-
-def hear_witnesses(node: Driven, plan: SwarmPlan, f: str, t: float) -> None:
-    """f's witnesses heartbeat their own slots: said something of themselves here, their
-    warnings naming a newer entry than ours are not held within the start-up grace
-    (`held.py`)."""
-    for g in plan.watched_by(f):
-        w = plan.initial_holder(g)
-        assert w is not None
-        node.receive(frame(plan, w, hb(plan, g)), t)
 
 
 # ---------------------------------------------------------------------- construction
@@ -196,13 +186,13 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
     # (5, epoch 1). Meanwhile 2, the holder before 5, comes back from a long pause and
     # heartbeats f2 at epoch 0. That is not the suspect answering: the claim goes on.
     node, _ = started(shared_plan, udp_params, 6)
-    hear_witnesses(node, shared_plan, "f2", 0.05)
-    out = quorum_on(node, shared_plan, 5, "f2", 1, 0.1)
+    t = past_grace(node, udp_params)
+    out = quorum_on(node, shared_plan, 5, "f2", 1, t + 0.1)
     assert events(out, ev.Claim)[0].fields() == {"subject": 5, "function": "f2", "epoch": 2}
-    out = node.receive(frame(shared_plan, 2, hb(shared_plan, "f2", epoch=0)), 0.15)
+    out = node.receive(frame(shared_plan, 2, hb(shared_plan, "f2", epoch=0)), t + 0.15)
     assert not events(out, ev.Refute) and not events(out, ev.Backoff)
     assert node.snapshot().role is Role.CLAIMING
-    out = node.run_to(0.11 + udp_params.claim_hold)
+    out = node.run_to(t + 0.11 + udp_params.claim_hold)
     assert [e.fields() for e in events(out, ev.Takeover)] == [
         {"function": "f2", "epoch": 2, "replaced": 5}]
     assert assigns(out) == [Assign("f2", 2)]
@@ -211,19 +201,17 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
 def test_warnings_about_an_older_holder_are_not_counted(shared_plan: SwarmPlan,
                                                         udp_params: Params) -> None:
     node, _ = started(shared_plan, udp_params, 6)
-    # 5 heard first (as a standby): within the start-up grace, a hold of a sender not
-    # heard yet waits for its word (`held.py`).
-    node.receive(frame(shared_plan, 5, hb(shared_plan, None, role=Role.STANDBY)), 0.05)
-    node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), 0.1)  # 5 took f2
+    t = past_grace(node, udp_params)
+    node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), t + 0.1)  # 5 took f2
     slot = shared_plan.slot("f2")
     # delayed warnings from before the takeover: about an entry below the slot's (the
     # slot table's order, `slots.py`: an older epoch is lower whoever it names)
     for stale in (wire.Warn(2, slot, 0), wire.Warn(4, slot, 0)):
-        out = quorum_on(node, shared_plan, stale.suspect, "f2", stale.epoch, 0.2)
+        out = quorum_on(node, shared_plan, stale.suspect, "f2", stale.epoch, t + 0.2)
         assert not events(out, ev.Vote) and not events(out, ev.Claim)
     assert node.snapshot().votes == {} and node.snapshot().role is Role.STANDBY
     # control: a warning about the current holder does count
-    out = node.receive(frame(shared_plan, 1, wire.Warn(5, slot, 1)), 0.3)
+    out = node.receive(frame(shared_plan, 1, wire.Warn(5, slot, 1)), t + 0.3)
     assert [e.fields()["count"] for e in events(out, ev.Vote)] == [1]
 
 
@@ -235,11 +223,11 @@ def test_the_epoch_saturates_instead_of_wrapping(paper_plan: SwarmPlan,
     # standby 6 cannot outrank holder 2 there, so it backs off instead of taking over a
     # slot whose every view would fence it at once.
     node, _ = started(paper_plan, udp_params, 6)
-    hear_witnesses(node, paper_plan, "f2", 0.05)
-    out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, 0.1)
+    t = past_grace(node, udp_params)
+    out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, t + 0.1)
     assert events(out, ev.Claim)[0].fields()["epoch"] == 0xFFFF
     assert sent(out) == [wire.Claim(2, paper_plan.slot("f2"), 0xFFFF)]
-    out = node.run_to(0.11 + udp_params.claim_hold)
+    out = node.run_to(t + 0.11 + udp_params.claim_hold)
     assert assigns(out) == []
     assert [e.fields()["winner"] for e in events(out, ev.Backoff)] == [2]
 

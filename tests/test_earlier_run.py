@@ -73,7 +73,8 @@ def run_a(n: Net) -> dict[str, bytes]:
                     and (slot is None or head.slot == slot))
 
     return {"leave": first(2, wire.MsgType.LEAVE), "claim": first(6, wire.MsgType.CLAIM),
-            "beat": first(6, wire.MsgType.HEARTBEAT, n.plan.slot("f2"))}
+            "beat": first(6, wire.MsgType.HEARTBEAT, n.plan.slot("f2")),
+            "standby": first(6, wire.MsgType.HEARTBEAT, 0)}
 
 
 def cert(plan: SwarmPlan, raw: bytes, sender: int = 5) -> bytes:
@@ -313,6 +314,26 @@ def test_a_recorded_hold_played_before_its_sender_is_heard_moves_nothing(
     tape = run_a(swarm(paper, auth, RUN_A, ids))
     n = swarm(paper, auth, RUN_B, ids)
     play(n, tape["beat"])
+    n.run_until(params.startup_grace + 8 * params.t_max)
+    moved_nothing(n)
+    if auth != "per-robot":
+        assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_recorded_word_played_before_the_recorded_hold_makes_it_no_word(
+        paper: Paper, auth: str) -> None:
+    """Run A's heartbeat of 6 as a standby, then its heartbeat holding f2 at epoch 1
+    (numbered above it), played in that order the moment run B starts. The first raises
+    nothing and is taken as 6's word; the second would raise f2's entry and is numbered
+    above that word, so only a later word of 6 can judge it: it is held until 6's live
+    standby heartbeat, numbered above every recording, makes it `outdated`. Before, the
+    recorded word made 6 known, the hold was taken, and live holder 2 was fenced."""
+    plan, params = paper
+    ids = fake_identities(plan.robots) if auth == "per-robot" else None
+    tape = run_a(swarm(paper, auth, RUN_A, ids))
+    n = swarm(paper, auth, RUN_B, ids)
+    play(n, tape["standby"], tape["beat"])
     n.run_until(params.startup_grace + 8 * params.t_max)
     moved_nothing(n)
     if auth != "per-robot":

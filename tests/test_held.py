@@ -1,8 +1,9 @@
 """Frames held within a robot's start-up grace (`swarmd/core/held.py`; DESIGN section 2,
-"Every proof is bound to its run"): a frame that would raise a view entry, from a sender
-not heard yet, waits for that sender's word or for the grace's end. The store is bounded
-per sender and in total, and counts what it pushes out (`held_over`); a sender never
-heard within the grace has its frames taken as they would have been."""
+"Every proof is bound to its run"): a frame that would raise a view entry, numbered above
+its sender's word here (or from a sender with no word yet), waits for a later word or for
+the grace's end. The store is bounded per sender and in total, and counts what it pushes
+out (`held_over`); a sender never heard within the grace has its frames taken as they
+would have been."""
 
 from __future__ import annotations
 
@@ -77,14 +78,19 @@ def beat(paper: Paper, auth: str, sender: int, seq: int, f: str | None, epoch: i
                        KEY if auth == "shared" else None)
 
 
+@pytest.mark.parametrize("word_first", [False, True])
 @pytest.mark.parametrize("auth", ["shared", "none"])
 def test_a_flood_of_recorded_holds_is_bounded_and_outdated_by_the_live_word(
-        paper: Paper, auth: str) -> None:
+        paper: Paper, auth: str, word_first: bool) -> None:
     """100 recorded heartbeats of 6 holding f2 (each at another epoch, so that none
     takes another's place), at holder 2's start: 8 held (`PER_SENDER`), 92 pushed out and
     counted; 6's live standby heartbeat, numbered above them, makes the 8 `outdated`. 2
-    keeps f2 at epoch 0 throughout."""
+    keeps f2 at epoch 0 throughout. Alike when a recorded standby heartbeat of 6,
+    numbered below the flood, was played first (`word_first`): it is 6's word, but the
+    flood is numbered above it."""
     two = node(paper, 2, auth)
+    if word_first:
+        assert two.receive(beat(paper, auth, 6, 999, None, 0), 0.005) == []
     for i in range(100):
         raw = beat(paper, auth, 6, 1000 + i, "f2", 1 + i)
         assert two.receive(raw, 0.01 + i / 1000) == []

@@ -47,8 +47,9 @@ class DropReason(StrEnum):
     run, or a reordered frame; DESIGN, "Every proof is bound to its run")."""
 
     HELD_OVER = "held_over"
-    """A frame held within the start-up grace (its sender not heard yet) pushed out by
-    the bound on what is held (`held.py`; DESIGN, "Every proof is bound to its run")."""
+    """A frame held within the start-up grace (numbered above its sender's word here)
+    pushed out by the bound on what is held (`held.py`; DESIGN, "Every proof is bound
+    to its run")."""
 
 
 __all__ = ["DropReason"]

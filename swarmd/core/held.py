@@ -4,12 +4,16 @@ say what": "Every proof is bound to its run").
 A robot's seqs only rise across its restarts, so its own heartbeat of this run tells a
 receiver which of its frames are older words it contradicts (`words.py`, `outdated`).
 A receiver that has just started has heard nobody yet: with a shared key or unsigned,
-a recording of an earlier run played to it then is believed like any frame. So within
-its start-up grace a robot holds the frames that would raise a view entry (a fence, a
-takeover, an epoch change) and come from a sender it has not heard say anything of
-itself yet; it judges them when that sender's word, numbered above them, arrives (a
-recording is then `outdated`), or when the grace ends (a sender never heard within it
-is dead or cut off: its frames are taken as they would have been).
+a recording of an earlier run played to it then is believed like any frame, and so is
+a recorded word (a standby heartbeat of the earlier run, played just before a recorded
+hold numbered above it). So within its start-up grace a robot holds every frame that
+would raise a view entry (a fence, a takeover, an epoch change) and is numbered above
+its sender's word here, or whose sender has no word here yet: only a later word,
+numbered above it, can judge it. It judges the held frames when such a word arrives (a
+live sender's frames are numbered above every recording, so its next heartbeat that
+raises nothing judges them, and a recording is then `outdated`), or when the grace
+ends (a sender not heard above them within it is dead, cut off, or a new holder whose
+every frame raises the entry: its frames are taken as they would have been).
 
 Bad input never grows memory: at most `PER_SENDER` frames a sender and `TOTAL` in all.
 Past the bound the lowest-numbered frame of the sender holding the most is pushed out
@@ -24,8 +28,9 @@ from typing import NamedTuple
 from swarmd.core import wire
 
 PER_SENDER = 8
-"""Distinct frames held per sender: more than a robot says in one start-up grace that
-would raise an entry (a LEAVE, a heartbeat of a new holder, a warning or two). The same
+"""Distinct frames held per sender: more than a robot says between two of its words
+that would raise an entry (a LEAVE, a heartbeat of a new holder, a warning or two),
+and than a new holder says in one start-up grace (its entry, a reassertion). The same
 frame again (a new holder heartbeats its entry ten times a second at `udp()`) takes the
 place of the one held, numbered higher, and is not counted."""
 

@@ -81,8 +81,8 @@ class NodeBase:
     """What each peer last said of itself, to refuse its older word that contradicts it
     (`words.py`)."""
     _held: HeldFrames
-    """Within the start-up grace, frames that would raise a view entry from senders not
-    heard yet, until they can be judged (`held.py`)."""
+    """Within the start-up grace, frames that would raise a view entry, numbered above
+    their sender's word here, until a later word can judge them (`held.py`)."""
     _shown_newer: set[str]
     """Per robot: slots we hold of which a live robot's signed warning named us at a
     newer epoch than ours (it took a recorded takeover that our refute voids: our

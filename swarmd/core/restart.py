@@ -95,13 +95,16 @@ class Restart(Hearing):
     # ------------------------------------------------------------------ start-up grace
     def _hold_back(self, frame: wire.Frame, data: bytes, now: float) -> bool:
         """Hold `frame` (`held.py`; DESIGN, "Every proof is bound to its run") if, within
-        our start-up grace, it would raise a view entry and comes from a sender that has
-        said nothing of itself here yet: with a shared key or unsigned, nothing else tells
-        a recording of an earlier run from its live word. Per robot nothing is held: a
-        heartbeat moves no entry without its certificate, and within the grace a LEAVE
-        of a sender not heard is refused (`_outdated`)."""
+        our start-up grace, it would raise a view entry and is numbered above its
+        sender's word here (or the sender has none): with a shared key or unsigned,
+        nothing else tells a recording of an earlier run from its live word, and the
+        word itself may be a recording played just before it; only a later word,
+        numbered above the frame, can judge it. Per robot nothing is held: a heartbeat
+        moves no entry without its certificate, and within the grace a LEAVE of a
+        sender not heard is refused (`_outdated`)."""
         sender = frame.sender
-        if self._verifier is not None or self._words.knows(sender) \
+        word = self._words.seq(sender)
+        if self._verifier is not None or (word is not None and frame.seq <= word) \
                 or now - self._start_time >= self._params.startup_grace:
             return False
         slot = self._raised(sender, frame.msg)
