@@ -31,12 +31,12 @@ from swarmd.base.identity import Ed25519Signer, Keyring, private_key_path, read_
 from swarmd.config import load_robot, load_swarm
 from swarmd.config.auth import public_keys
 from swarmd.core import wire
-from swarmd.core.actions import Assign
+from swarmd.core.actions import Assign, Release
 from swarmd.core.auth import Identity
 from swarmd.core.node import Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.roles import Health
+from swarmd.core.roles import Health, Role
 from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.none import NoneLink
 
@@ -124,11 +124,20 @@ def played_at_run_b(paper: Paper, auth: str, *names: str, wrap: bool = False,
     return n
 
 
-def moved_nothing(n: Net) -> None:
-    """Nobody fenced, claimed or took over; 2 executes f2 throughout, 6 never; every view
-    of f2 still at epoch 0."""
+def paused_then_resumed(n: Net, robot: int, f: str) -> bool:
+    """`robot` was told to execute f at epoch 0, to stop at most once (a pause while a
+    frame that would fence it was held, `held.py`), and to execute it again."""
+    out = n.outputs[robot]
+    return bool(out) and out[-1] == Assign(f, 0) and sum(a == Release(f) for a in out) <= 1 \
+        and all(a in (Assign(f, 0), Release(f)) for a in out)
+
+
+def moved_nothing(n: Net, *, paused: bool = False) -> None:
+    """Nobody fenced, claimed or took over; 2 executes f2 throughout (or, `paused`, at
+    the end, after a pause at its start), 6 never; every view of f2 still at epoch 0."""
     assert n.named("fenced") == [] and n.named("takeover") == [] and n.named("claim") == []
-    assert held_throughout(n, 2, "f2") and n.outputs[6] == []
+    assert paused_then_resumed(n, 2, "f2") if paused else held_throughout(n, 2, "f2")
+    assert n.outputs[6] == []
     assert views_of_f2(n) == {(2, 0)}
 
 
@@ -307,15 +316,16 @@ def test_a_recorded_hold_played_before_its_sender_is_heard_moves_nothing(
     Before, with a shared key or none, it fenced live holder 2 at once and f2's epoch
     moved 0 -> 2. Now a receiver within its start-up grace holds it (it would raise f2's
     entry, from a sender it has not heard) until 6's own standby heartbeat, numbered
-    above it, makes it `outdated`. Per robot a heartbeat moves no entry without its
-    certificate: `uncertified`, as before."""
+    above it, makes it `outdated`; 2, whose hold it would fence, stops executing f2
+    while it is held and executes it again then. Per robot a heartbeat moves no entry
+    without its certificate: `uncertified`, as before."""
     plan, params = paper
     ids = fake_identities(plan.robots) if auth == "per-robot" else None
     tape = run_a(swarm(paper, auth, RUN_A, ids))
     n = swarm(paper, auth, RUN_B, ids)
     play(n, tape["beat"])
     n.run_until(params.startup_grace + 8 * params.t_max)
-    moved_nothing(n)
+    moved_nothing(n, paused=auth != "per-robot")
     if auth != "per-robot":
         assert outdated(n) > 0
 
@@ -335,9 +345,64 @@ def test_a_recorded_word_played_before_the_recorded_hold_makes_it_no_word(
     n = swarm(paper, auth, RUN_B, ids)
     play(n, tape["standby"], tape["beat"])
     n.run_until(params.startup_grace + 8 * params.t_max)
-    moved_nothing(n)
+    moved_nothing(n, paused=auth != "per-robot")
     if auth != "per-robot":
         assert outdated(n) > 0
+
+
+def both_execute_f2(n: Net, until: float, step: float = 0.001) -> float:
+    """Runs `n` to `until` in steps of `step`: how long 2 and 6 both executed f2."""
+    both = 0.0
+    while n.now < until:
+        n.run_until(n.now + step)
+        running = n.executing()
+        both += step if running.get(2) == running.get(6) == "f2" else 0.0
+    return both
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_a_holder_restarted_without_its_state_file_pauses_while_its_fence_is_held(
+        paper: Paper, auth: str) -> None:
+    """2 crashes, 6 takes f2 over at epoch 1, and 2 restarts without its state file: the
+    plan makes it f2's holder and it executes at once. 6's heartbeats of (f2, 1) would
+    fence it, but 2 holds them within its start-up grace (6 says nothing else there). So
+    2 stops executing while they are held (the robot told to release, as a fence does)
+    and is fenced when the grace ends and they are taken: two executors for at most the
+    old bound (6's answer to 2's first heartbeat, a few ms), not the whole grace (2 s
+    before)."""
+    params = paper[1]
+    n = swarm(paper, auth, RUN_B)
+    n.run_until(2.5)
+    n.crash(2)
+    n.run_until(2.5 + params.claim_horizon + params.takeover_bound())
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    restart = n.now
+    n.boot(2, seq_start=RUN_B + 10**6)
+    both = both_execute_f2(n, restart + params.startup_grace + 4 * params.t_max)
+    assert both <= params.heartbeat_interval, both
+    assert n.executing().get(6) == "f2" and 2 not in n.executing()
+    assert [e["robot"] for e in n.named("fenced")] == [2]
+    assert views_of_f2(n) == {(6, 1)} and n.nodes[2].snapshot().known["f2"] == (6, 1)
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_a_holder_paused_by_a_recorded_hold_executes_again_once_it_is_outdated(
+        paper: Paper, auth: str) -> None:
+    """Run A's heartbeat of 6 holding f2 at epoch 1, played the moment run B starts: 2,
+    f2's holder by the plan, holds it and stops executing f2 while it is held; 6's live
+    standby heartbeat makes it `outdated`, and 2 executes f2 again at epoch 0 (an Assign
+    at the same entry). What an outsider with a recording can do: pause a slot for at
+    most the grace at a robot's start, never fence it."""
+    params = paper[1]
+    tape = run_a(swarm(paper, auth, RUN_A))
+    n = swarm(paper, auth, RUN_B)
+    play(n, tape["beat"])
+    n.run_until(params.startup_grace + 8 * params.t_max)
+    assert n.named("fenced") == [] and n.named("takeover") == [] and n.outputs[6] == []
+    assert n.outputs[2][-2:] == [Release("f2"), Assign("f2", 0)]
+    assert n.nodes[2].snapshot().role == Role.ACTIVE
+    moved_nothing(n, paused=True)
+    assert outdated(n) > 0
 
 
 @pytest.mark.parametrize("auth", MODES)

@@ -3,13 +3,15 @@
 its sender's word here (or from a sender with no word yet), waits for a later word or for
 the grace's end. The store is bounded per sender and in total, and counts what it pushes
 out (`held_over`); a sender never heard within the grace has its frames taken as they
-would have been."""
+would have been. A holder does not execute its slot while a frame that would fence it
+is held."""
 
 from __future__ import annotations
 
 import pytest
 
 from swarmd.core import wire
+from swarmd.core.actions import Assign, Release
 from swarmd.core.held import HeldFrame, HeldFrames
 from swarmd.core.node import Node
 from swarmd.core.params import Params
@@ -85,30 +87,32 @@ def test_a_flood_of_recorded_holds_is_bounded_and_outdated_by_the_live_word(
     """100 recorded heartbeats of 6 holding f2 (each at another epoch, so that none
     takes another's place), at holder 2's start: 8 held (`PER_SENDER`), 92 pushed out and
     counted; 6's live standby heartbeat, numbered above them, makes the 8 `outdated`. 2
-    keeps f2 at epoch 0 throughout. Alike when a recorded standby heartbeat of 6,
-    numbered below the flood, was played first (`word_first`): it is 6's word, but the
-    flood is numbered above it."""
+    keeps f2 at epoch 0 throughout: it stops executing f2 while they are held (the
+    first would fence it) and executes it again once they are judged. Alike when a
+    recorded standby heartbeat of 6, numbered below the flood, was played first
+    (`word_first`): it is 6's word, but the flood is numbered above it."""
     two = node(paper, 2, auth)
     if word_first:
         assert two.receive(beat(paper, auth, 6, 999, None, 0), 0.005) == []
-    for i in range(100):
-        raw = beat(paper, auth, 6, 1000 + i, "f2", 1 + i)
-        assert two.receive(raw, 0.01 + i / 1000) == []
+    outs = [two.receive(beat(paper, auth, 6, 1000 + i, "f2", 1 + i), 0.01 + i / 1000)
+            for i in range(100)]
+    assert outs[0] == [Release("f2")] and not any(outs[1:])
     assert two.drops["held_over"] == 92 and two.snapshot().known["f2"] == (2, 0)
-    two.receive(beat(paper, auth, 6, 10**6, None, 0), 0.2)
+    out = two.receive(beat(paper, auth, 6, 10**6, None, 0), 0.2)
     assert two.drops["outdated"] == 8 and two.snapshot().known["f2"] == (2, 0)
-    assert two.snapshot().role == Role.ACTIVE
+    assert two.snapshot().role == Role.ACTIVE and Assign("f2", 0) in out
 
 
 @pytest.mark.parametrize("auth", ["shared", "none"])
 def test_a_sender_never_heard_within_the_grace_is_taken_at_its_end(
         paper: Paper, auth: str) -> None:
     """6's heartbeat holding f2 at epoch 1, and nothing else of 6, within 2's start-up
-    grace: held, and taken when the grace ends (a deadline of its own), as it would have
-    been before: 2 is fenced then (rule 2), not at once."""
+    grace: held, and taken when the grace ends (a deadline of its own). 2 stops
+    executing f2 while it is held (it would fence 2) but still holds and heartbeats its
+    entry; once it is taken 2 is fenced (rule 2), with no second release."""
     params = paper[1]
     two = node(paper, 2, auth)
-    two.receive(beat(paper, auth, 6, 1000, "f2", 1), 0.1)
+    assert two.receive(beat(paper, auth, 6, 1000, "f2", 1), 0.1) == [Release("f2")]
     assert two.snapshot().role == Role.ACTIVE and two.snapshot().known["f2"] == (2, 0)
     deadline = two.next_deadline()
     assert deadline is not None and deadline <= params.startup_grace
@@ -117,8 +121,9 @@ def test_a_sender_never_heard_within_the_grace_is_taken_at_its_end(
         two.tick(d)
         t = d
     assert two.snapshot().role == Role.ACTIVE and t < params.startup_grace
-    two.tick(params.startup_grace)
+    out = two.tick(params.startup_grace)
     assert two.snapshot().known["f2"] == (6, 1) and two.snapshot().role == Role.FENCED
+    assert not any(isinstance(a, Assign | Release) for a in out)
 
 
 def test_per_robot_nothing_is_held(paper: Paper) -> None:

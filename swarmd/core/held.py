@@ -15,6 +15,10 @@ raises nothing judges them, and a recording is then `outdated`), or when the gra
 ends (a sender not heard above them within it is dead, cut off, or a new holder whose
 every frame raises the entry: its frames are taken as they would have been).
 
+While a frame that would fence its own hold is held, the robot does not execute that
+slot (`NodeBase._paused`), and executes it again at the same entry if every such frame
+is judged `outdated` (DESIGN rule 2: never two executors beyond the takeover bound).
+
 Bad input never grows memory: at most `PER_SENDER` frames a sender and `TOTAL` in all.
 Past the bound the lowest-numbered frame of the sender holding the most is pushed out
 and counted (`held_over`): a recording is numbered below its sender's live frames, so a
@@ -90,13 +94,24 @@ class HeldFrames:
         most = max(counts, key=lambda s: counts[s])
         return min((h for h in self._frames if h.sender == most), key=lambda h: h.seq)
 
+    def waiting(self, sender: int | None = None, below: int | None = None
+                ) -> list[HeldFrame]:
+        """The frames held (of `sender`, numbered below `below`: its word can judge
+        them), in the order they came; still held until `forget`, so that what judging
+        them does sees them as held (a hold paused by them, `NodeBase._paused`)."""
+        return [h for h in self._frames if (sender is None or h.sender == sender)
+                and (below is None or h.seq < below)]
+
+    def forget(self, judged: list[HeldFrame]) -> None:
+        """These frames were judged: no longer held."""
+        if judged:
+            self._frames = [h for h in self._frames if h not in judged]
+
     def release(self, sender: int, below: int) -> list[HeldFrame]:
-        """`sender`'s frames numbered below `below` (its word: it can judge them), in
-        the order they came; those above it stay held."""
-        out = [h for h in self._frames if h.sender == sender and h.seq < below]
-        if out:
-            self._frames = [h for h in self._frames
-                            if not (h.sender == sender and h.seq < below)]
+        """`sender`'s frames numbered below `below`, in the order they came, no longer
+        held; those above it stay held."""
+        out = self.waiting(sender, below)
+        self.forget(out)
         return out
 
     def release_all(self) -> list[HeldFrame]:

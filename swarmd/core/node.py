@@ -246,18 +246,23 @@ class Node(Restart):
         word = self._words.seq(sender)
         if word is not None and self._held:
             # Its word now: what we held of it, numbered below, can be judged.
-            self._judge_held(self._held.release(sender, word), now)
+            self._judge_held(self._held.waiting(sender, below=word), now)
         return self._drain()
 
     def _judge_held(self, held: list[HeldFrame], now: float) -> None:
         """Frames held within our start-up grace (`held.py`), judged as if they came now:
         refused if their sender's later word contradicts them (a recording of an earlier
-        run, DESIGN "Every proof is bound to its run"), else acted on."""
+        run, DESIGN "Every proof is bound to its run"), else acted on. They stay held
+        while they are judged: a hold of ours they paused (`_paused`) is fenced without
+        a second release, or executed again once none is left."""
+        was_paused = self._paused()
         for h in held:
             if self._outdated(h.sender, h.seq, h.frame.msg, now):
                 self._drops[DropReason.OUTDATED] += 1
             else:
                 self._on_message(h.frame, now, h.data)
+        self._held.forget(held)
+        self._execution_follows(was_paused)
 
     def _on_message(self, frame: wire.Frame, now: float, data: bytes) -> None:
         """A frame through every receive filter: the per-message rules (`hearing.py`,
@@ -373,7 +378,7 @@ class Node(Restart):
         if self._held and now >= self._start_time + self._params.startup_grace:
             # A sender not heard within the whole grace is dead or cut off: what we
             # held of it is taken as it would have been.
-            self._judge_held(self._held.release_all(), now)
+            self._judge_held(self._held.waiting(), now)
         if self._rejoin is not None and now >= self._rejoin_until():
             self._finish_rejoin(now)
         if isinstance(self._state, Fenced) and now >= self._state.until:

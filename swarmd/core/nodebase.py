@@ -18,7 +18,7 @@ from collections.abc import Mapping
 
 from swarmd.core import digest, wire
 from swarmd.core import events as ev
-from swarmd.core.actions import Action, Broadcast
+from swarmd.core.actions import Action, Assign, Broadcast, Release
 from swarmd.core.auth import Identity, Signer, Verifier
 from swarmd.core.chain import OwnChain, PeerChains
 from swarmd.core.claims import ClaimMemory, WaitState
@@ -211,6 +211,26 @@ class NodeBase:
                         or (msg.failed == self._robot_id
                             and self._plan.function_at(msg.function) in self._shown_newer))
         return True
+
+    def _paused(self) -> bool:
+        """Is our hold's execution paused? We hold a slot, and a frame that would fence
+        that hold is held until it can be judged (`held.py`): we do not execute the slot
+        meanwhile, so that we never execute it beside the holder the frame may show
+        (DESIGN rule 2: never two executors beyond the takeover bound). Derived from the
+        role and the held frames, never stored: nothing to keep in step. The entry is
+        still ours until a frame judged moves it, so we heartbeat it and answer a claim
+        against it as its holder (rule 4)."""
+        f = self._function
+        return f is not None and self._held.about(self._plan.slot(f))
+
+    def _execution_follows(self, was_paused: bool) -> None:
+        """Tell the robot when `_paused` changed while we still hold the slot: release
+        it, as a fence does, or execute it again at the same entry (every frame held
+        about it was judged `outdated`, or pushed out by the bound)."""
+        f = self._function
+        paused = self._paused()
+        if f is not None and paused != was_paused:
+            self._pending.append(Release(f) if paused else Assign(f, self._epoch))
 
     def _after_held(self, f: str, t: float) -> float:
         """`t`, or the end of our start-up grace while frames about f are held until then

@@ -110,8 +110,10 @@ class Restart(Hearing):
         slot = self._raised(sender, frame.msg)
         if slot == 0:
             return False
+        was_paused = self._paused()
         pushed = self._held.hold(HeldFrame(sender, frame.seq, slot, frame, data))
         self._drops[DropReason.HELD_OVER] += pushed
+        self._execution_follows(was_paused)
         return True
 
     def _raised(self, sender: int, msg: wire.Message) -> int:
