@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import pytest
-from test_node import Driven, events, frame, hb, sent, started
+from test_node import Driven, events, frame, hb, past_grace, sent, started
 
 from swarmd.core import events as ev
 from swarmd.core import wire
@@ -165,15 +165,18 @@ def test_a_heartbeat_at_the_claimed_epoch_supersedes_the_claim(
         shared_plan: SwarmPlan, udp_params: Params, epoch: int) -> None:
     # 5 and 6 both claimed f2 after 2 died; 6 lost 5's CLAIM but hears 5's first
     # heartbeat as the new holder: 6 backs off instead of executing f2 too (rule 2).
+    # Within 6's start-up grace 5 has said nothing else here, so that heartbeat is held
+    # (`held.py`), and 6's takeover waits for it: 6 backs off when the grace ends.
     node, _ = started(shared_plan, udp_params, 6)
     quorum_on(node, shared_plan, 2, "f2", 0, 0.1)
     assert node.snapshot().role is Role.CLAIMING
     out = node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=epoch)), 0.15)
+    out += node.run_to(udp_params.startup_grace)
     assert [e.fields() for e in events(out, ev.Backoff)] == [
         {"subject": 2, "function": "f2", "winner": 5}]
     assert node.snapshot().role is Role.STANDBY
     assert node.snapshot().known["f2"] == (5, epoch)
-    out = node.run_to(3.0)
+    out += node.run_to(3.0)
     assert not assigns(out) and not events(out, ev.Takeover)
 
 
@@ -183,12 +186,13 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
     # (5, epoch 1). Meanwhile 2, the holder before 5, comes back from a long pause and
     # heartbeats f2 at epoch 0. That is not the suspect answering: the claim goes on.
     node, _ = started(shared_plan, udp_params, 6)
-    out = quorum_on(node, shared_plan, 5, "f2", 1, 0.1)
+    t = past_grace(node, udp_params)
+    out = quorum_on(node, shared_plan, 5, "f2", 1, t + 0.1)
     assert events(out, ev.Claim)[0].fields() == {"subject": 5, "function": "f2", "epoch": 2}
-    out = node.receive(frame(shared_plan, 2, hb(shared_plan, "f2", epoch=0)), 0.15)
+    out = node.receive(frame(shared_plan, 2, hb(shared_plan, "f2", epoch=0)), t + 0.15)
     assert not events(out, ev.Refute) and not events(out, ev.Backoff)
     assert node.snapshot().role is Role.CLAIMING
-    out = node.run_to(0.11 + udp_params.claim_hold)
+    out = node.run_to(t + 0.11 + udp_params.claim_hold)
     assert [e.fields() for e in events(out, ev.Takeover)] == [
         {"function": "f2", "epoch": 2, "replaced": 5}]
     assert assigns(out) == [Assign("f2", 2)]
@@ -197,16 +201,17 @@ def test_a_stale_holder_does_not_cancel_a_claim_against_a_newer_one(
 def test_warnings_about_an_older_holder_are_not_counted(shared_plan: SwarmPlan,
                                                         udp_params: Params) -> None:
     node, _ = started(shared_plan, udp_params, 6)
-    node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), 0.1)  # 5 took f2
+    t = past_grace(node, udp_params)
+    node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), t + 0.1)  # 5 took f2
     slot = shared_plan.slot("f2")
     # delayed warnings from before the takeover: about an entry below the slot's (the
     # slot table's order, `slots.py`: an older epoch is lower whoever it names)
     for stale in (wire.Warn(2, slot, 0), wire.Warn(4, slot, 0)):
-        out = quorum_on(node, shared_plan, stale.suspect, "f2", stale.epoch, 0.2)
+        out = quorum_on(node, shared_plan, stale.suspect, "f2", stale.epoch, t + 0.2)
         assert not events(out, ev.Vote) and not events(out, ev.Claim)
     assert node.snapshot().votes == {} and node.snapshot().role is Role.STANDBY
     # control: a warning about the current holder does count
-    out = node.receive(frame(shared_plan, 1, wire.Warn(5, slot, 1)), 0.3)
+    out = node.receive(frame(shared_plan, 1, wire.Warn(5, slot, 1)), t + 0.3)
     assert [e.fields()["count"] for e in events(out, ev.Vote)] == [1]
 
 
@@ -218,10 +223,11 @@ def test_the_epoch_saturates_instead_of_wrapping(paper_plan: SwarmPlan,
     # standby 6 cannot outrank holder 2 there, so it backs off instead of taking over a
     # slot whose every view would fence it at once.
     node, _ = started(paper_plan, udp_params, 6)
-    out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, 0.1)
+    t = past_grace(node, udp_params)
+    out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, t + 0.1)
     assert events(out, ev.Claim)[0].fields()["epoch"] == 0xFFFF
     assert sent(out) == [wire.Claim(2, paper_plan.slot("f2"), 0xFFFF)]
-    out = node.run_to(0.11 + udp_params.claim_hold)
+    out = node.run_to(t + 0.11 + udp_params.claim_hold)
     assert assigns(out) == []
     assert [e.fields()["winner"] for e in events(out, ev.Backoff)] == [2]
 

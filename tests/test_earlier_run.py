@@ -31,11 +31,12 @@ from swarmd.base.identity import Ed25519Signer, Keyring, private_key_path, read_
 from swarmd.config import load_robot, load_swarm
 from swarmd.config.auth import public_keys
 from swarmd.core import wire
-from swarmd.core.actions import Assign
+from swarmd.core.actions import Assign, Release
 from swarmd.core.auth import Identity
+from swarmd.core.node import Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.roles import Health
+from swarmd.core.roles import Health, Role
 from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.none import NoneLink
 
@@ -72,7 +73,8 @@ def run_a(n: Net) -> dict[str, bytes]:
                     and (slot is None or head.slot == slot))
 
     return {"leave": first(2, wire.MsgType.LEAVE), "claim": first(6, wire.MsgType.CLAIM),
-            "beat": first(6, wire.MsgType.HEARTBEAT, n.plan.slot("f2"))}
+            "beat": first(6, wire.MsgType.HEARTBEAT, n.plan.slot("f2")),
+            "standby": first(6, wire.MsgType.HEARTBEAT, 0)}
 
 
 def cert(plan: SwarmPlan, raw: bytes, sender: int = 5) -> bytes:
@@ -122,11 +124,20 @@ def played_at_run_b(paper: Paper, auth: str, *names: str, wrap: bool = False,
     return n
 
 
-def moved_nothing(n: Net) -> None:
-    """Nobody fenced, claimed or took over; 2 executes f2 throughout, 6 never; every view
-    of f2 still at epoch 0."""
+def paused_then_resumed(n: Net, robot: int, f: str) -> bool:
+    """`robot` was told to execute f at epoch 0, to stop at most once (a pause while a
+    frame that would fence it was held, `held.py`), and to execute it again."""
+    out = n.outputs[robot]
+    return bool(out) and out[-1] == Assign(f, 0) and sum(a == Release(f) for a in out) <= 1 \
+        and all(a in (Assign(f, 0), Release(f)) for a in out)
+
+
+def moved_nothing(n: Net, *, paused: bool = False) -> None:
+    """Nobody fenced, claimed or took over; 2 executes f2 throughout (or, `paused`, at
+    the end, after a pause at its start), 6 never; every view of f2 still at epoch 0."""
     assert n.named("fenced") == [] and n.named("takeover") == [] and n.named("claim") == []
-    assert held_throughout(n, 2, "f2") and n.outputs[6] == []
+    assert paused_then_resumed(n, 2, "f2") if paused else held_throughout(n, 2, "f2")
+    assert n.outputs[6] == []
     assert views_of_f2(n) == {(2, 0)}
 
 
@@ -203,6 +214,74 @@ def test_per_robot_a_receiver_that_missed_every_anchor_of_the_holder_converges(
     assert views_of_f2(n) == {(2, 2)}
 
 
+def crashed_run_a(n: Net) -> list[bytes]:
+    """Run A where 2 crashes at 3 s: 1 and 3 warn, 6 takes f2 over on their warnings.
+    What an outsider recorded: 6's first CLAIM and the CERTs it sent before it (the
+    warnings that back it)."""
+    n.run_until(3.0)
+    n.crash(2)
+    n.run_until(6.0)
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    sent = [raw for _, s, raw in n.frames if s == 6]
+    claim = next(i for i, raw in enumerate(sent)
+                 if (head := wire.peek(raw)) is not None and head.mtype == wire.MsgType.CLAIM)
+    certs = [raw for raw in sent[:claim]
+             if (head := wire.peek(raw)) is not None and head.mtype == wire.MsgType.CERT]
+    assert len(certs) >= 2
+    return [*certs, sent[claim]]
+
+
+def test_per_robot_a_recorded_takeover_backed_by_warnings_moves_nothing(
+        paper: Paper) -> None:
+    """Run A's takeover backed by warnings (CERTs wrapping 1's and 3's warnings about 2,
+    then 6's CLAIM), at run B's start. A warning is no word of its signer about itself,
+    but the CLAIM is its claimant's: 6 heartbeats as a standby above it, so it backs no
+    takeover (`outdated`). Before, every receiver merged (6, 1) before 2's refutes, and
+    f2's epoch moved 0 -> 2 (2's reassertion)."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    tape = crashed_run_a(swarm(paper, "per-robot", RUN_A, ids))
+    n = swarm(paper, "per-robot", RUN_B, ids)
+    n.run_until(2.0)
+    play(n, *tape)
+    n.run_until(2.0 + 8 * params.t_max)
+    moved_nothing(n)
+    assert outdated(n) > 0
+
+
+def test_per_robot_a_certificate_outlives_its_signers_restarts(paper: Paper) -> None:
+    """A certificate is not voided by its signers' restarts: 2 crashes and 6 takes f2
+    over on 1's and 3's warnings; then 1, 3 and 6 restart on their state files (6 is a
+    standby, rejoining, for its rejoin hold) and 5 starts afresh with no state file.
+    Its certificate relayed to 5 while 6 still heartbeats as a standby is refused (6's
+    claim is below that word), but 6 resumes f2 at epoch 1, its claim counts again
+    above its hold's heartbeats, and every view reaches (6, 1)."""
+    plan, params = paper
+    n = swarm(paper, "per-robot", RUN_B, fake_identities(plan.robots))
+    n.run_until(2.5)
+    n.crash(2)
+    n.run_until(2.5 + params.claim_horizon + params.takeover_bound())
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    proof = [cert(plan, raw) for _, s, raw in n.frames if s == 6 and (
+        head := wire.peek(raw)) is not None and head.mtype == wire.MsgType.CLAIM][:1]
+    snaps = {r: n.nodes[r].snapshot() for r in (1, 3, 6)}
+    for r in (1, 3, 5, 6):
+        n.crash(r)
+    for r, snap in snaps.items():
+        n.boot(r, seq_start=RUN_B + 10**6 * r, restored=Restored(
+            known=dict(snap.known), held=(snap.function, snap.epoch) if snap.function else None,
+            peer_seq=snap.peer_seq, certificate=snap.certificate))
+    restart = n.now
+    n.boot(5, seq_start=RUN_B + 10**7)
+    n.run_until(restart + params.rejoin_hold - params.heartbeat_interval)
+    assert n.nodes[6].snapshot().function is None and proof
+    n.inject(5, n.nodes[5].receive(proof[0], n.now))
+    assert n.nodes[5].drops["outdated"] == 1
+    n.run_until(restart + params.startup_grace + 16 * params.t_max)
+    assert n.executing().get(6) == "f2" and n.named("fenced") == []
+    assert views_of_f2(n) == {(6, 1)}
+
+
 def test_per_robot_a_recorded_anchor_moves_no_view(paper: Paper) -> None:
     """Run A's anchor of 6 as f2's holder at epoch 1, played raw: 6's later anchor says
     it is a standby, so it is `outdated` (it was `uncertified` before: a heartbeat never
@@ -227,6 +306,131 @@ def test_a_recorded_takeover_played_raw_at_a_fresh_start_moves_nothing(
     n.run_until(2.0 + 8 * params.t_max)
     moved_nothing(n)
     assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_recorded_hold_played_before_its_sender_is_heard_moves_nothing(
+        paper: Paper, auth: str) -> None:
+    """Run A's heartbeat of 6 holding f2 at epoch 1, played the moment run B starts,
+    before any robot has heard 6's own heartbeat (nothing to tell the recording by yet).
+    Before, with a shared key or none, it fenced live holder 2 at once and f2's epoch
+    moved 0 -> 2. Now a receiver within its start-up grace holds it (it would raise f2's
+    entry, from a sender it has not heard) until 6's own standby heartbeat, numbered
+    above it, makes it `outdated`; 2, whose hold it would fence, stops executing f2
+    while it is held and executes it again then. Per robot a heartbeat moves no entry
+    without its certificate: `uncertified`, as before."""
+    plan, params = paper
+    ids = fake_identities(plan.robots) if auth == "per-robot" else None
+    tape = run_a(swarm(paper, auth, RUN_A, ids))
+    n = swarm(paper, auth, RUN_B, ids)
+    play(n, tape["beat"])
+    n.run_until(params.startup_grace + 8 * params.t_max)
+    moved_nothing(n, paused=auth != "per-robot")
+    if auth != "per-robot":
+        assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_recorded_word_played_before_the_recorded_hold_makes_it_no_word(
+        paper: Paper, auth: str) -> None:
+    """Run A's heartbeat of 6 as a standby, then its heartbeat holding f2 at epoch 1
+    (numbered above it), played in that order the moment run B starts. The first raises
+    nothing and is taken as 6's word; the second would raise f2's entry and is numbered
+    above that word, so only a later word of 6 can judge it: it is held until 6's live
+    standby heartbeat, numbered above every recording, makes it `outdated`. Before, the
+    recorded word made 6 known, the hold was taken, and live holder 2 was fenced."""
+    plan, params = paper
+    ids = fake_identities(plan.robots) if auth == "per-robot" else None
+    tape = run_a(swarm(paper, auth, RUN_A, ids))
+    n = swarm(paper, auth, RUN_B, ids)
+    play(n, tape["standby"], tape["beat"])
+    n.run_until(params.startup_grace + 8 * params.t_max)
+    moved_nothing(n, paused=auth != "per-robot")
+    if auth != "per-robot":
+        assert outdated(n) > 0
+
+
+def both_execute_f2(n: Net, until: float, step: float = 0.001) -> float:
+    """Runs `n` to `until` in steps of `step`: how long 2 and 6 both executed f2."""
+    both = 0.0
+    while n.now < until:
+        n.run_until(n.now + step)
+        running = n.executing()
+        both += step if running.get(2) == running.get(6) == "f2" else 0.0
+    return both
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_a_holder_restarted_without_its_state_file_pauses_while_its_fence_is_held(
+        paper: Paper, auth: str) -> None:
+    """2 crashes, 6 takes f2 over at epoch 1, and 2 restarts without its state file: the
+    plan makes it f2's holder and it executes at once. 6's heartbeats of (f2, 1) would
+    fence it, but 2 holds them within its start-up grace (6 says nothing else there). So
+    2 stops executing while they are held (the robot told to release, as a fence does)
+    and is fenced when the grace ends and they are taken: two executors for at most the
+    old bound (6's answer to 2's first heartbeat, a few ms), not the whole grace (2 s
+    before)."""
+    params = paper[1]
+    n = swarm(paper, auth, RUN_B)
+    n.run_until(2.5)
+    n.crash(2)
+    n.run_until(2.5 + params.claim_horizon + params.takeover_bound())
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    restart = n.now
+    n.boot(2, seq_start=RUN_B + 10**6)
+    both = both_execute_f2(n, restart + params.startup_grace + 4 * params.t_max)
+    assert both <= params.heartbeat_interval, both
+    assert n.executing().get(6) == "f2" and 2 not in n.executing()
+    assert [e["robot"] for e in n.named("fenced")] == [2]
+    assert views_of_f2(n) == {(6, 1)} and n.nodes[2].snapshot().known["f2"] == (6, 1)
+
+
+@pytest.mark.parametrize("auth", ["shared", "none"])
+def test_a_holder_paused_by_a_recorded_hold_executes_again_once_it_is_outdated(
+        paper: Paper, auth: str) -> None:
+    """Run A's heartbeat of 6 holding f2 at epoch 1, played the moment run B starts: 2,
+    f2's holder by the plan, holds it and stops executing f2 while it is held; 6's live
+    standby heartbeat makes it `outdated`, and 2 executes f2 again at epoch 0 (an Assign
+    at the same entry). What an outsider with a recording can do: pause a slot for at
+    most the grace at a robot's start, never fence it."""
+    params = paper[1]
+    tape = run_a(swarm(paper, auth, RUN_A))
+    n = swarm(paper, auth, RUN_B)
+    play(n, tape["beat"])
+    n.run_until(params.startup_grace + 8 * params.t_max)
+    assert n.named("fenced") == [] and n.named("takeover") == [] and n.outputs[6] == []
+    assert n.outputs[2][-2:] == [Release("f2"), Assign("f2", 0)]
+    assert n.nodes[2].snapshot().role == Role.ACTIVE
+    moved_nothing(n, paused=True)
+    assert outdated(n) > 0
+
+
+@pytest.mark.parametrize("auth", MODES)
+def test_a_restarted_old_holder_learns_the_takeover_within_its_grace_and_never_resumes(
+        paper: Paper, auth: str) -> None:
+    """The cost of holding, bounded: 2 crashes, 6 takes f2 over at epoch 1, and 2
+    restarts on its state file (its hold of f2 at epoch 0). 6's heartbeats all raise
+    f2's entry at 2 and 6 has said nothing else there, so with a shared key or none 2
+    holds them until its start-up grace ends: its rejoin hold (shorter than the grace)
+    waits for them, so 2 never executes f2 again, and its view reaches (6, 1) within
+    the grace."""
+    params = paper[1]
+    n = swarm(paper, auth, RUN_B)
+    n.run_until(2.5)
+    snap = n.nodes[2].snapshot()
+    n.crash(2)
+    n.run_until(2.5 + params.claim_horizon + params.takeover_bound())
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    restart, before = n.now, len(n.outputs[2])
+    n.boot(2, seq_start=RUN_B + 10**6, restored=Restored(
+        known=dict(snap.known), held=("f2", 0), peer_seq=snap.peer_seq,
+        certificate=snap.certificate))
+    n.run_until(restart + params.startup_grace + params.heartbeat_interval)
+    assert n.nodes[2].snapshot().known["f2"] == (6, 1)
+    assert n.outputs[2][before:] == [] and n.named("fenced") == []
+    n.run_until(restart + params.startup_grace + 4 * params.t_max)
+    assert n.outputs[2][before:] == [] and views_of_f2(n) == {(6, 1)}
+    assert n.executing()[6] == "f2"
 
 
 @pytest.mark.parametrize("auth", MODES)

@@ -90,6 +90,14 @@ def started(plan: SwarmPlan, params: Params, rid: int,
     return d, d.tick(0.0)
 
 
+def past_grace(node: Driven, params: Params) -> float:
+    """Runs `node` to the end of its start-up grace and returns that time: within it, a
+    frame that would raise a view entry waits for a later word of its sender
+    (`held.py`), and these rules are about a robot that has settled."""
+    node.run_to(params.startup_grace)
+    return params.startup_grace
+
+
 # ---------------------------------------------------------------------- start-up
 def test_active_starts_with_assign_and_heartbeat(paper_plan: SwarmPlan,
                                                  udp_params: Params) -> None:
@@ -216,11 +224,12 @@ def test_faulty_robot_leaves_and_goes_silent(paper_plan: SwarmPlan, udp_params: 
 def test_leave_heard_makes_the_covering_standby_claim_at_once(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 6)
+    t = past_grace(node, udp_params)
     leave = wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.SHUTDOWN))
-    actions = node.receive(frame(paper_plan, 2, leave), 0.3)
+    actions = node.receive(frame(paper_plan, 2, leave), t + 0.3)
     assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
     assert node.snapshot().role is Role.CLAIMING
-    actions = node.tick(0.3 + udp_params.claim_hold)
+    actions = node.tick(t + 0.3 + udp_params.claim_hold)
     assert Assign("f2", 1) in actions
     assert events(actions, ev.Takeover)[0].fields() == {"function": "f2", "epoch": 1, "replaced": 2}
 
@@ -237,11 +246,12 @@ def test_leave_from_a_non_holder_is_ignored(paper_plan: SwarmPlan, udp_params: P
 def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 2)
-    actions = node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), 0.05)
+    t = past_grace(node, udp_params)
+    actions = node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), t + 0.05)
     assert events(actions, ev.Fenced)[0].fields() == {"function": "f2", "epoch": 1}
     assert Release("f2") in actions
     assert node.snapshot().role is Role.FENCED
-    node.tick(0.05 + udp_params.heartbeat_interval)
+    node.tick(t + 0.05 + udp_params.heartbeat_interval)
     snap = node.snapshot()
     assert (snap.role, snap.function, snap.known["f2"]) == (Role.STANDBY, None, (6, 1))
 
@@ -249,11 +259,12 @@ def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
 def test_older_epoch_does_not_fence_but_gets_an_answer(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 6)
-    node.receive(frame(paper_plan, 2, wire.Leave(2, 0, 0)), 0.1)
-    node.tick(0.1 + udp_params.claim_hold)
+    t = past_grace(node, udp_params)
+    node.receive(frame(paper_plan, 2, wire.Leave(2, 0, 0)), t + 0.1)
+    node.tick(t + 0.1 + udp_params.claim_hold)
     assert node.snapshot().function == "f2"
     # the old holder (2) heartbeats f2 at epoch 0: the new holder answers at once
-    actions = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2", epoch=0)), 0.6)
+    actions = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2", epoch=0)), t + 0.6)
     assert sent(actions) == [hb(paper_plan, "f2", epoch=1)]
     assert node.snapshot().role is Role.ACTIVE
 

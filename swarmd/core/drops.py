@@ -46,5 +46,10 @@ class DropReason(StrEnum):
     entry it holds since, a claim or hold it gave up since (a recording of an earlier
     run, or a reordered frame; DESIGN, "Every proof is bound to its run")."""
 
+    HELD_OVER = "held_over"
+    """A frame held within the start-up grace (numbered above its sender's word here)
+    pushed out by the bound on what is held (`held.py`; DESIGN, "Every proof is bound
+    to its run")."""
+
 
 __all__ = ["DropReason"]

@@ -261,7 +261,7 @@ class Episode(Signed):
         c = self._claim
         if c is None:
             return
-        if now >= c.until:
+        if now >= self._after_held(c.function, c.until):
             self._take_over(now)
         elif now >= c.resend:
             c.resend = now + self._params.warn_interval

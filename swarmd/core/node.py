@@ -38,6 +38,7 @@ from swarmd.core.drops import DropReason
 from swarmd.core.errors import NodeError
 from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
+from swarmd.core.held import HeldFrame, HeldFrames
 from swarmd.core.limits import check_keys, check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -94,7 +95,8 @@ class Node(Restart):
         self._beat = HeartbeatClock(params, now)
         self._chain = OwnChain(robot_id, self._signer, seq_start) if self._signer else None
         self._chains = PeerChains(1 / params.heartbeat_interval)
-        self._words, self._shown_newer = LatestWords(), set()
+        # What each peer last said of itself, and what waits for it (`held.py`).
+        self._words, self._held, self._shown_newer = LatestWords(), HeldFrames(), set()
         self._anchor_every, self._resync_after = anchor_every(params), resync_after(params)
         self._armed = now
         self._stopped = self._started = False
@@ -238,8 +240,29 @@ class Node(Restart):
             # Its own later heartbeat says otherwise: a recording of an earlier run, or
             # a frame reordered behind it (DESIGN, "Every proof is bound to its run").
             return self._drop(DropReason.OUTDATED)
+        if self._hold_back(frame, data, now):
+            return self._drain()
         self._on_message(frame, now, data)
+        word = self._words.seq(sender)
+        if word is not None and self._held:
+            # Its word now: what we held of it, numbered below, can be judged.
+            self._judge_held(self._held.waiting(sender, below=word), now)
         return self._drain()
+
+    def _judge_held(self, held: list[HeldFrame], now: float) -> None:
+        """Frames held within our start-up grace (`held.py`), judged as if they came now:
+        refused if their sender's later word contradicts them (a recording of an earlier
+        run, DESIGN "Every proof is bound to its run"), else acted on. They stay held
+        while they are judged: a hold of ours they paused (`_paused`) is fenced without
+        a second release, or executed again once none is left."""
+        was_paused = self._paused()
+        for h in held:
+            if self._outdated(h.sender, h.seq, h.frame.msg, now):
+                self._drops[DropReason.OUTDATED] += 1
+            else:
+                self._on_message(h.frame, now, h.data)
+        self._held.forget(held)
+        self._execution_follows(was_paused)
 
     def _on_message(self, frame: wire.Frame, now: float, data: bytes) -> None:
         """A frame through every receive filter: the per-message rules (`hearing.py`,
@@ -352,7 +375,11 @@ class Node(Restart):
             return self._drain()
         if not self._started:
             self._start(now)
-        if self._rejoin is not None and now >= self._rejoin.until:
+        if self._held and now >= self._start_time + self._params.startup_grace:
+            # A sender not heard within the whole grace is dead or cut off: what we
+            # held of it is taken as it would have been.
+            self._judge_held(self._held.waiting(), now)
+        if self._rejoin is not None and now >= self._rejoin_until():
             self._finish_rejoin(now)
         if isinstance(self._state, Fenced) and now >= self._state.until:
             self._to(Trigger.FENCE_DONE, Standby())
@@ -447,15 +474,19 @@ class Node(Restart):
         for w in self._watches.values():
             if best is None or w.deadline < best:
                 best = w.deadline
-        if self._claim is None and self._rejoin is None and not isinstance(self._state, Fenced):
+        if self._claim is None and self._rejoin is None and not self._held \
+                and not isinstance(self._state, Fenced):
             return best
         candidates = [] if best is None else [best]
         if self._claim is not None:
-            candidates.append(min(self._claim.until, self._claim.resend))
+            c = self._claim
+            candidates.append(min(self._after_held(c.function, c.until), c.resend))
         if isinstance(self._state, Fenced):
             candidates.append(self._state.until)
         if self._rejoin is not None:
-            candidates.append(self._rejoin.until)
+            candidates.append(self._rejoin_until())
+        if self._held:
+            candidates.append(self._start_time + self._params.startup_grace)
         return min(candidates) if candidates else None
 
     def standing(self) -> Standing:

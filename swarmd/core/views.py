@@ -58,7 +58,9 @@ class Views(NodeBase):
         f = self._function
         assert f is not None
         self._emit(ev.Fenced(function=f, epoch=epoch))
-        self._pending.append(Release(f))
+        if not self._paused():
+            # Paused, the robot was told to release f already (`_execution_follows`).
+            self._pending.append(Release(f))
         self._to(Trigger.FENCE, Fenced(now + self._params.heartbeat_interval))
 
     # ------------------------------------------------------------------ rejoin (rule 2)

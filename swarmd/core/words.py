@@ -12,10 +12,12 @@ later one, and the receiver refuses it (`outdated`) before it backs, starts or m
 anything. A frame that agrees with the later word (a `LEAVE` followed by standby
 heartbeats) passes: it says nothing the later frame did not.
 
-A `CLAIM` is not judged here: a claimant that gave up heartbeats as a standby since, yet
-its claim stays what the holder it named refutes (the proof of that holder's
-reassertion, DESIGN "Convergence"); a recorded claim backs nothing without its
-recorded `LEAVE` or warnings.
+A `CLAIM` below its claimant's later heartbeat as a standby is its word no more either:
+the claimant gave it up (backed off, refuted, fenced, or started afresh), so it backs no
+takeover, whatever warnings back it (a warning is no word of its signer about itself).
+Yet such a claim stays what the holder it named refutes, the proof of that holder's
+reassertion (DESIGN "Convergence"): the node keeps it where that holder heartbeats
+above it (`NodeBase._outdated`).
 
 Which heartbeats may set the word: only those whose sequence number is the sender's own,
 bound by what authenticates the frame — a tag of the swarm key, or, per robot without
@@ -79,6 +81,11 @@ class LatestWords:
         """Has `sender` said anything of itself here yet (an authenticated heartbeat)?"""
         return sender in self._heard
 
+    def seq(self, sender: int) -> int | None:
+        """The seq of `sender`'s word, if it said anything of itself that set it."""
+        last = self._last.get(sender)
+        return None if last is None else last.seq
+
     def above(self, sender: int, slot: int, epoch: int) -> bool:
         """Has `sender` heartbeat holding `slot` at an epoch above `epoch`?"""
         return self._top.get((sender, slot), -1) > epoch
@@ -105,6 +112,10 @@ class LatestWords:
                 return holds and last.epoch == epoch
             case wire.Heartbeat(function, epoch) if function != 0:
                 return not (holds and last.epoch >= epoch)
+            case wire.Claim():
+                # A claimant heartbeating as a standby since gave its claim up (backed
+                # off, refuted, fenced, or started afresh): it backs no takeover now.
+                return last.role == Role.STANDBY
         return False
 
 
