@@ -243,8 +243,9 @@ class Node(Restart):
         if self._hold_back(frame, data, now):
             return self._drain()
         self._on_message(frame, now, data)
-        word = self._words.seq(sender)
-        if word is not None and self._held:
+        # Nothing held (after the start-up grace, always): no word to look up.
+        word = self._words.seq(sender) if self._held else None
+        if word is not None:
             # Its word now: what we held of it, numbered below, can be judged.
             self._judge_held(self._held.waiting(sender, below=word), now)
         return self._drain()
@@ -276,14 +277,17 @@ class Node(Restart):
                 if self._verifier is not None:
                     self._chains.commit(sender, hb.n, hb.link, frame.seq, now,
                                         anchor=hb.anchor)
+                # The slot it names, looked up once for the rules below (the plan is
+                # fixed for the node's life).
+                f = self._plan.function_at(hb.function) if hb.function else None
                 # Vouching is for a shared key or unsigned (`_vouch`): per robot no
                 # heartbeat pays for it.
                 vouching = self._verifier is None
-                own = vouching and self._suspecting(sender, hb)
+                own = vouching and self._suspecting(sender, hb, f)
                 self._on_heartbeat(sender, hb, now)
-                self._heard_word(sender, frame.seq, hb)
+                self._heard_word(sender, frame.seq, hb, f)
                 if vouching:
-                    self._vouch(frame, hb, own, data, now)
+                    self._vouch(frame, hb, f, own, data, now)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
                 if w.belief >= level_byte(self._params.suspect_level):
@@ -319,27 +323,25 @@ class Node(Restart):
                 and slot in self._relevant.slots:
             self._vouches.suspected(f, Holder(suspect, epoch), now)
 
-    def _suspecting(self, sender: int, hb: wire.Heartbeat) -> bool:
-        """Does our own watch of the slot `hb` names suspect `sender` at `hb`'s epoch
-        (before `hb`)? Not a new holder that ends a handover: it was suspected by
+    def _suspecting(self, sender: int, hb: wire.Heartbeat, f: str | None) -> bool:
+        """Does our own watch of the slot `hb` names (`f`) suspect `sender` at `hb`'s
+        epoch (before `hb`)? Not a new holder that ends a handover: it was suspected by
         nobody."""
-        f = self._plan.function_at(hb.function) if hb.function else None
         if f is None:
             return False
         watch = self._watches.get(f)
         return watch is not None and watch.suspecting \
             and self._known[f] == Holder(sender, hb.epoch)
 
-    def _vouch(self, frame: wire.Frame, hb: wire.Heartbeat, own: bool, data: bytes,
-               now: float) -> None:
-        """Relay `frame` (`hb`, as heard: `data`) if it answers a suspicion heard here of
-        its sender, the slot's holder as we know it. With a shared key or unsigned only
-        (`_on_message` calls it there, and `_suspicion_heard` arms nothing per robot):
-        per robot the holder's REFUTE is what others relay (`signed.py`), and a heartbeat
-        is a link of its sender's chain, not a frame to repeat. Only the top of the
-        sender's run: a frame reordered or played back behind a newer one vouches for
-        nothing now."""
-        f = self._plan.function_at(hb.function) if hb.function else None
+    def _vouch(self, frame: wire.Frame, hb: wire.Heartbeat, f: str | None, own: bool,
+               data: bytes, now: float) -> None:
+        """Relay `frame` (`hb` for slot `f`, as heard: `data`) if it answers a suspicion
+        heard here of its sender, the slot's holder as we know it. With a shared key or
+        unsigned only (`_on_message` calls it there, and `_suspicion_heard` arms nothing
+        per robot): per robot the holder's REFUTE is what others relay (`signed.py`),
+        and a heartbeat is a link of its sender's chain, not a frame to repeat. Only the
+        top of the sender's run: a frame reordered or played back behind a newer one
+        vouches for nothing now."""
         entry = Holder(frame.sender, hb.epoch)
         # Not while faulty: a faulty robot only leaves (rule 7).
         if f is None or not self._heartbeating() \
@@ -352,17 +354,18 @@ class Node(Restart):
         self._pending.append(Broadcast(raw))
         self._frames_out += 1
 
-    def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat) -> None:
-        """A heartbeat we believed sets its sender's latest word (`words.py`) if its seq
-        is bound to it (a swarm key's tag, per robot an anchor, or unsigned anything) and
-        it is the top of the sender's own run (`ReplayFilter.top`: not a lone frame far
-        ahead, which would make the sender's own next frames `outdated`). A hold we did
-        not believe (uncertified, outranked) sets nothing: an insider's own anchor at a
-        forged epoch must not make its real heartbeats `outdated`."""
+    def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat,
+                    f: str | None) -> None:
+        """A heartbeat (for slot `f`) we believed sets its sender's latest word
+        (`words.py`) if its seq is bound to it (a swarm key's tag, per robot an anchor,
+        or unsigned anything) and it is the top of the sender's own run
+        (`ReplayFilter.top`: not a lone frame far ahead, which would make the sender's
+        own next frames `outdated`). A hold we did not believe (uncertified, outranked)
+        sets nothing: an insider's own anchor at a forged epoch must not make its real
+        heartbeats `outdated`."""
         if not (hb.anchor or self._keys or self._verifier is None):
             return
         self._words.held(sender, hb)
-        f = self._plan.function_at(hb.function) if hb.function else None
         top = self._replay.top(sender)
         if (top is None or seq >= top) and (
                 hb.function == 0 or (f is not None and self._known[f] == (sender, hb.epoch))):
@@ -469,14 +472,21 @@ class Node(Restart):
         if not self._started:
             return self._start_time
         # Worked out at the end of every entry point (`_drain`), so once per frame heard:
-        # the common case (heartbeats and watchdogs only) is a plain loop, no list built.
+        # the common case (an active robot's heartbeats and watchdogs, or a standby's
+        # heartbeats, nothing held) reads the role once and builds no list.
+        state = self._state
         best = self._beat.next if self._heartbeating() else None
-        for w in self._watches.values():
-            if best is None or w.deadline < best:
-                best = w.deadline
-        if self._claim is None and self._rejoin is None and not self._held \
-                and not isinstance(self._state, Fenced):
+        if isinstance(state, Active):
+            for w in state.watches.values():
+                if best is None or w.deadline < best:
+                    best = w.deadline
+        if isinstance(state, Active | Standby) and not self._held:
             return best
+        return self._rare_deadline(best)
+
+    def _rare_deadline(self, best: float | None) -> float | None:
+        """`_deadline` beyond heartbeats and watchdogs (`best`, the earliest of those):
+        a claim's wait, a fence, a rejoin's hold, the end of the start-up grace."""
         candidates = [] if best is None else [best]
         if self._claim is not None:
             c = self._claim
