@@ -165,9 +165,12 @@ class NodeBase:
     def _peer_back(self, sender: int, now: float) -> None:
         """Per-robot mode: a frame of `sender`, verified or not. Back after a silence
         long enough to have lost our chain, it gets anchors from us (`chain.py`)."""
+        chain = self._chain
+        if chain is None:  # a shared key or unsigned: no chain, nothing to look up
+            return
         last = self._heard_at.get(sender)
-        if self._chain is not None and last is not None and now - last > self._resync_after:
-            self._chain.reanchor(now, self._resync_after)
+        if last is not None and now - last > self._resync_after:
+            chain.reanchor(now, self._resync_after)
 
     def _slot(self, index: int) -> str | None:
         """The function at wire slot `index`; None (and a `bad_function` drop) if the
