@@ -285,9 +285,15 @@ class Node(Restart):
                 vouching = self._verifier is None
                 own = vouching and self._suspecting(sender, hb, f)
                 self._on_heartbeat(sender, hb, now)
-                self._heard_word(sender, frame.seq, hb, f)
-                if vouching:
-                    self._vouch(frame, hb, f, own, data, now)
+                # Its seq bound to its sender (a swarm key's tag, per robot an anchor,
+                # or unsigned anything): its word, and what we may vouch for.
+                if hb.anchor or self._keys or vouching:
+                    # The top of its sender's run, which no rule moves once the replay
+                    # filter took the frame: asked once for both.
+                    top = self._replay.top(sender)
+                    self._heard_word(sender, frame.seq, hb, f, top)
+                    if vouching:
+                        self._vouch(frame, hb, f, own, top, data, now)
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
                 if w.belief >= level_byte(self._params.suspect_level):
@@ -334,19 +340,21 @@ class Node(Restart):
             and self._known[f] == Holder(sender, hb.epoch)
 
     def _vouch(self, frame: wire.Frame, hb: wire.Heartbeat, f: str | None, own: bool,
-               data: bytes, now: float) -> None:
-        """Relay `frame` (`hb` for slot `f`, as heard: `data`) if it answers a suspicion
-        heard here of its sender, the slot's holder as we know it. With a shared key or
+               top: int | None, data: bytes, now: float) -> None:
+        """Relay `frame` (`hb` for slot `f`, as heard: `data`; `top`: its sender's
+        established top) if it answers a suspicion heard here of its sender, the slot's
+        holder as we know it. With a shared key or
         unsigned only (`_on_message` calls it there, and `_suspicion_heard` arms nothing
         per robot): per robot the holder's REFUTE is what others relay (`signed.py`),
         and a heartbeat is a link of its sender's chain, not a frame to repeat. Only the
         top of the sender's run: a frame reordered or played back behind a newer one
         vouches for nothing now."""
-        entry = Holder(frame.sender, hb.epoch)
         # Not while faulty: a faulty robot only leaves (rule 7).
         if f is None or not self._heartbeating() \
-                or self._known[f] != entry or self._replay.top(frame.sender) != frame.seq \
-                or not self._vouches.due(f, entry, now, own=own):
+                or self._known[f] != (frame.sender, hb.epoch) or top != frame.seq:
+            return
+        # The entry built only now: most heartbeats are not the top, or not the holder's.
+        if not self._vouches.due(f, Holder(frame.sender, hb.epoch), now, own=own):
             return
         # The bytes heard, or (a driver that decoded the frame for us) the same frame
         # encoded again: with a swarm key its tag is the same as the sender's.
@@ -354,19 +362,16 @@ class Node(Restart):
         self._pending.append(Broadcast(raw))
         self._frames_out += 1
 
-    def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat,
-                    f: str | None) -> None:
-        """A heartbeat (for slot `f`) we believed sets its sender's latest word
-        (`words.py`) if its seq is bound to it (a swarm key's tag, per robot an anchor,
-        or unsigned anything) and it is the top of the sender's own run
-        (`ReplayFilter.top`: not a lone frame far ahead, which would make the sender's
-        own next frames `outdated`). A hold we did not believe (uncertified, outranked)
-        sets nothing: an insider's own anchor at a forged epoch must not make its real
-        heartbeats `outdated`."""
-        if not (hb.anchor or self._keys or self._verifier is None):
-            return
+    def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat, f: str | None,
+                    top: int | None) -> None:
+        """A heartbeat (for slot `f`) we believed, whose seq is bound to its sender (a
+        swarm key's tag, per robot an anchor, or unsigned anything: `_on_message`
+        checks), sets its sender's latest word (`words.py`) if it is the top of the
+        sender's own run (`top`, `ReplayFilter.top`: not a lone frame far ahead, which
+        would make the sender's own next frames `outdated`). A hold we did not believe
+        (uncertified, outranked) sets nothing: an insider's own anchor at a forged epoch
+        must not make its real heartbeats `outdated`."""
         self._words.held(sender, hb)
-        top = self._replay.top(sender)
         if (top is None or seq >= top) and (
                 hb.function == 0 or (f is not None and self._known[f] == (sender, hb.epoch))):
             self._words.heard(sender, seq, hb)
