@@ -19,8 +19,8 @@ tree's own code makes its keys and runs its daemons (`--tree PATH` measures anot
 checkout). `--together` runs both trees' swarms at the same time instead, each on its own
 port, and measures them over the same seconds: on a machine shared with other jobs a load
 that comes and goes then weighs on both trees alike. `--profile FILE` runs robot 1
-under cProfile, CPU time, from READY until it is told to stop, writes the stats to FILE
-and prints the top entries per frame.
+(`--profile-robot 6`: the standby) under cProfile, CPU time, from READY until it is
+told to stop, writes the stats to FILE and prints the top entries per frame.
 `--floor` also measures, beside robot 1 and the standby, a bare process for each on the
 daemon's event loop (bench/bare_listener.py) that wakes for every frame on the group and
 at that robot's heartbeat period, sends its heartbeats and does the checks `--auth` makes
@@ -33,7 +33,7 @@ of reach there.
     python bench/bench_daemon.py [--duration 10] [--alone | --failover]
                                  [--auth per-robot|shared|none]
                                  [--compare REV [--runs 3] [--together]]
-                                 [--profile FILE] [--floor]
+                                 [--profile FILE [--profile-robot 1|6]] [--floor]
 """
 
 from __future__ import annotations
@@ -129,7 +129,8 @@ def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
             cfg.write_text(f"robot: {robot}\nswarm: {swarm}\n"
                            f"transport: {{kind: udp, port: {port}}}\n"
                            f"state_dir: {tmp}/state{robot}\n" + identity)
-            how = [str(PROFILER), args.profile] if robot == 1 and args.profile \
+            how = [str(PROFILER), args.profile] \
+                if robot == args.profile_robot and args.profile \
                 else ["-m", "swarmd.cli"]
             return subprocess.Popen([sys.executable, *how, "start", "--config", str(cfg)],
                                     stdout=subprocess.PIPE, text=True, env=env, cwd=root)
@@ -388,7 +389,10 @@ def main() -> int:
                          "(bench/bare_listener.py): waking for the same frames and their "
                          "unavoidable checks, at this load")
     ap.add_argument("--profile", metavar="FILE",
-                    help="run robot 1 under cProfile (CPU time, READY to stop); stats to FILE")
+                    help="run a robot (--profile-robot, default 1) under cProfile (CPU time, "
+                         "READY to stop); stats to FILE")
+    ap.add_argument("--profile-robot", type=int, choices=(1, 6), default=1,
+                    help="the robot --profile runs: 1 (active) or 6 (the standby)")
     args = ap.parse_args()
     if args.compare:
         if args.runs < 1:
@@ -402,12 +406,12 @@ def main() -> int:
         return 1
     code = report(args, r)
     if args.profile:
-        print_profile(args.profile)
+        print_profile(args.profile, args.profile_robot)
     return code
 
 
-def print_profile(path: str, top: int = 25) -> None:
-    """The top entries of robot 1's profile, in microseconds per frame (in and out)."""
+def print_profile(path: str, robot: int, top: int = 25) -> None:
+    """The top entries of `robot`'s profile, in microseconds per frame (in and out)."""
     import pstats
 
     stats = pstats.Stats(path)
@@ -417,7 +421,7 @@ def print_profile(path: str, top: int = 25) -> None:
     n_in, n_out = calls.get(("runtime.py", "_on_frame"), 0), calls.get(("udp.py", "send"), 0)
     frames = n_in + n_out
     total: float = stats.total_tt  # type: ignore[attr-defined]
-    print(f"profile of robot 1: {n_in} frames in, {n_out} out, {total:.3f} s CPU under "
+    print(f"profile of robot {robot}: {n_in} frames in, {n_out} out, {total:.3f} s CPU under "
           f"the profiler ({1e6 * total / max(1, frames):.0f} us per frame)")
     rows = sorted(raw.items(), key=lambda kv: kv[1][3], reverse=True)[:top]
     print(f"{'cumulative us/frame':>20} {'own us/frame':>13} {'calls':>7}  function")

@@ -20,7 +20,7 @@ from swarmd.core.evidence import cert_says
 from swarmd.core.records import Holder
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.slots import greater
-from swarmd.core.state import Standby
+from swarmd.core.state import Active, Claiming, Rejoining, Standby
 
 
 class Hearing(Episode):
@@ -45,7 +45,9 @@ class Hearing(Episode):
                 and not self._ev.is_certified(f, sender, hb.epoch):
             self._uncertified_beat(f, hb, now)
             return
-        if self._holds(f) and sender != self._robot_id:
+        # Ours, heard from another robot: the one case below that moves our role.
+        rival = sender != self._robot_id and self._holds(f)
+        if rival:
             self._refute_claim(f, sender, hb.epoch, 0, now)  # if it replaces us, rule 4
         ahead = self._forward(f, entry)
         if ahead != entry:
@@ -58,8 +60,8 @@ class Hearing(Episode):
         self._ears.slot_beat(f, sender, hb.epoch, now)
         self._claims_seen.forget(f)
         # Rule 2: a greater entry for the slot we execute (a higher epoch, or ours by a
-        # lower id) ends our hold.
-        if self._holds(f) and sender != self._robot_id:
+        # lower id) ends our hold. Only if `rival`: nothing since made us hold f.
+        if rival and self._holds(f):
             self._fence(hb.epoch, now)
             return
         self._holder_heard(f, sender, hb.epoch, known, now)
@@ -170,7 +172,10 @@ class Hearing(Episode):
                       now: float) -> None:
         """f's holder (`sender` at `epoch`; `before`: the view until now) heartbeated:
         watchdog, votes, our claim and our rejoin learn it."""
-        watch = self._watches.get(f)
+        # The role read once: only an active robot watches, claims and rejoins are
+        # roles of their own (`state.py`), and the watch's verdict moves no role.
+        state = self._state
+        watch = state.watches.get(f) if isinstance(state, Active) else None
         if watch is not None:
             suspected = watch.suspecting
             reasserted = self._identity is not None and epoch > before.epoch \
@@ -187,14 +192,14 @@ class Hearing(Episode):
         votes = self._votes.get(f)
         if votes is not None and votes.witnesses:
             votes.clear()  # rule 4: the suspect is alive, or a new holder is
-        claim = self._claim
-        if claim is not None and claim.function == f:
-            if epoch >= claim.epoch:
+        if isinstance(state, Claiming) and state.wait.function == f:
+            if epoch >= state.wait.epoch:
                 self._back_off(sender)
-            elif sender == claim.failed:
+            elif sender == state.wait.failed:
                 self._emit(ev.Refute(subject=sender, function=f))
                 self._to(Trigger.REFUTED, Standby())
-        if self._rejoin is not None and self._rejoin.function == f and sender != self._robot_id:
+        if isinstance(state, Rejoining) and state.rejoin.function == f \
+                and sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
 
     # ------------------------------------------------------------------ LEAVE

@@ -226,6 +226,13 @@ class ReplayFilter:
         c = None if now is None else self.clock(now)
         return None if c is None else c + AHEAD
 
+    def _beyond(self, seq: int, now: float) -> bool:
+        """Is `seq` above `limit(now)`? The same sum, in one call: `stale` and `check`
+        ask it of every frame heard."""
+        origin = self.origin
+        return origin is not None \
+            and seq > origin + int(RATE * max(0.0, now - self.since)) + AHEAD
+
     def restore(self, sender: int, top: int) -> bool:
         """A peer's seq as persisted before a restart: it and everything below it count
         as seen, so an old frame stays old. One above the bound at our start is refused
@@ -240,8 +247,7 @@ class ReplayFilter:
         """What `check` would say of a frame that is no longer new (`replay`, `seq_jump`),
         moving nothing: the cheap test a receiver makes before checking a signature, so
         a flood of played-back signed frames costs no signature check."""
-        bound = self.limit(now)
-        if bound is not None and seq > bound:
+        if self._beyond(seq, now):
             return DropReason.SEQ_JUMP
         known = self.state.get(sender)
         if known is None:
@@ -255,8 +261,7 @@ class ReplayFilter:
     def check(self, sender: int, seq: int, now: float | None = None) -> DropReason | None:
         """None if the frame is new (and it is remembered), else the drop reason
         (`replay` or `seq_jump`). Without `now` (or an origin), seqs are not bounded."""
-        bound = self.limit(now)
-        if bound is not None and seq > bound:
+        if now is not None and self._beyond(seq, now):
             return DropReason.SEQ_JUMP
         known = self.state.get(sender)
         if known is None:

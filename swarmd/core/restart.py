@@ -102,10 +102,11 @@ class Restart(Hearing):
         numbered above the frame, can judge it. Per robot nothing is held: a heartbeat
         moves no entry without its certificate, and within the grace a LEAVE of a
         sender not heard is refused (`_outdated`)."""
+        if self._verifier is not None or now - self._start_time >= self._params.startup_grace:
+            return False  # every frame after the grace: no word to look up
         sender = frame.sender
         word = self._words.seq(sender)
-        if self._verifier is not None or (word is not None and frame.seq <= word) \
-                or now - self._start_time >= self._params.startup_grace:
+        if word is not None and frame.seq <= word:
             return False
         slot = self._raised(sender, frame.msg)
         if slot == 0:

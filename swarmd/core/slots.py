@@ -34,8 +34,9 @@ def rank(entry: Holder) -> tuple[int, int, int]:
 
 
 def greater(a: Holder, b: Holder) -> bool:
-    """Is entry `a` strictly greater than entry `b`?"""
-    return rank(a) > rank(b)
+    """Is entry `a` strictly greater than entry `b`? (Equal entries, a holder heard
+    again as we know it, rank alike: no rank worked out.)"""
+    return a != b and rank(a) > rank(b)
 
 
 def join(a: Holder, b: Holder) -> Holder:
@@ -57,7 +58,9 @@ class SlotTable(Mapping[str, Holder]):
     def merge(self, f: str, entry: Holder) -> bool:
         """Keep the greater of f's entry and `entry`. True if f's entry rose."""
         old = self._entries.get(f)
-        if old is not None and rank(old) >= rank(entry):
+        # `old == entry` first: every heartbeat heard merges the entry it shows, almost
+        # always the one we know (equal entries rank alike).
+        if old is not None and (old == entry or rank(old) >= rank(entry)):
             return False
         self._entries[f] = Holder(*entry)
         return True
