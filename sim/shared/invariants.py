@@ -474,7 +474,7 @@ class Checker:
     def _judge_expect(self, e: _Expect, duration: float) -> Violation | None:
         """Invariant 1 for one failure whose slot was not taken over (see the module
         docstring): the violation, or None when the miss is excused."""
-        bound = self._takeover_bound(e.t)
+        bound = self._takeover_bound(e)
         near = set(self.plan.watched_by(e.function))
         hood = {*self.plan.covered_by(e.function), *e.standbys, *e.watchers}
         mates = [x for x in self.failures if x.robot != e.robot
@@ -505,7 +505,7 @@ class Checker:
     def _expect_deadline(self, e: _Expect, mates: list[_Failure]) -> float:
         """By when the failure's slot must be taken over: the takeover bound, restarted
         by each failure in its neighbourhood and stretched by a standby's grace."""
-        bound = self._takeover_bound(e.t)
+        bound = self._takeover_bound(e)
         deadline = e.t + bound
         moved = True
         while moved:  # each failure in the neighbourhood restarts the clock
@@ -523,13 +523,28 @@ class Checker:
                 deadline = max(deadline, before[-1] + grace + bound)
         return deadline
 
-    def _takeover_bound(self, t: float) -> float:
-        """The takeover bound for a failure at `t` (DESIGN "Detection": a function of the
-        links as measured): the configured one, unless a link fault or a pause came
-        before, which the watchers may have learnt as a fade."""
-        if self.faded_at is not None and self.faded_at < t:
+    def _takeover_bound(self, e: _Expect) -> float:
+        """The takeover bound for a failure (DESIGN "Detection": a function of the links
+        as measured): the configured one, unless a link fault or a pause came before,
+        which the watchers may have learnt as a fade, or the links that judge it were
+        not measured yet (`_measuring`): then their patience may be `t_max_bursty`."""
+        if (self.faded_at is not None and self.faded_at < e.t) or self._measuring(e):
             return self.bounds.takeover_faded
         return self.bounds.takeover
+
+    def _measuring(self, e: _Expect) -> bool:
+        """Were the failed holder's links to its watchers and standbys heard for less
+        than a start-up grace when it failed? A link is acted on only once heard for a
+        start-up grace's worth of heartbeats (`witness.Ears.patience`): from the start of
+        the run, of the holder's hold (a takeover), or of a watcher's or standby's node
+        (a restart); `t_max` more for its first heartbeat to be heard."""
+        since = [s for r in (e.robot, *e.watchers, *e.standbys)
+                 for s in self.started_at.get(r, ()) if s <= e.t]
+        since += [tk["t"] for tk in self.takeovers
+                  if tk["robot"] == e.robot and tk["function"] == e.function
+                  and tk["t"] <= e.t]
+        settled = self.params.startup_grace + self.params.t_max
+        return bool(since) and e.t < max(since) + settled
 
     def _excused(self, e: _Expect, deadline: float, duration: float) -> bool:
         """Whether the slot was taken over in time, or the miss is no violation."""
