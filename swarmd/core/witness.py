@@ -58,15 +58,29 @@ class Ears:
 
     # ------------------------------------------------------------------ beliefs
     def patience(self, robot: int) -> float:
-        """s of silence of `robot`'s slot heartbeats after which this robot suspects it:
-        `t_max` on a link measured clean, up to `t_max_bursty` on a bursty one; and
-        `t_max_bursty` on a link not measured yet (never heard, or heard for less than a
-        start-up grace's worth of heartbeats): its first seconds are no evidence that it
-        is clean, and a fade then would otherwise be judged by `t_max` alone."""
-        p = self._params
+        """s of silence of `robot`'s slot heartbeats after which this robot, watching
+        it, suspects it: `t_max` on a link measured clean, up to `t_max_bursty` on a
+        bursty one; and `t_max_bursty` on a link not measured yet (never heard, or heard
+        for less than a start-up grace's worth of heartbeats): its first seconds are no
+        evidence that it is clean, and a fade then would otherwise be judged by `t_max`
+        alone."""
         link = self._links.get(robot)
         if link is None or link.samples < self._settle:
-            return p.t_max_bursty
+            return self._params.t_max_bursty
+        return self._believed(link)
+
+    def _ears_patience(self, robot: int) -> float:
+        """The patience a standby's own ears judge `robot`'s silence by (rules 4 and 9):
+        the link's belief, `t_max` until it has measured bursts, as on a clean link.
+        Unlike a watcher's suspicion, these are a veto on a claim: a longer one on a
+        link not measured yet would let a frame of the suspect's heard late (a replay
+        that got through) hold a claim back longer than the T_max/2 `alive_to_me`
+        promises."""
+        link = self._links.get(robot)
+        return self._params.t_max if link is None else self._believed(link)
+
+    def _believed(self, link: LinkBelief) -> float:
+        p = self._params
         return link.patience(p.suspect_level, p.t_max, p.t_max_bursty)
 
     def level(self, robot: int, silence: float) -> float:
@@ -128,7 +142,7 @@ class Ears:
         the same moment give or take the channel's jitter, so the first quorum claims;
         a frame of the suspect's heard later (a replay that got through, a refutation)
         holds the claim back for T_max/2, no more."""
-        within = self.patience(holder) - self._params.t_max / 2
+        within = self._ears_patience(holder) - self._params.t_max / 2
         return self.heard_lately(f, holder, epoch, now, within)
 
     def own_ears(self, f: str, known: Mapping[str, Holder], now: float) -> bool:
@@ -145,7 +159,7 @@ class Ears:
         if now - self._start < p.startup_grace:
             return False
         heard = self._slot_heard.get(f)
-        if heard is not None and now - heard.at < self.patience(heard.holder):
+        if heard is not None and now - heard.at < self._ears_patience(heard.holder):
             return False
         live = len(self._plan.watched_by(f)) - len(self.silent_watchers(f, known, now))
         return live < p.quorum
@@ -158,7 +172,7 @@ class Ears:
         for g in self._plan.watched_by(f):
             beat = self._slot_heard.get(g)
             if beat is None or beat.holder != known[g].robot \
-                    or now - beat.at >= self.patience(beat.holder):
+                    or now - beat.at >= self._ears_patience(beat.holder):
                 silent.add((g, known[g].robot))
         return frozenset(silent)
 
