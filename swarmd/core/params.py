@@ -50,7 +50,9 @@ class Params:
     claimant or a refutation before taking over. A few channel latencies."""
 
     startup_grace: float
-    """s. A watched slot never heard from is suspected after this (DESIGN rule 5)."""
+    """s. A watched slot never heard from is suspected after this (DESIGN rule 5); a
+    link heard for less than this many seconds' worth of heartbeats is not measured yet
+    and its watchers' patience is `t_max_bursty` (DESIGN "Detection")."""
 
     standby_timeout: float
     """s. A standby not heard for this long is taken for dead (DESIGN rule 6)."""
