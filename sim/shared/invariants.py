@@ -11,7 +11,8 @@ Invariants (each violation names the time, robot and what went wrong):
 1. takeover: an ACTIVE robot that crashes (or collides, leaves, reports a fault, or stays
    paused long enough) is replaced within the takeover bound (`bounds.takeover`;
    `bounds.takeover_faded` once a link fault or a pause may have taught the watchers a
-   longer patience, DESIGN "Detection"), whatever else fails at the same time, whenever
+   longer patience, or while their links to the holder are not measured yet, DESIGN
+   "Detection"), whatever else fails at the same time, whenever
    its slot keeps a live covering standby and (for a silent failure: crash, collide,
    pause) at least one live watcher. "Live" means not failed at any
    moment between the failure and the deadline. Not a violation:
@@ -101,8 +102,9 @@ class Bounds:
     """After the last fault, by when every view of every slot is one (invariant 8): a
     takeover, then the holders' unasked certificate relay (`RELAY_EVERY` T_max)."""
     takeover_faded: float = 0.0
-    """The takeover bound for a failure after a link fault or a pause: the watchers may
-    have measured that silence as a fade of the link and wait up to `t_max_bursty`."""
+    """The takeover bound for a failure after a link fault or a pause, or on links not
+    measured yet: the watchers may have measured that silence as a fade of the link, or
+    not measured the link enough to act on it, and wait up to `t_max_bursty`."""
 
     @classmethod
     def of(cls, p: Params, loss: float) -> Bounds:
