@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import math
 
+from swarmd.core.params import Params
+
 LAPSE = 1.5
 """Times the witness's cadence: how overdue its next warning may be, once its
 heartbeats show its link to us is up, before its vote lapses. Its warnings and
@@ -54,6 +56,14 @@ class VoteCounter:
         self._ceiling = cadence_ceiling
         """s. The slowest a suspecting witness warns (after its alert, rule 8): the
         cadence of a vote not measured yet, and the longest gap that is one."""
+
+    @classmethod
+    def of(cls, params: Params) -> VoteCounter:
+        """A standby's counter for one slot at the swarm's timing: its vote window; no
+        witness warns faster than `warn_interval` nor, suspecting, slower than
+        `standby_heartbeat_interval` (after its alert, rule 8)."""
+        return cls(params.vote_window, params.warn_interval,
+                   params.standby_heartbeat_interval)
 
     def add(self, witness: int, subject: int, epoch: int, now: float) -> int:
         """Record a warning; return the number of distinct witnesses in the window."""
