@@ -40,9 +40,9 @@ def takeovers(paper: tuple[SwarmPlan, Params], auth: str, spec: str, f: str,
 def test_a_holder_faded_in_its_first_second_is_left_alone(
         paper: tuple[SwarmPlan, Params], auth: str) -> None:
     """Robot 3's radio fades to everyone 0.3 s into the run, for 1 s: its watchers heard
-    it two or three times, its standby perhaps never. Judged by `t_max` as a clean link,
-    that was a crash, and standby 6 took f3 over 0.9 s in; unmeasured, the links wait
-    `t_max_bursty` (doubting from `t_max`, which 3 answers once it is heard again)."""
+    it two or three times, its standby perhaps never. Judged by `t_max`, as a clean link
+    is, that silence is a crash and standby 6 takes f3 over 0.9 s in; a link not measured
+    yet waits `t_max_bursty` (doubting from `t_max`, which 3 answers once heard again)."""
     assert takeovers(paper, auth, "fade:3@0.3+1", "f3") == []
 
 
@@ -82,12 +82,12 @@ def hear(node: Node, t: float, frame: bytes) -> bool:
 @pytest.mark.parametrize("auth", MODES)
 def test_a_witness_heard_after_its_one_warning_loses_its_vote(
         paper: tuple[SwarmPlan, Params], auth: str) -> None:
-    """Standby 6 stopped hearing robot 2 (f2) at 3 s, a long fade of that one link.
+    """Standby 6 stops hearing robot 2 (f2) at 3 s, a long fade of that one link.
     Witness 3 warns about 2 once at 5 s and, having heard 2 again at once, warns no
     more; 6 keeps hearing 3's heartbeats. Witness 1 warns about 2 at 5.9 s, its own
-    link to 2 faded now. Two witnesses within the vote window, but never silent at
-    once: 3's single warning kept its vote the whole window (its cadence unknown), and
-    6 claimed f2 from a live robot. Now a vote with no cadence measured is given the
+    link to 2 faded by then. Two witnesses within the vote window, never silent at
+    once: a vote standing the whole window on one warning (its cadence unknown) would
+    have 6 claim f2 from a live robot. A vote with no cadence measured is given the
     slowest a suspecting witness warns at (after its alert, rule 8), and lapses."""
     plan, params = paper
     radio = Radio(plan, params, auth)
