@@ -17,7 +17,8 @@ their normal or exponential gaps:
   than the patience cap is an outage, not a burst: it is counted only up to the cap
   (a censored sample), so one fault does not teach the link to wait forever;
 - the counts decay with a half-life of `HALF_LIFE` heartbeat periods, so memory per link
-  is six numbers, whatever the run's length, and a link that heals earns its speed back;
+  is a handful of numbers (`LinkBelief.__slots__`), whatever the run's length, and a
+  link that heals earns its speed back;
 - a silence of x + 1 periods (x heartbeats missed) is as likely as `p_enter * q^(x-1)`
   for a live neighbour: the suspicion level is minus its log10 (2 means one silence in a
   hundred this long, on this link, from a live robot), rising linearly with silence.
