@@ -10,14 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from swarmd.core.belief import (
-    HALF_LIFE,
-    LEVEL_MAX,
-    MIN_BURSTS,
-    LinkBelief,
-    byte_level,
-    level_byte,
-)
+from swarmd.core.belief import HALF_LIFE, LEVEL_MAX, LinkBelief, byte_level, level_byte
 from swarmd.core.params import Params, radio, udp
 
 P = udp()
@@ -96,32 +89,6 @@ def test_a_bursty_link_earns_patience(loss: float, burst: float, low: float,
     assert low < patience(b) <= high
 
 
-def test_a_burst_length_from_few_bursts_is_not_acted_on() -> None:
-    # One burst of 2 lost heartbeats in 35: the estimate makes bursts short and would
-    # wait ~0.6 s; resting on one burst, it is no estimate yet, so the link waits the cap.
-    b = heard([H] * 20 + [3 * H] + [H] * 14)
-    assert not b.bursts_known(P.suspect_level)
-    assert patience(b) == P.t_max_bursty
-    assert b.level(0.7) >= P.suspect_level  # what the estimate alone would act on
-
-
-def test_a_burst_length_is_acted_on_from_min_bursts() -> None:
-    # The same short bursts, enough of them seen to end (one more than MIN_BURSTS, as
-    # the first have decayed a little by the last): the measured patience again.
-    few = heard(([H] * 20 + [3 * H]) * (int(MIN_BURSTS) - 1) + [H])
-    enough = heard(([H] * 20 + [3 * H]) * (int(MIN_BURSTS) + 1) + [H])
-    assert patience(few) == P.t_max_bursty
-    assert enough.bursts_known(P.suspect_level)
-    assert P.t_max <= patience(enough) < P.t_max_bursty
-
-
-def test_a_loss_in_thousands_needs_no_burst_length() -> None:
-    # One lost heartbeat already reaches the threshold: the link stays at t_max.
-    b = heard([H] * 3000 + [2 * H] + [H] * 10)
-    assert b.bursts_known(P.suspect_level)
-    assert patience(b) == P.t_max
-
-
 def test_patience_never_passes_the_cap() -> None:
     # A link that only ever comes back after long outages: as patient as allowed.
     b = heard([3.0] * 200)
@@ -198,4 +165,4 @@ def test_memory_per_link_is_bounded(gaps: list[float], rounds: int) -> None:
     enter, _ = link.stats()
     assert 0.0 <= enter <= 1.0
     assert all(getattr(link, n) <= ceiling for n in ("_received", "_bursts", "_continued",
-                                                     "_ended", "_seen_ended"))
+                                                     "_ended"))

@@ -17,8 +17,7 @@ their normal or exponential gaps:
   than the patience cap is an outage, not a burst: it is counted only up to the cap
   (a censored sample), so one fault does not teach the link to wait forever;
 - the counts decay with a half-life of `HALF_LIFE` heartbeat periods, so memory per link
-  is a handful of numbers (`LinkBelief.__slots__`), whatever the run's length, and a
-  link that heals earns its speed back;
+  is six numbers, whatever the run's length, and a link that heals earns its speed back;
 - a silence of x + 1 periods (x heartbeats missed) is as likely as `p_enter * q^(x-1)`
   for a live neighbour: the suspicion level is minus its log10 (2 means one silence in a
   hundred this long, on this link, from a live robot), rising linearly with silence.
@@ -28,9 +27,7 @@ sooner than `t_max` (a clean link stays exactly as fast as Fig. 7 makes it) nor 
 than `t_max_bursty` (the takeover stays bounded; `Params.takeover_bound`). A link not
 measured yet is believed a clean one (`PRIOR_*`), but that belief is not acted on until
 the link has been heard for a start-up grace's worth of heartbeats (`samples`; the
-watcher's `Ears` gives it the cap until then, DESIGN "Detection"). Nor is a burst length
-acted on before it is measured: a link whose patience rests on how long its bursts last
-gets the cap until it has seen `MIN_BURSTS` bursts end (`bursts_known`).
+watcher's `Ears` gives it the cap until then, DESIGN "Detection").
 
 Pure, on whatever clock `now` comes from (virtual time in the simulator).
 """
@@ -57,17 +54,6 @@ takeover bound users configure holds on any link until it has faded; light, so t
 bursty link earns its patience with its first burst or two (about 1.2 s of patience
 after one burst of 7 lost heartbeats in its first 20)."""
 
-MIN_BURSTS = 8.0
-"""Bursts seen to end (decayed like the other counts) before a link's measured burst
-length is acted on. That length is the mean of N geometric samples, whose relative
-standard error is sqrt(q / N) < 1 / sqrt(N): 0.7 to 1 from the one or two bursts of a
-link's first seconds (the patience could as well be half or twice what the link needs),
-0.35 from 8. An estimate one standard error short then still waits until a live robot's
-silence reaches two thirds of the level the threshold asks of the bursts' part, and the
-prior's half a burst weighs under a tenth. Until then the link gets the cap, as a link
-not measured yet does: a crash is taken over within the lossy bound, which a lossy link
-is held to anyway."""
-
 LEVEL_MAX = 25.5
 """The highest level a warning carries (one byte in tenths, `wire.Warn.belief`): a
 silence that a live robot on this link produces less than once in 10^25 tries."""
@@ -78,7 +64,7 @@ class LinkBelief:
     (decayed), and when and what it last heartbeated."""
 
     __slots__ = ("_bursts", "_continued", "_ended", "_key", "_period", "_received",
-                 "_seen_ended", "last", "samples")
+                 "last", "samples")
 
     def __init__(self, period: float) -> None:
         self._period = period
@@ -91,9 +77,6 @@ class LinkBelief:
         """Lost heartbeats that followed a lost one (a burst went on)."""
         self._ended = PRIOR_ENDED
         """Bursts seen to end (the next heartbeat got through)."""
-        self._seen_ended = 0.0
-        """Of those, the ones measured (decayed, without the prior's): the evidence the
-        burst length rests on (`bursts_known`)."""
         self._key: object = None
         self.samples = 0
         """Gaps learnt so far, not decayed: how much of this link has been measured."""
@@ -126,7 +109,6 @@ class LinkBelief:
         self._bursts *= decay
         self._continued *= decay
         self._ended *= decay
-        self._seen_ended *= decay
         if not missed:
             return
         self._bursts += 1.0
@@ -135,7 +117,6 @@ class LinkBelief:
         else:
             self._continued += missed - 1
             self._ended += 1.0
-            self._seen_ended += 1.0
 
     # ------------------------------------------------------------------ judging
     def _slopes(self) -> tuple[float, float]:
@@ -159,23 +140,12 @@ class LinkBelief:
         value = missed * first if missed <= 1.0 else first + (missed - 1.0) * further
         return min(LEVEL_MAX, value)
 
-    def bursts_known(self, threshold: float) -> bool:
-        """Does this link's belief rest on enough evidence to be acted on at `threshold`?
-        A link on which one lost heartbeat already reaches the threshold (a clean one, or
-        one losing a heartbeat in thousands) needs no burst length; any other one needs
-        its bursts' length measured from `MIN_BURSTS` bursts seen to end."""
-        first, _ = self._slopes()
-        return first >= threshold or self._seen_ended >= MIN_BURSTS
-
     def patience(self, threshold: float, floor: float, cap: float) -> float:
         """Seconds of silence after which the level reaches `threshold`, kept within
-        [floor, cap] (the configured `t_max` and `t_max_bursty`); `cap` while its burst
-        length is not measured yet (`bursts_known`)."""
+        [floor, cap] (the configured `t_max` and `t_max_bursty`)."""
         first, further = self._slopes()
         if first >= threshold:
             missed = threshold / first
-        elif self._seen_ended < MIN_BURSTS:
-            return cap  # how long its bursts last is no estimate yet
         elif math.isinf(further):
             missed = 1.0  # no burst ever went on: a second lost heartbeat is news
         elif further <= 0.0:
@@ -202,4 +172,4 @@ def byte_level(value: int) -> float:
     return value / 10.0
 
 
-__all__ = ["HALF_LIFE", "LEVEL_MAX", "MIN_BURSTS", "LinkBelief", "byte_level", "level_byte"]
+__all__ = ["HALF_LIFE", "LEVEL_MAX", "LinkBelief", "byte_level", "level_byte"]

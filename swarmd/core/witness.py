@@ -63,9 +63,7 @@ class Ears:
         bursty one; and `t_max_bursty` on a link not measured yet (never heard, or heard
         for less than a start-up grace's worth of heartbeats): its first seconds are no
         evidence that it is clean, and a fade then would otherwise be judged by `t_max`
-        alone. A link that lost heartbeats but has not shown `MIN_BURSTS` bursts yet gets
-        `t_max_bursty` too (`LinkBelief.bursts_known`): how long its bursts last is no
-        estimate yet."""
+        alone."""
         link = self._links.get(robot)
         if link is None or link.samples < self._settle:
             return self._params.t_max_bursty
@@ -73,14 +71,11 @@ class Ears:
 
     def _ears_patience(self, robot: int) -> float:
         """The patience a standby's own ears judge `robot`'s silence by (rules 4 and 9):
-        the link's belief, `t_max` until it has lost heartbeats, as on a clean link.
+        the link's belief, `t_max` until it has measured bursts, as on a clean link.
         Unlike a watcher's suspicion, these are a veto on a claim: a longer one on a
         link not measured yet would let a frame of the suspect's heard late (a replay
         that got through) hold a claim back longer than the T_max/2 `alive_to_me`
-        promises. Once the link has lost heartbeats, its bursts are judged as a
-        watcher's are: `t_max_bursty` until `MIN_BURSTS` of them have ended, since
-        silences the standby counts as its own witness (rule 9) must be as unlikely
-        from a live robot as a watcher's."""
+        promises."""
         link = self._links.get(robot)
         return self._params.t_max if link is None else self._believed(link)
 
@@ -94,8 +89,7 @@ class Ears:
         link = self._links.get(robot)
         if link is None:
             return LEVEL_MAX
-        if link.samples < self._settle \
-                or not link.bursts_known(self._params.suspect_level):
+        if link.samples < self._settle:
             return self._unmeasured_level(silence)
         return link.level(silence)
 
