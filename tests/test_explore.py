@@ -62,7 +62,7 @@ def test_a_merge_that_keeps_the_last_entry_heard_is_caught(auth: str) -> None:
     bad = explore(script, auth=auth, budget=0, factory=_bench().LastHeardNode)
     assert {"view_regressed", "views_disagree"} <= set(bad.found)
     shown = bad.schedule("view_regressed")
-    assert "partition:1|2,3,4@1+2.2" in shown and "went back from 4@1 to 1@0" in shown
+    assert "partition:1|2,3,4@3+2.2" in shown and "went back from 4@1 to 1@0" in shown
 
 
 def test_a_state_copies_with_ed25519_keys_and_replays_the_same() -> None:

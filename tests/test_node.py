@@ -307,16 +307,19 @@ def test_stalled_node_does_not_blame_its_neighbours(paper_plan: SwarmPlan,
                                                     udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 1)
     t = 0.0
-    while t < 1.0:
+    # Heard for a start-up grace and more: the links are measured clean (DESIGN
+    # "Detection"), so the control below is Fig. 7's t_max.
+    heard = udp_params.startup_grace + 0.5
+    while t < heard:
         _feed_neighbours(node, paper_plan, t)
         node.tick(t)
         t += 0.1
     # the process froze for 10 s (SIGSTOP): neighbours kept heartbeating, we heard none
-    actions = node.tick(11.0)
+    actions = node.tick(heard + 10.0)
     assert not events(actions, ev.Suspect) and not events(actions, ev.Warn)
     assert not [m for m in sent(actions) if isinstance(m, wire.Warn)]
     # control: real silence after the stall is still detected, one t_max later
-    out = node.run_to(11.0 + 2 * udp_params.t_max)
+    out = node.run_to(heard + 10.0 + 2 * udp_params.t_max)
     assert {e.fields()["subject"] for e in events(out, ev.Suspect)} == {2, 4}
 
 
@@ -336,7 +339,11 @@ def test_next_deadline_is_heartbeat_or_watch(paper_plan: SwarmPlan, udp_params: 
     node2.run_to(0.34)  # heartbeats at 0.2 and 0.3
     assert node2.next_deadline() == pytest.approx(0.35)
     assert not events(node2.tick(0.349), ev.Suspect)
-    assert len(events(node2.tick(0.35), ev.Suspect)) == 2
+    # The watch fires at t_max; on links heard once (not measured yet, DESIGN
+    # "Detection") a doubt: warnings below the suspicion level, nothing logged.
+    fired = node2.tick(0.35)
+    assert not events(fired, ev.Suspect)
+    assert {m.suspect for m in sent(fired) if isinstance(m, wire.Warn)} == {2, 4}
 
 
 def test_heartbeat_period_does_not_drift(paper_plan: SwarmPlan, udp_params: Params) -> None:

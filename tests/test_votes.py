@@ -61,3 +61,15 @@ def test_a_vote_whose_cadence_is_unknown_or_slow_keeps_the_window() -> None:
     v.add(4, 2, 0, 3.1)
     v.add(4, 2, 0, 5.0)
     assert not v.witness_heard(4, 5.4)
+
+
+def test_a_vote_with_no_cadence_is_given_the_slowest_a_witness_warns_at() -> None:
+    """No suspecting witness warns slower than `cadence_ceiling` (after its alert, rule
+    8): one warning, then its heartbeats past 1.5 of that with no warning, and its vote
+    lapses; a gap longer than the ceiling is two suspicions, not a cadence."""
+    v = VoteCounter(window=1.0, cadence_floor=0.1, cadence_ceiling=0.5)
+    v.add(3, 2, 0, 10.443)
+    v.add(3, 2, 0, 11.408)  # 0.965 s after: a new suspicion, no cadence of 0.965 s
+    assert not v.witness_heard(3, 12.1)  # even its slowest next warning may be coming
+    assert v.witness_heard(3, 12.2)
+    assert v.add(1, 2, 0, 12.267) == 1  # the window alone would have counted 2

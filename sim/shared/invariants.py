@@ -11,7 +11,8 @@ Invariants (each violation names the time, robot and what went wrong):
 1. takeover: an ACTIVE robot that crashes (or collides, leaves, reports a fault, or stays
    paused long enough) is replaced within the takeover bound (`bounds.takeover`;
    `bounds.takeover_faded` once a link fault or a pause may have taught the watchers a
-   longer patience, DESIGN "Detection"), whatever else fails at the same time, whenever
+   longer patience, or while their links to the holder are not measured yet, DESIGN
+   "Detection"), whatever else fails at the same time, whenever
    its slot keeps a live covering standby and (for a silent failure: crash, collide,
    pause) at least one live watcher. "Live" means not failed at any
    moment between the failure and the deadline. Not a violation:
@@ -101,8 +102,9 @@ class Bounds:
     """After the last fault, by when every view of every slot is one (invariant 8): a
     takeover, then the holders' unasked certificate relay (`RELAY_EVERY` T_max)."""
     takeover_faded: float = 0.0
-    """The takeover bound for a failure after a link fault or a pause: the watchers may
-    have measured that silence as a fade of the link and wait up to `t_max_bursty`."""
+    """The takeover bound for a failure after a link fault or a pause, or on links not
+    measured yet: the watchers may have measured that silence as a fade of the link, or
+    not measured the link enough to act on it, and wait up to `t_max_bursty`."""
 
     @classmethod
     def of(cls, p: Params, loss: float) -> Bounds:
@@ -474,7 +476,7 @@ class Checker:
     def _judge_expect(self, e: _Expect, duration: float) -> Violation | None:
         """Invariant 1 for one failure whose slot was not taken over (see the module
         docstring): the violation, or None when the miss is excused."""
-        bound = self._takeover_bound(e.t)
+        bound = self._takeover_bound(e)
         near = set(self.plan.watched_by(e.function))
         hood = {*self.plan.covered_by(e.function), *e.standbys, *e.watchers}
         mates = [x for x in self.failures if x.robot != e.robot
@@ -505,7 +507,7 @@ class Checker:
     def _expect_deadline(self, e: _Expect, mates: list[_Failure]) -> float:
         """By when the failure's slot must be taken over: the takeover bound, restarted
         by each failure in its neighbourhood and stretched by a standby's grace."""
-        bound = self._takeover_bound(e.t)
+        bound = self._takeover_bound(e)
         deadline = e.t + bound
         moved = True
         while moved:  # each failure in the neighbourhood restarts the clock
@@ -523,13 +525,28 @@ class Checker:
                 deadline = max(deadline, before[-1] + grace + bound)
         return deadline
 
-    def _takeover_bound(self, t: float) -> float:
-        """The takeover bound for a failure at `t` (DESIGN "Detection": a function of the
-        links as measured): the configured one, unless a link fault or a pause came
-        before, which the watchers may have learnt as a fade."""
-        if self.faded_at is not None and self.faded_at < t:
+    def _takeover_bound(self, e: _Expect) -> float:
+        """The takeover bound for a failure (DESIGN "Detection": a function of the links
+        as measured): the configured one, unless a link fault or a pause came before,
+        which the watchers may have learnt as a fade, or the links that judge it were
+        not measured yet (`_measuring`): then their patience may be `t_max_bursty`."""
+        if (self.faded_at is not None and self.faded_at < e.t) or self._measuring(e):
             return self.bounds.takeover_faded
         return self.bounds.takeover
+
+    def _measuring(self, e: _Expect) -> bool:
+        """Were the failed holder's links to its watchers and standbys heard for less
+        than a start-up grace when it failed? A link is acted on only once heard for a
+        start-up grace's worth of heartbeats (`witness.Ears.patience`): from the start of
+        the run, of the holder's hold (a takeover), or of a watcher's or standby's node
+        (a restart); `t_max` more for its first heartbeat to be heard."""
+        since = [s for r in (e.robot, *e.watchers, *e.standbys)
+                 for s in self.started_at.get(r, ()) if s <= e.t]
+        since += [tk["t"] for tk in self.takeovers
+                  if tk["robot"] == e.robot and tk["function"] == e.function
+                  and tk["t"] <= e.t]
+        settled = self.params.startup_grace + self.params.t_max
+        return bool(since) and e.t < max(since) + settled
 
     def _excused(self, e: _Expect, deadline: float, duration: float) -> bool:
         """Whether the slot was taken over in time, or the miss is no violation."""

@@ -25,7 +25,9 @@ their normal or exponential gaps:
 The watcher suspects when the level reaches the swarm's `suspect_level`, but never
 sooner than `t_max` (a clean link stays exactly as fast as Fig. 7 makes it) nor later
 than `t_max_bursty` (the takeover stays bounded; `Params.takeover_bound`). A link not
-measured yet is a clean one (`PRIOR_*`).
+measured yet is believed a clean one (`PRIOR_*`), but that belief is not acted on until
+the link has been heard for a start-up grace's worth of heartbeats (`samples`; the
+watcher's `Ears` gives it the cap until then, DESIGN "Detection").
 
 Pure, on whatever clock `now` comes from (virtual time in the simulator).
 """
@@ -62,7 +64,7 @@ class LinkBelief:
     (decayed), and when and what it last heartbeated."""
 
     __slots__ = ("_bursts", "_continued", "_ended", "_key", "_period", "_received",
-                 "last")
+                 "last", "samples")
 
     def __init__(self, period: float) -> None:
         self._period = period
@@ -76,6 +78,8 @@ class LinkBelief:
         self._ended = PRIOR_ENDED
         """Bursts seen to end (the next heartbeat got through)."""
         self._key: object = None
+        self.samples = 0
+        """Gaps learnt so far, not decayed: how much of this link has been measured."""
         self.last: float | None = None
         """When its last heartbeat was heard (None: since a restart of the count)."""
 
@@ -100,6 +104,7 @@ class LinkBelief:
         missed = max(0, round(gap / self._period) - 1)
         most = max(1, round(cap / self._period) - 1)
         decay = 0.5 ** ((min(missed, most) + 1) / HALF_LIFE)
+        self.samples += 1
         self._received = self._received * decay + 1.0
         self._bursts *= decay
         self._continued *= decay

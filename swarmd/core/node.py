@@ -88,8 +88,7 @@ class Node(Restart):
         self._covers = frozenset(f for f in plan.functions if robot_id in plan.covered_by(f))
         self._relevant = plan.relevant(robot_id)
         self._state = Standby()
-        self._votes = {f: VoteCounter(params.vote_window, params.warn_interval)
-                       for f in self._covers}
+        self._votes = {f: VoteCounter.of(params) for f in self._covers}
         self._heard_at = {}
         self._vouches = Vouches(params.vote_window)
         self._ears = Ears(robot_id, plan, params, now)

@@ -50,7 +50,9 @@ class Params:
     claimant or a refutation before taking over. A few channel latencies."""
 
     startup_grace: float
-    """s. A watched slot never heard from is suspected after this (DESIGN rule 5)."""
+    """s. A watched slot never heard from is suspected after this (DESIGN rule 5); a
+    link heard for less than this many seconds' worth of heartbeats is not measured yet
+    and its watchers' patience is `t_max_bursty` (DESIGN "Detection")."""
 
     standby_timeout: float
     """s. A standby not heard for this long is taken for dead (DESIGN rule 6)."""
@@ -122,8 +124,11 @@ class Params:
         link the patience is `t_max` (paper Fig. 7): the bound users configure. On a
         `lossy` channel the links may fade in bursts, so the patience is at most
         `t_max_bursty` (the default there), and the warnings, repeated every
-        `warn_interval`, may need two more vote windows. The one formula `swarmd check`
-        prints and the invariant checker holds runs to."""
+        `warn_interval`, may need two more vote windows. A link not measured yet (heard
+        for less than a start-up grace's worth of heartbeats: the run's first seconds, a
+        new holder's, a watcher's restart) gets `t_max_bursty` on any channel, so a crash
+        then is taken over within `takeover_bound(patience=t_max_bursty)`. The one
+        formula `swarmd check` prints and the invariant checker holds runs to."""
         if patience is None:
             patience = self.t_max_bursty if lossy else self.t_max
         wait = min(max(patience, self.t_max), self.t_max_bursty)

@@ -31,8 +31,8 @@ def witnesses(plan: SwarmPlan, known: Mapping[str, Holder], f: str) -> set[int]:
 
 
 class Ears:
-    __slots__ = ("_links", "_params", "_plan", "_robot_id", "_slot_heard", "_standby_at",
-                 "_start")
+    __slots__ = ("_links", "_params", "_plan", "_robot_id", "_settle", "_slot_heard",
+                 "_standby_at", "_start")
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, start: float) -> None:
         self._robot_id = robot_id
@@ -43,6 +43,10 @@ class Ears:
         self._standby_at: dict[int, float] = {}
         self._links: dict[int, LinkBelief] = {}
         """robot -> its link's belief; one per robot of the plan at most."""
+        self._settle = max(1, round(params.startup_grace / params.heartbeat_interval))
+        """Gaps a link must have been heard for before its belief is acted on: a start-up
+        grace's worth of heartbeats (rule 5's time for a robot never heard, here for a
+        link barely heard; DESIGN "Detection", "A link not measured yet")."""
 
     def slot_beat(self, f: str, holder: int, epoch: int, now: float) -> None:
         """A heartbeat of f's holder at `epoch` was accepted at `now`."""
@@ -54,26 +58,58 @@ class Ears:
 
     # ------------------------------------------------------------------ beliefs
     def patience(self, robot: int) -> float:
-        """s of silence of `robot`'s slot heartbeats after which this robot suspects it:
-        `t_max` on a clean or unmeasured link, up to `t_max_bursty` on a bursty one."""
-        p = self._params
+        """s of silence of `robot`'s slot heartbeats after which this robot, watching
+        it, suspects it: `t_max` on a link measured clean, up to `t_max_bursty` on a
+        bursty one; and `t_max_bursty` on a link not measured yet (never heard, or heard
+        for less than a start-up grace's worth of heartbeats): its first seconds are no
+        evidence that it is clean, and a fade then would otherwise be judged by `t_max`
+        alone."""
         link = self._links.get(robot)
-        if link is None:
-            return p.t_max
+        if link is None or link.samples < self._settle:
+            return self._params.t_max_bursty
+        return self._believed(link)
+
+    def _ears_patience(self, robot: int) -> float:
+        """The patience a standby's own ears judge `robot`'s silence by (rules 4 and 9):
+        the link's belief, `t_max` until it has measured bursts, as on a clean link.
+        Unlike a watcher's suspicion, these are a veto on a claim: a longer one on a
+        link not measured yet would let a frame of the suspect's heard late (a replay
+        that got through) hold a claim back longer than the T_max/2 `alive_to_me`
+        promises."""
+        link = self._links.get(robot)
+        return self._params.t_max if link is None else self._believed(link)
+
+    def _believed(self, link: LinkBelief) -> float:
+        p = self._params
         return link.patience(p.suspect_level, p.t_max, p.t_max_bursty)
 
     def level(self, robot: int, silence: float) -> float:
         """How strongly a `silence` (s) of `robot` is suspected on its link (`belief.py`);
         a robot never heard heartbeating a slot is as suspect as can be."""
         link = self._links.get(robot)
-        return LEVEL_MAX if link is None else link.level(silence)
+        if link is None:
+            return LEVEL_MAX
+        if link.samples < self._settle:
+            return self._unmeasured_level(silence)
+        return link.level(silence)
 
     def level_now(self, robot: int, now: float) -> float:
         """`level` for `robot`'s silence since its last slot heartbeat we heard."""
         link = self._links.get(robot)
         if link is None or link.last is None:
             return LEVEL_MAX
-        return link.level(now - link.last)
+        return self.level(robot, now - link.last)
+
+    def _unmeasured_level(self, silence: float) -> float:
+        """The level of a silence on a link not measured yet: rising with each heartbeat
+        missed, to `suspect_level` at `t_max_bursty` (its patience), so the doubts sent
+        before then stay doubts that no standby counts."""
+        p = self._params
+        missed = silence / p.heartbeat_interval - 1.0
+        most = p.t_max_bursty / p.heartbeat_interval - 1.0
+        if missed <= 0.0:
+            return 0.0
+        return min(LEVEL_MAX, p.suspect_level * missed / most)
 
     def forget_gaps(self) -> None:
         """This robot stalled: the silences it is about to see are its own."""
@@ -106,7 +142,7 @@ class Ears:
         the same moment give or take the channel's jitter, so the first quorum claims;
         a frame of the suspect's heard later (a replay that got through, a refutation)
         holds the claim back for T_max/2, no more."""
-        within = self.patience(holder) - self._params.t_max / 2
+        within = self._ears_patience(holder) - self._params.t_max / 2
         return self.heard_lately(f, holder, epoch, now, within)
 
     def own_ears(self, f: str, known: Mapping[str, Holder], now: float) -> bool:
@@ -123,7 +159,7 @@ class Ears:
         if now - self._start < p.startup_grace:
             return False
         heard = self._slot_heard.get(f)
-        if heard is not None and now - heard.at < self.patience(heard.holder):
+        if heard is not None and now - heard.at < self._ears_patience(heard.holder):
             return False
         live = len(self._plan.watched_by(f)) - len(self.silent_watchers(f, known, now))
         return live < p.quorum
@@ -136,7 +172,7 @@ class Ears:
         for g in self._plan.watched_by(f):
             beat = self._slot_heard.get(g)
             if beat is None or beat.holder != known[g].robot \
-                    or now - beat.at >= self.patience(beat.holder):
+                    or now - beat.at >= self._ears_patience(beat.holder):
                 silent.add((g, known[g].robot))
         return frozenset(silent)
 
