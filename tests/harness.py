@@ -11,6 +11,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import random
+import socket
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -203,3 +204,12 @@ class Radio:
         signer = self.ids[sender].signer if self.mode == "per-robot" else None
         return wire.encode(wire.Frame(self.plan.swarm_id, sender, self._next(), msg),
                            MODE_KEY if self.keys else None, signer)
+
+
+def send_to_group(group: str, port: int, frame: bytes) -> None:
+    """`frame` to the multicast group from a socket of its own, on loopback with TTL 1:
+    another daemon on this host (a neighbour, or one started with our robot id)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+        s.sendto(frame, (group, port))

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import asyncio
 import ipaddress
-import socket
 import struct
 from pathlib import Path
 
 import pytest
+from harness import send_to_group
 
 from swarmd.config import load_swarm
 from swarmd.core import wire
@@ -129,12 +129,6 @@ def test_a_swarm_too_large_for_classic_bpf_keeps_only_the_echo_filter() -> None:
     assert made == socket_filter.program(("127.0.0.1", 40000), None)
 
 
-def _send(group: str, port: int, frame: bytes) -> None:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
-        s.sendto(frame, (group, port))
-
 
 async def test_a_heartbeat_robot_1_does_not_hear_never_reaches_its_transport(
         udp_port: int) -> None:
@@ -150,8 +144,8 @@ async def test_a_heartbeat_robot_1_does_not_hear_never_reaches_its_transport(
     await t.start(frame, lambda event: None)
     try:
         assert t.echoes_filtered and t.unheard_filtered
-        _send(t.group, udp_port, heartbeat(plan.swarm_id, 3, 3))  # slot 3: not robot 1's
-        _send(t.group, udp_port, heartbeat(plan.swarm_id, 2, 2))  # its neighbour's
+        send_to_group(t.group, udp_port, heartbeat(plan.swarm_id, 3, 3))  # slot 3: not robot 1's
+        send_to_group(t.group, udp_port, heartbeat(plan.swarm_id, 2, 2))  # its neighbour's
         await asyncio.wait_for(heard.wait(), 2.0)
         await asyncio.sleep(0.05)
         assert got == [heartbeat(plan.swarm_id, 2, 2)]

@@ -9,6 +9,7 @@ import socket
 from typing import Any
 
 import pytest
+from harness import send_to_group
 from pydantic import ValidationError
 
 from swarmd.config.robot import UdpTransportConfig
@@ -53,13 +54,6 @@ async def test_udp_two_transports_exchange_frames_on_loopback(udp_port: int) -> 
         await b.close()
 
 
-def _send_as_someone_else(group: str, port: int, frame: bytes) -> None:
-    """`frame` to the group from a socket of its own (another daemon with our id)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
-        s.sendto(frame, (group, port))
-
 
 async def test_udp_own_frames_are_filtered_but_the_same_bytes_from_another_socket_arrive(
         udp_port: int) -> None:
@@ -73,7 +67,7 @@ async def test_udp_own_frames_are_filtered_but_the_same_bytes_from_another_socke
         assert t.echoes_filtered
         for _ in range(3):
             t.send(b"\x11mine")
-        _send_as_someone_else(t.group, udp_port, b"\x11mine")
+        send_to_group(t.group, udp_port, b"\x11mine")
         await asyncio.wait_for(sink.got.wait(), 2.0)
         await asyncio.sleep(0.05)
         assert sink.frames == [b"\x11mine"] and t.counters["sent"] == 3
