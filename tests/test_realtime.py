@@ -223,8 +223,12 @@ def test_realtime_interrupt_leaves_no_process_behind(tmp_path: Path, sig: int) -
 @pytest.mark.parametrize("transport", ["xbee", "serial"])
 async def test_realtime_over_emulated_radios_fails_over(tmp_path: Path, transport: str) -> None:
     """`swarmd sim --transport xbee|serial` runs the swarm over
-    emulated radios on ptys (digi-xbee in API mode, or transparent mode + COBS/CRC)."""
-    result = await run(5.0, "crash:2@3", tmp_path=tmp_path, transport=transport)
+    emulated radios on ptys (digi-xbee in API mode, or transparent mode + COBS/CRC).
+    The run lasts the lossy takeover bound past the crash: an emulated radio on a loaded
+    machine delivers in bunches, which its watchers may learn as bursts, or may have
+    been heard for less than a start-up grace by then (DESIGN "Detection"); this test is
+    about the radios carrying a failover, not about its latency."""
+    result = await run(8.5, "crash:2@3", tmp_path=tmp_path, transport=transport)
     takeover = named(result, "takeover", function="f2")
     assert [(e["robot"], e["replaced"]) for e in takeover] == [(6, 2)]
     assert holders_at_end(result) == {"f1": 1, "f2": 6, "f3": 3, "f4": 4}
