@@ -34,7 +34,7 @@ def test_a_sender_keeps_its_highest_numbered_frames() -> None:
     store = HeldFrames(per_sender=4, total=64)
     pushed = sum(store.hold(held(6, seq)) for seq in [50, 10, 40, 30, 20, 60])
     assert pushed == 2 and len(store) == 4
-    assert [h.seq for h in store.release_all()] == [50, 40, 30, 60]
+    assert [h.seq for h in store.waiting()] == [50, 40, 30, 60]
 
 
 def test_the_same_frame_again_takes_the_place_of_the_one_held() -> None:
@@ -42,7 +42,7 @@ def test_the_same_frame_again_takes_the_place_of_the_one_held() -> None:
     latest copy, and nothing counted as pushed out."""
     store = HeldFrames(per_sender=4, total=64)
     pushed = sum(store.hold(held(6, seq, epoch=1)) for seq in [10, 12, 11, 13])
-    assert pushed == 0 and [h.seq for h in store.release_all()] == [13]
+    assert pushed == 0 and [h.seq for h in store.waiting()] == [13]
 
 
 def test_the_total_is_bounded_whatever_the_senders() -> None:
@@ -51,7 +51,7 @@ def test_the_total_is_bounded_whatever_the_senders() -> None:
     pushed = sum(store.hold(held(s, seq)) for s in (5, 6) for seq in (3, 2, 1))
     pushed += store.hold(held(4, 9))
     assert pushed == 1 and len(store) == 6
-    assert sorted((h.sender, h.seq) for h in store.release_all()) == [
+    assert sorted((h.sender, h.seq) for h in store.waiting()) == [
         (4, 9), (5, 2), (5, 3), (6, 1), (6, 2), (6, 3)]
 
 
@@ -59,7 +59,9 @@ def test_a_word_releases_only_what_is_numbered_below_it() -> None:
     store = HeldFrames()
     for h in (held(6, 10, slot=3), held(6, 30), held(5, 5)):
         store.hold(h)
-    assert [h.seq for h in store.release(6, below=20)] == [10]
+    judged = store.waiting(6, below=20)
+    assert [h.seq for h in judged] == [10]
+    store.forget(judged)
     assert store.about(2) and not store.about(3) and len(store) == 2
 
 

@@ -107,18 +107,6 @@ class HeldFrames:
         if judged:
             self._frames = [h for h in self._frames if h not in judged]
 
-    def release(self, sender: int, below: int) -> list[HeldFrame]:
-        """`sender`'s frames numbered below `below`, in the order they came, no longer
-        held; those above it stay held."""
-        out = self.waiting(sender, below)
-        self.forget(out)
-        return out
-
-    def release_all(self) -> list[HeldFrame]:
-        """Every frame held, in the order they came (the grace is over)."""
-        out, self._frames = self._frames, []
-        return out
-
     def about(self, slot: int) -> bool:
         """Is a frame about wire slot `slot` held?"""
         return any(h.slot == slot for h in self._frames)
