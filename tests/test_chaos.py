@@ -118,7 +118,7 @@ clean since, in every mode (`test_wide_seeds_fixed_run_clean_in_every_mode`).
   f22), then hears it again without logging an answer: `warning_unresolved`."""
 
 WIDE_SMALL: tuple[int, ...] = (5, 50, 84, 99, 136, 144, 147, 172, 182, 195, 279, 321, 365,
-                                383, 1713, 73506)
+                                383, 1713, 73506, 94471)
 """Wide seeds on swarms of up to 12 robots (`python bench/bench_chaos.py --seed N --wide
 --max-robots 12 --verbose`) that broke an invariant per robot on the slot-table core as
 first merged, each a shape the table's proofs had to cover; clean in every mode since
@@ -140,7 +140,14 @@ first merged, each a shape the table's proofs had to cover; clean in every mode 
   slot's current entry yet, so it warns about the holder its stale view names, which a
   greater entry had already fenced; it merges the entry once the grace ends. The checker
   counted that warning unresolved: a warning about a fenced holder is now resolved by
-  the entry that fenced it, as one about a replaced holder is by the takeover.
+  the entry that fenced it, as one about a replaced holder is by the takeover;
+- 94471 (with a shared key and unsigned): a holder restarted on its state file resumed
+  its slot, cut off from the robot that had taken it over meanwhile; past the cut it
+  heard the new holder's heartbeat within its start-up grace, held it (it could not
+  judge it yet) and released the slot at once, fenced at the grace's end. The log shows
+  only the fence, and the checker counted both robots executing until then: it now
+  reads what the robot link is told (`Release`, `Assign`) as the virtual simulator
+  hands it over.
 (Classic seed 25, run per robot here and in tests/test_attacks.py: a standby's own refuted claim,
 relayed back as part of a reassertion's proof, never certified at it.)"""
 

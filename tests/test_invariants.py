@@ -12,6 +12,7 @@ import pytest
 
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import Checker, check_events
+from swarmd.core.actions import Assign, Release
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
@@ -201,6 +202,34 @@ def test_a_fade_elsewhere_or_healed_long_before_excuses_nothing(
         paper: tuple[SwarmPlan, Params]) -> None:
     assert kinds(_two_holders(paper, (5, 1, 3.5, 4.5))) == [("dual_execution", None)]
     assert kinds(_two_holders(paper, (5, 6, 1.0, 2.0))) == [("dual_execution", None)]
+
+
+def _paused_holder(paper: tuple[SwarmPlan, Params], resume_at: float | None) -> Checker:
+    # 2 crashes and 5 takes f2 over; 6 took it too (it missed 5's claim) but is told to
+    # release it at once with no event, as a hold paused at a robot's start is (a frame
+    # that would fence it waits to be judged); it is fenced 2.0 s later.
+    plan, params = paper
+    checker = Checker(plan, params)
+    for rec in boot(plan):
+        checker.event(rec)
+    checker.fault(3.0, parse_fault("crash:2@3"), "begin")
+    checker.event(takeover(3.6, 5, "f2", 2))
+    checker.robot_output(3.6, 6, Assign("f2", 1))
+    checker.event(takeover(3.6, 6, "f2", 2))
+    checker.robot_output(3.65, 6, Release("f2"))
+    if resume_at is not None:
+        checker.robot_output(resume_at, 6, Assign("f2", 1))
+    checker.event({"t": 5.6, "robot": 6, "event": "fenced", "function": "f2", "epoch": 1})
+    checker.finish([], 8.0)
+    return checker
+
+
+def test_a_hold_released_without_an_event_executes_nothing_until_assigned_again(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    """What a robot executes is what its robot link was told: a `Release` of the slot
+    its events say it holds stops it there (a paused hold), an `Assign` starts it."""
+    assert kinds(_paused_holder(paper, None)) == []
+    assert kinds(_paused_holder(paper, 3.7)) == [("dual_execution", None)]
 
 
 @pytest.mark.parametrize("model", ["bernoulli", "burst"])

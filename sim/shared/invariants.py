@@ -67,6 +67,7 @@ from typing import Any
 
 from sim.shared.faults import LINK_KINDS, Fault, FaultKind
 from sim.shared.holders import HolderFold
+from swarmd.core.actions import Assign, Release
 from swarmd.core.events import Fault as EventFault
 from swarmd.core.events import name_of
 from swarmd.core.params import Params
@@ -206,6 +207,12 @@ class Checker:
     claimed: set[tuple[str, int]] = field(default_factory=set)
     """(function, epoch) pairs some claim named (invariant 6: a reassertion outranks
     a claim refuted in its wait state as well as a takeover)."""
+    released: dict[int, str] = field(default_factory=dict)
+    """robot -> the slot it still holds by its events but was told to release, with no
+    event: its hold paused while a frame held at its start that would fence it waits to
+    be judged (DESIGN "Every proof is bound to its run"). The robot link's `Release`
+    and `Assign` say what a robot executes; the log shows only role changes, so only
+    the virtual simulator, which hands the checker both, sees the pause."""
 
     def __post_init__(self) -> None:
         self.bounds = Bounds.of(self.params, self.loss)
@@ -263,6 +270,7 @@ class Checker:
                 self.dead.add(r)
                 self.started.discard(r)
                 self.holding.forget(r)
+                self.released.pop(r, None)
                 self.paused.discard(r)
             else:
                 self.unhealthy[r] = t
@@ -276,6 +284,7 @@ class Checker:
             self.dead.discard(r)
             self.started.discard(r)
             self.holding.forget(r)
+            self.released.pop(r, None)
             self.paused.discard(r)
         elif fault.kind is FaultKind.PAUSE:
             if phase == "begin":
@@ -292,14 +301,24 @@ class Checker:
                                          f"node raised {type(exc).__name__}: {exc}"))
 
     def robot_output(self, t: float, robot: int, action: object) -> None:
-        """Assign/Release as the node produced them (virtual simulator). The event log
-        carries the same facts; this hook exists for cross-checks in tests."""
+        """Assign/Release as the node produced them (virtual simulator). The log carries
+        the same facts, but for a paused hold (`released`): a `Release` of the slot the
+        robot's events say it executes stops it there, the next `Assign` starts it again."""
+        match action:
+            case Release(function=f) if self.executing.get(robot) == f:
+                self.released[robot] = f
+            case Assign():
+                self.released.pop(robot, None)
+            case _:
+                return
+        self._dual_update(t)
 
     def event(self, rec: dict[str, Any]) -> None:
         t = float(rec["t"])
         r = int(rec["robot"])
         name = name_of(rec)
-        self.holding.feed(rec)
+        if self.holding.feed(rec) is not None:
+            self.released.pop(r, None)  # a role change: the log tells it from here
         if name == "fenced":
             self._fenced(t, r, rec)
         if name == "takeover":
@@ -388,7 +407,7 @@ class Checker:
 
     def _running(self) -> dict[int, str]:
         return {r: f for r, f in self.executing.items()
-                if r not in self.dead and r not in self.paused}
+                if r not in self.dead and r not in self.paused and r not in self.released}
 
     def _dual_update(self, t: float) -> None:
         by_function: dict[str, list[int]] = {}
