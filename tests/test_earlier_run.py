@@ -190,6 +190,33 @@ def test_per_robot_a_receiver_that_started_after_the_last_anchor_converges(
     assert len(views_of_f2(n)) == 1
 
 
+def test_per_robot_a_watcher_in_its_grace_refuses_a_recorded_leave_of_a_dead_holder(
+        paper: Paper) -> None:
+    """Watcher 1 restarts just before run A's LEAVE and CLAIM are played, and 2 dies
+    then. 1 has heard no anchor of 2 since its start, so it cannot judge the LEAVE, and
+    within its start-up grace it refuses it (`NodeBase._outdated`). Had it taken it, its
+    view would name 6 at epoch 1 for good: 2 is dead and refutes nothing, so no
+    reassertion settles the slot, and every other robot refuses the recording, so 1
+    would warn about 6 and the others about 2, and no standby would count a quorum:
+    f2 never taken over. Refused, f2 is taken over at epoch 1 as a silent robot's
+    slot, and every view that hears f2 agrees."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
+    n = swarm(paper, "per-robot", RUN_B, ids)
+    n.run_until(1.95)
+    n.crash(1)
+    n.boot(1, seq_start=RUN_B + 10**6)
+    n.run_until(2.0)
+    n.crash(2)
+    play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
+    n.run_until(2.0 + params.startup_grace + params.claim_horizon
+                + params.takeover_bound(lossy=False))
+    assert [(e["robot"], e["epoch"], e["replaced"]) for e in n.named("takeover")] == [
+        (6, 1, 2)]
+    assert views_of_f2(n) == {(6, 1)}
+
+
 def test_per_robot_a_receiver_that_missed_every_anchor_of_the_holder_converges(
         paper: Paper) -> None:
     """What is left: standby 6 hears nothing of 2 for its whole start-up grace (2 -> 6
