@@ -289,6 +289,24 @@ def test_a_holder_cut_off_through_its_takeover_holds_it_again_when_the_new_holde
 
 
 @pytest.mark.parametrize("auth", MODES)
+def test_a_standby_alone_ahead_of_a_stale_holder_whose_new_holder_died_converges(
+        paper: Paper, auth: str) -> None:
+    """Standbys 5 and 6 both cover f2. Robot 2 is cut off both ways from 1 s to 8 s and
+    executes on; 5 takes f2 over at epoch 1, but its heartbeats reach neither watcher
+    (1 and 3) before it crashes at 5 s: standby 6 alone holds (5, 1), the watchers
+    and 2 hold (2, 0), and nobody warns about 5. After the heal only 6 can carry the
+    entry: per robot with its proof (`_relay_view`), unsigned and with a shared key
+    with one warning about the silent holder (`Hearing._older_beat`, DESIGN
+    "Convergence"); the digest alone only makes 2 heartbeat its older entry at 6.
+    Without that warning, 6's view stays (5, 1) against (2, 0) for good."""
+    _, params = paper
+    res = _run((two_standbys(), params), auth, [
+        "partition:2|1,3,4,5,6@1+7", "partition:5>1,3@1+5", "crash:5@5"], duration=30.0)
+    assert [v.kind for v in res.violations] == []
+    assert len(res.holders()["f2"]) == 1
+
+
+@pytest.mark.parametrize("auth", MODES)
 def test_a_stalled_holder_that_answers_out_of_its_buffer_does_not_pull_views_back(
         paper: Paper, auth: str) -> None:
     """Robot 2 freezes from 3 s to 5.5 s; 6 takes f2 over and crashes at 4.3 s. On
