@@ -168,26 +168,37 @@ def test_per_robot_a_recorded_takeover_just_after_the_holder_died_is_refused(
     assert n.nodes[6].snapshot().function == "f2" and views_of_f2(n) == {(6, 1)}
 
 
-def test_per_robot_a_receiver_that_started_after_the_last_anchor_converges(
-        paper: Paper) -> None:
-    """A receiver that restarted just before the recording was played has heard no
-    anchor of 2 since (nothing to tell it by): it takes the recorded takeover, 2 refutes
-    its own LEAVE and reasserts, and the robots that refused the LEAVE take it back as
-    the void backer of 2's reassertion once they hold 2's refute (`_outdated`): f2 is
-    never fenced nor taken over, and every view agrees within the convergence bound."""
-    plan, params = paper
+def restarted_before_the_recording(paper: Paper, robot: int, dead: int | None = None
+                                   ) -> Net:
+    """Per robot, run A recorded and run B started fresh; `robot` restarts at 1.95 s,
+    `dead` crashes at 2.0 s, and then run A's LEAVE and CLAIM are played inside CERTs:
+    `robot` has heard no anchor of 2 since its start (one comes every `anchor_every`)."""
+    plan = paper[0]
     ids = fake_identities(plan.robots)
     tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
     n = swarm(paper, "per-robot", RUN_B, ids)
     n.run_until(1.95)
-    n.crash(6)
-    n.boot(6, seq_start=RUN_B + 10**6)
+    n.crash(robot)
+    n.boot(robot, seq_start=RUN_B + 10**6)
     n.run_until(2.0)
+    if dead is not None:
+        n.crash(dead)
     play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
+    return n
+
+
+def test_per_robot_a_receiver_that_started_after_the_last_anchor_converges(
+        paper: Paper) -> None:
+    """A receiver that restarted just before the recording was played has heard no
+    anchor of 2 since (nothing to tell it by): within its start-up grace it refuses the
+    LEAVE (`_outdated`), so f2 is never fenced nor taken over, and every view stays at
+    (2, 0)."""
+    params = paper[1]
+    n = restarted_before_the_recording(paper, 6)
     n.run_until(2.0 + params.claim_horizon + 16 * params.t_max)
     assert n.named("fenced") == [] and n.named("takeover") == []
     assert held_throughout(n, 2, "f2") and n.outputs[6] == []
-    assert len(views_of_f2(n)) == 1
+    assert views_of_f2(n) == {(2, 0)}
 
 
 def test_per_robot_a_watcher_in_its_grace_refuses_a_recorded_leave_of_a_dead_holder(
@@ -200,16 +211,8 @@ def test_per_robot_a_watcher_in_its_grace_refuses_a_recorded_leave_of_a_dead_hol
     would warn about 6 and the others about 2, and no standby would count a quorum:
     f2 never taken over. Refused, f2 is taken over at epoch 1 as a silent robot's
     slot, and every view that hears f2 agrees."""
-    plan, params = paper
-    ids = fake_identities(plan.robots)
-    tape = run_a(swarm(paper, "per-robot", RUN_A, ids))
-    n = swarm(paper, "per-robot", RUN_B, ids)
-    n.run_until(1.95)
-    n.crash(1)
-    n.boot(1, seq_start=RUN_B + 10**6)
-    n.run_until(2.0)
-    n.crash(2)
-    play(n, cert(plan, tape["leave"]), cert(plan, tape["claim"]))
+    params = paper[1]
+    n = restarted_before_the_recording(paper, 1, dead=2)
     n.run_until(2.0 + params.startup_grace + params.claim_horizon
                 + params.takeover_bound(lossy=False))
     assert [(e["robot"], e["epoch"], e["replaced"]) for e in n.named("takeover")] == [
