@@ -118,7 +118,7 @@ clean since, in every mode (`test_wide_seeds_fixed_run_clean_in_every_mode`).
   f22), then hears it again without logging an answer: `warning_unresolved`."""
 
 WIDE_SMALL: tuple[int, ...] = (5, 50, 84, 99, 136, 144, 147, 172, 182, 195, 279, 321, 365,
-                                383, 1713, 73506, 94471)
+                                383, 1713, 73506, 94471, 97376)
 """Wide seeds on swarms of up to 12 robots (`python bench/bench_chaos.py --seed N --wide
 --max-robots 12 --verbose`) that broke an invariant per robot on the slot-table core as
 first merged, each a shape the table's proofs had to cover; clean in every mode since
@@ -147,7 +147,12 @@ first merged, each a shape the table's proofs had to cover; clean in every mode 
   judge it yet) and released the slot at once, fenced at the grace's end. The log shows
   only the fence, and the checker counted both robots executing until then: it now
   reads what the robot link is told (`Release`, `Assign`) as the virtual simulator
-  hands it over.
+  hands it over;
+- 97376: a holder restarted as a standby took its own slot over (its watchers warned of
+  its silence), crashed unheard, and restarted on that entry; two watchers that missed
+  the takeover suspected it at its old epoch and, once it resumed, heard it at the new
+  one, which ended their suspicion without a word in the log (a newer epoch was taken
+  for another robot's takeover): the suspect itself heard at any epoch is now refuted.
 (Classic seed 25, run per robot here and in tests/test_attacks.py: a standby's own refuted claim,
 relayed back as part of a reassertion's proof, never certified at it.)"""
 

@@ -207,6 +207,34 @@ def test_suspect_heartbeat_refutes_a_claim(paper_plan: SwarmPlan, udp_params: Pa
     assert not [a for a in later if isinstance(a, Assign)]
 
 
+def _suspecting_2(plan: SwarmPlan, params: Params) -> tuple[Driven, float]:
+    """Robot 1, past its grace with both links measured, once f2's holder 2 fell silent
+    long enough to be suspected (4, on f4, heartbeats on)."""
+    node, _ = started(plan, params, 1)
+    t = 0.0
+    while t < params.startup_grace + 0.5:
+        _feed_neighbours(node, plan, t)
+        node.tick(t)
+        t += 0.1
+    while not events(node.tick(t), ev.Suspect):
+        node.receive(frame(plan, 4, hb(plan, "f4")), t)
+        t += 0.05
+    return node, t
+
+
+@pytest.mark.parametrize(("sender", "refuted"), [(2, True), (6, False)])
+def test_the_suspect_heard_at_a_newer_epoch_ends_the_suspicion_in_a_refute(
+        paper_plan: SwarmPlan, udp_params: Params, sender: int, refuted: bool) -> None:
+    """Every warning ends in a takeover, a refutation or an alert (the paper's property):
+    the suspect itself heard at a newer epoch is alive (it took its own slot over in a
+    takeover we missed, restarted as a standby), so the watcher logs the refute; another
+    robot at a newer epoch ends it by its own takeover instead."""
+    node, t = _suspecting_2(paper_plan, udp_params)
+    actions = node.receive(frame(paper_plan, sender, hb(paper_plan, "f2", epoch=1)), t + 0.05)
+    refutes = [e.fields() for e in events(actions, ev.Refute)]
+    assert refutes == ([{"subject": 2, "function": "f2"}] if refuted else [])
+
+
 # ---------------------------------------------------------------------- health, leave
 def test_faulty_robot_leaves_and_goes_silent(paper_plan: SwarmPlan, udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 2)

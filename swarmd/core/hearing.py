@@ -181,13 +181,16 @@ class Hearing(Episode):
             reasserted = self._identity is not None and epoch > before.epoch \
                 and self._ev.reasserted(f, sender, epoch) is not None
             if watch.heard(now, self._ears.patience(sender)) and suspected \
-                    and (epoch <= before.epoch or reasserted):
+                    and (epoch <= before.epoch or sender == before.robot or reasserted):
                 # The suspect heard alive (rule 4), or the rival that won the suspect's
                 # own takeover race at its epoch (lowest id): the suspicion is over, and
                 # the log says so (the paper's property: every warning ends in a
-                # takeover, a refutation or an alert). A holder at a newer epoch ends it
-                # by its takeover, unless that epoch is its reassertion (per robot: it
-                # refuted the takeover we suspected, DESIGN "Convergence").
+                # takeover, a refutation or an alert). Another holder at a newer epoch
+                # ends it by its takeover, unless that epoch is its reassertion (per
+                # robot: it refuted the takeover we suspected, DESIGN "Convergence").
+                # The suspect itself at a newer epoch is alive whatever took it there:
+                # it may have taken its own slot over, restarted as a standby, in a
+                # takeover we missed and logged before we warned.
                 self._emit(ev.Refute(subject=sender, function=f))
         votes = self._votes.get(f)
         if votes is not None and votes.witnesses:
