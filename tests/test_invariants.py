@@ -168,16 +168,25 @@ def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace
 
 
 def _two_holders(paper: tuple[SwarmPlan, Params],
-                 outage: tuple[int, int, float, float] | None) -> Checker:
+                 outage: tuple[int, int, float, float] | None, *,
+                 released: float | None = None, resumed: float | None = None) -> Checker:
     # 2 crashes; standbys 5 and 6 both take f2 over (each missed the other's claim) and
     # 6 yields 2.0 s later: past the single-holder bound on a clean channel (0.7 s).
+    # `released`: 6's robot link is told to release f2 then, with no event, as a hold
+    # paused at a robot's start is (a frame that would fence it waits to be judged);
+    # `resumed`: told to execute it again then.
     plan, params = paper
     checker = Checker(plan, params)
     for rec in boot(plan):
         checker.event(rec)
     checker.fault(3.0, parse_fault("crash:2@3"), "begin")
     checker.event(takeover(3.6, 5, "f2", 2))
+    checker.robot_output(3.6, 6, Assign("f2", 1))
     checker.event(takeover(3.6, 6, "f2", 2))
+    if released is not None:
+        checker.robot_output(released, 6, Release("f2"))
+    if resumed is not None:
+        checker.robot_output(resumed, 6, Assign("f2", 1))
     if outage is not None:  # the simulator reports a fade once the link heals
         checker.outage(*outage)
     checker.event({"t": 5.6, "robot": 6, "event": "fenced", "function": "f2", "epoch": 1})
@@ -204,32 +213,13 @@ def test_a_fade_elsewhere_or_healed_long_before_excuses_nothing(
     assert kinds(_two_holders(paper, (5, 6, 1.0, 2.0))) == [("dual_execution", None)]
 
 
-def _paused_holder(paper: tuple[SwarmPlan, Params], resume_at: float | None) -> Checker:
-    # 2 crashes and 5 takes f2 over; 6 took it too (it missed 5's claim) but is told to
-    # release it at once with no event, as a hold paused at a robot's start is (a frame
-    # that would fence it waits to be judged); it is fenced 2.0 s later.
-    plan, params = paper
-    checker = Checker(plan, params)
-    for rec in boot(plan):
-        checker.event(rec)
-    checker.fault(3.0, parse_fault("crash:2@3"), "begin")
-    checker.event(takeover(3.6, 5, "f2", 2))
-    checker.robot_output(3.6, 6, Assign("f2", 1))
-    checker.event(takeover(3.6, 6, "f2", 2))
-    checker.robot_output(3.65, 6, Release("f2"))
-    if resume_at is not None:
-        checker.robot_output(resume_at, 6, Assign("f2", 1))
-    checker.event({"t": 5.6, "robot": 6, "event": "fenced", "function": "f2", "epoch": 1})
-    checker.finish([], 8.0)
-    return checker
-
-
 def test_a_hold_released_without_an_event_executes_nothing_until_assigned_again(
         paper: tuple[SwarmPlan, Params]) -> None:
     """What a robot executes is what its robot link was told: a `Release` of the slot
     its events say it holds stops it there (a paused hold), an `Assign` starts it."""
-    assert kinds(_paused_holder(paper, None)) == []
-    assert kinds(_paused_holder(paper, 3.7)) == [("dual_execution", None)]
+    assert kinds(_two_holders(paper, None, released=3.65)) == []
+    assert kinds(_two_holders(paper, None, released=3.65, resumed=3.7)) \
+        == [("dual_execution", None)]
 
 
 @pytest.mark.parametrize("model", ["bernoulli", "burst"])
