@@ -60,6 +60,11 @@ def test_per_robot_a_forged_max_epoch_heartbeat_fences_nobody(paper: Paper) -> N
     assert named(res, "fenced") == [] and takeovers(res) == []
     assert res.holders() == HOLDERS
     assert drops(res, "uncertified") >= 5  # every robot that hears f2 counted it
+    # Nor is robot 1 muted: the forged anchors, signed with its key, start a chain
+    # beside its own at the receivers (`PeerChains`), whose links are still heard, so
+    # nobody suspects it and no standby races its refutation.
+    assert drops(res, "unanchored") == 0
+    assert [e for e in res.events if e["event"] in ("suspect", "claim")] == []
 
 
 @pytest.mark.parametrize("auth", ["none", "shared"])

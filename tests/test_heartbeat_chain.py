@@ -20,6 +20,8 @@ from swarmd.core.auth import Identity
 from swarmd.core.chain import (
     ANCHOR_RUN,
     CHAIN_LEN,
+    HEADS,
+    SLACK,
     WALK,
     OwnChain,
     PeerChains,
@@ -70,7 +72,7 @@ def test_links_are_accepted_forward_only_and_within_the_walk() -> None:
     n0, l0, _ = links[0]
     assert not peers.check(2, n0, l0, 0.0, anchor=False)  # nothing to tie it to yet
     assert peers.check(2, n0, l0, 0.0, anchor=True)
-    peers.commit(2, n0, l0, 10, 0.0, anchor=True)
+    peers.commit(2, n0, l0, 0.0, anchor=True)
     n1, l1, _ = links[1]
     assert peers.check(2, n1, l1, 0.1, anchor=False)
     assert not peers.check(2, n0, l0, 0.1, anchor=False)  # revealed already: anyone has it
@@ -85,13 +87,63 @@ def test_links_are_accepted_forward_only_and_within_the_walk() -> None:
     assert peers.check(2, nw, lw, 100.0, anchor=False)
     nf, lf, _ = links[WALK + 1]
     assert not peers.check(2, nf, lf, 100.0, anchor=False)
-    peers.commit(2, nw, lw, 20, 100.0, anchor=False)
+    peers.commit(2, nw, lw, 100.0, anchor=False)
     assert peers.check(2, nf, lf, 100.1, anchor=False)
-    # An anchor older than what was accepted (a reordering channel) moves nothing back.
-    peers.commit(2, n0, l0, 15, 100.1, anchor=True)
     assert peers.check(2, nf, lf, 100.1, anchor=False)
     peers.forget([2])
     assert not peers.check(2, nf, lf, 100.1, anchor=False)
+
+
+def _chain_of(robot: int, run: int, count: int) -> list[tuple[int, bytes, bool]]:
+    """`count` heartbeats of `robot`'s chain for run `run` (another run: another chain)."""
+    chain = OwnChain(robot, fake_identities([robot])[robot].signer, run=run)
+    return [chain.next(0.1 * i, (2, 0, 1), 1e9) for i in range(count)]
+
+
+def test_an_anchor_of_another_chain_leaves_the_robots_own_chain_followed() -> None:
+    """One anchor in a robot's name that continues none of its chains (another radio
+    with its key) is followed beside the robot's own chain, never instead of it: the
+    robot's next links still count as its liveness."""
+    own, other = _chain_of(2, 77, 40), _chain_of(2, 78, 40)
+    peers = PeerChains(10.0)
+    n, link, _ = own[0]
+    peers.commit(2, n, link, 0.0, anchor=True)
+    for i in range(1, 10):
+        n, link, _ = own[i]
+        assert peers.check(2, n, link, 0.1 * i, anchor=False)
+        peers.commit(2, n, link, 0.1 * i, anchor=False)
+    fn, fl, _ = other[0]
+    peers.commit(2, fn, fl, 1.0, anchor=True)  # the other radio's anchor
+    for i in range(10, 20):
+        n, link, _ = own[i]
+        assert peers.check(2, n, link, 0.1 * i, anchor=False), i
+        peers.commit(2, n, link, 0.1 * i, anchor=False)
+    # The other chain is followed too (its anchor was signed with the robot's key) ...
+    assert peers.check(2, other[1][0], other[1][1], 2.0, anchor=False)
+    # ... and a link already revealed is refused on either chain.
+    assert not peers.check(2, *own[19][:2], 2.0, anchor=False)
+    assert not peers.check(2, fn, fl, 2.0, anchor=False)
+
+
+def test_a_late_anchor_behind_its_chain_moves_nothing_and_heads_are_bounded() -> None:
+    own = _chain_of(2, 77, 40)
+    peers = PeerChains(10.0)
+    for i in range(12):
+        n, link, anchor = own[i]
+        assert anchor or peers.check(2, n, link, 0.1 * i, anchor=False)
+        peers.commit(2, n, link, 0.1 * i, anchor=anchor or i == 5)
+    # An anchor of the same chain that a reordering channel brings late (within SLACK):
+    # the head stays where it is, so the links it already passed are still refused.
+    late = own[11 - SLACK]
+    peers.commit(2, late[0], late[1], 1.2, anchor=True)
+    assert not peers.check(2, *own[11 - SLACK + 1][:2], 1.2, anchor=False)
+    assert peers.check(2, *own[12][:2], 1.2, anchor=False)
+    # Anchors of more chains than HEADS: the oldest head makes room, the newest stay.
+    others = [_chain_of(2, 100 + k, 2) for k in range(HEADS)]
+    for k, chain in enumerate(others):
+        peers.commit(2, chain[0][0], chain[0][1], 1.3 + 0.01 * k, anchor=True)
+    assert not peers.check(2, *own[12][:2], 1.4, anchor=False)
+    assert all(peers.check(2, *chain[1][:2], 1.4, anchor=False) for chain in others)
 
 
 def test_chains_follow_each_other_and_each_starts_with_anchors() -> None:

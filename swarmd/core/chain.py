@@ -53,9 +53,20 @@ SLACK = 8
 refutations, answers; at most four a period, `heartbeat.py`)."""
 ANCHOR_RUN = 3
 """Anchors in a row where a chain starts, so one lost frame leaves nobody unanchored."""
+HEADS = 3
+"""Chains a receiver follows per peer (`PeerChains`): the one its links are on, its
+next one (a new chain, a new run) and one more, so an anchor of another chain in its
+name (a second radio with its key) leaves the chain it links on followed."""
 _WRAP = 256
 """The link number on the wire is one byte, counted modulo 256."""
 _SEED_DOMAIN = b"swarmd heartbeat chain v1"
+
+
+def _back(robot: int, link: bytes, steps: int) -> bytes:
+    """`link` hashed `steps` times: the link that many before it in its chain."""
+    for _ in range(steps):
+        link = step(robot, link)
+    return link
 
 
 def step(robot: int, link: bytes) -> bytes:
@@ -158,41 +169,95 @@ class OwnChain:
         self._anchor_due = ANCHOR_RUN
 
 
+class _Head:
+    """Where one chain of a peer stands: the last link accepted, its number, and when."""
+
+    __slots__ = ("link", "n", "when")
+
+    def __init__(self, n: int, link: bytes, when: float) -> None:
+        self.n, self.link, self.when = n, link, when
+
+
 class PeerChains:
-    """Where each peer's chain stands, as this robot verified it. `check` is pure (a
+    """Where each peer's chains stand, as this robot verified them. `check` is pure (a
     frame the replay filter then refuses moves nothing); `commit` records an accepted
     heartbeat. `rate`: the most heartbeats a second a robot sends on schedule (the
-    active period's), which bounds how far a link may be ahead."""
+    active period's), which bounds how far a link may be ahead.
 
-    __slots__ = ("_at", "_rate")
+    Up to `HEADS` chains per peer, each of which only moves forward. An anchor moves the
+    chain it continues; one that continues none (the robot's next chain, its new run, or
+    an anchor another radio signs with its key) is another head beside the ones its
+    links still follow, so no anchor in a robot's name takes its own chain from the
+    receivers (DESIGN "Heartbeats, per robot")."""
+
+    __slots__ = ("_at", "_hit", "_rate")
 
     def __init__(self, rate: float) -> None:
         self._rate = 2 * rate  # margin: a late sender catching up, clocks that differ
-        self._at: dict[int, tuple[int, bytes, int, float]] = {}
-        """robot -> (link number, link, seq of the frame that carried it, when)."""
+        self._at: dict[int, list[_Head]] = {}
+        """robot -> its chains' heads, the one a link or anchor moved last first."""
+        self._hit: tuple[int, int, bytes, _Head] | None = None
+        """The head `check` tied the last link to, so `commit` hashes nothing again."""
+
+    def _reach(self, head: _Head, n: int, now: float) -> int:
+        """How many links `n` is ahead of `head`, 0 where a link there cannot be its
+        chain's next: revealed already, or further than `WALK` and the time since allow."""
+        gap = (n - head.n) % _WRAP
+        return gap if 0 < gap <= min(WALK, SLACK + int((now - head.when) * self._rate)) \
+            else 0
+
+    def _continues(self, robot: int, head: _Head, n: int, link: bytes, now: float) -> bool:
+        """Is link `n` of `robot`'s the next one of `head`'s chain?"""
+        gap = self._reach(head, n, now)
+        return bool(gap) and hmac.compare_digest(_back(robot, link, gap), head.link)
+
+    def _open(self, head: _Head, now: float) -> bool:
+        """Can a link still be tied to `head` without an anchor (its walk is not yet
+        `WALK` long)? A head past that is kept only while no other chain needs room."""
+        return SLACK + (now - head.when) * self._rate < WALK
 
     def check(self, robot: int, n: int, link: bytes, now: float, *, anchor: bool) -> bool:
         """Is this heartbeat `robot`'s own? An anchor is (its signature was verified);
-        a link is if it hashes to the last one accepted within as many steps as the
-        time since allows (at most `WALK`)."""
+        a link is if it hashes to the last one accepted of one of its chains within as
+        many steps as the time since allows (at most `WALK`)."""
         if anchor:
             return True
-        at = self._at.get(robot)
-        if at is None or len(link) != LINK_LEN:
+        if len(link) != LINK_LEN:
             return False
-        gap = (n - at[0]) % _WRAP
-        if not 0 < gap <= min(WALK, SLACK + int((now - at[3]) * self._rate)):
-            return False  # a link already revealed, or too far: wait for an anchor
-        for _ in range(gap):
-            link = step(robot, link)
-        return hmac.compare_digest(link, at[1])
+        for head in self._at.get(robot, ()):
+            if self._continues(robot, head, n, link, now):
+                self._hit = (robot, n, link, head)
+                return True
+        return False
 
-    def commit(self, robot: int, n: int, link: bytes, seq: int, now: float, *,
-               anchor: bool) -> None:
-        at = self._at.get(robot)
-        if anchor and at is not None and seq < at[2]:
-            return  # an older anchor a reordering channel brought late: keep the newer
-        self._at[robot] = (n, link, seq, now)
+    def commit(self, robot: int, n: int, link: bytes, now: float, *, anchor: bool) -> None:
+        """Record an accepted heartbeat: a link moves the head `check` tied it to; an
+        anchor moves the head it continues, moves nothing if it is at most `SLACK` links
+        behind one (a reordering channel brought it late), else starts a head."""
+        heads = self._at.setdefault(robot, [])
+        hit = self._hit
+        if hit is not None and hit[:3] == (robot, n, link) and hit[3] in heads:
+            head: _Head | None = hit[3]
+        else:  # an anchor, or a link judged later (held within the start-up grace)
+            head = next((h for h in heads if (h.n == n and h.link == link)
+                         or self._continues(robot, h, n, link, now)), None)
+        if head is None and anchor:
+            if any(0 < (h.n - n) % _WRAP <= SLACK
+                   and _back(robot, h.link, (h.n - n) % _WRAP) == link for h in heads):
+                return  # behind a head of its chain: reordered, late; keep the newer
+            # A chain none of the heads continues: first among them; heads no link can
+            # reach any more without an anchor make room first, then the oldest.
+            heads.sort(key=lambda h: not self._open(h, now))
+            del heads[HEADS - 1:]
+            head = _Head(n, link, now)
+            heads.insert(0, head)
+            return
+        if head is None:
+            return  # `check` said no: nothing to record
+        head.n, head.link, head.when = n, link, now
+        if heads[0] is not head:
+            heads.remove(head)
+            heads.insert(0, head)
 
     def forget(self, robots: Iterable[int]) -> None:
         """Revoked robots: only an anchor (which their revoked key cannot sign any more)
@@ -201,8 +266,8 @@ class PeerChains:
             self._at.pop(r, None)
 
     def __contains__(self, robot: object) -> bool:
-        return robot in self._at
+        return isinstance(robot, int) and bool(self._at.get(robot))
 
 
-__all__ = ["ANCHOR_RUN", "CHAIN_LEN", "LINK_LEN", "SLACK", "WALK", "OwnChain", "PeerChains",
-           "anchor_every", "resync_after", "step"]
+__all__ = ["ANCHOR_RUN", "CHAIN_LEN", "HEADS", "LINK_LEN", "SLACK", "WALK", "OwnChain",
+           "PeerChains", "anchor_every", "resync_after", "step"]

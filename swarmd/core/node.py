@@ -279,8 +279,7 @@ class Node(Restart):
         match frame.msg:
             case wire.Heartbeat() as hb:
                 if self._verifier is not None:
-                    self._chains.commit(sender, hb.n, hb.link, frame.seq, now,
-                                        anchor=hb.anchor)
+                    self._chains.commit(sender, hb.n, hb.link, now, anchor=hb.anchor)
                 # The slot it names, looked up once for the rules below (the plan is
                 # fixed for the node's life).
                 f = self._plan.function_at(hb.function) if hb.function else None

@@ -210,8 +210,7 @@ class MonitorState:
             self._drop(reason)
             return None
         if isinstance(msg, wire.Heartbeat) and self.verifier is not None:
-            self.chains.commit(frame.sender, msg.n, msg.link, frame.seq, now,
-                               anchor=msg.anchor)
+            self.chains.commit(frame.sender, msg.n, msg.link, now, anchor=msg.anchor)
         return frame
 
     def _on_heartbeat(self, seen: Heard, sender: int, function: int, epoch: int, role: int,
