@@ -207,15 +207,23 @@ def test_suspect_heartbeat_refutes_a_claim(paper_plan: SwarmPlan, udp_params: Pa
     assert not [a for a in later if isinstance(a, Assign)]
 
 
-def _suspecting_2(plan: SwarmPlan, params: Params) -> tuple[Driven, float]:
-    """Robot 1, past its grace with both links measured, once f2's holder 2 fell silent
-    long enough to be suspected (4, on f4, heartbeats on)."""
-    node, _ = started(plan, params, 1)
+def _heard_past_grace(node: Driven, plan: SwarmPlan, params: Params) -> float:
+    """Robot 1's neighbours heard every 0.1 s for a start-up grace and more: its links
+    are measured clean (DESIGN "Detection"), so its watches use Fig. 7's t_max. The
+    time reached."""
     t = 0.0
     while t < params.startup_grace + 0.5:
         _feed_neighbours(node, plan, t)
         node.tick(t)
         t += 0.1
+    return t
+
+
+def _suspecting_2(plan: SwarmPlan, params: Params) -> tuple[Driven, float]:
+    """Robot 1, past its grace with both links measured, once f2's holder 2 fell silent
+    long enough to be suspected (4, on f4, heartbeats on)."""
+    node, _ = started(plan, params, 1)
+    t = _heard_past_grace(node, plan, params)
     while not events(node.tick(t), ev.Suspect):
         node.receive(frame(plan, 4, hb(plan, "f4")), t)
         t += 0.05
@@ -334,14 +342,8 @@ def _feed_neighbours(node: Driven, plan: SwarmPlan, t: float) -> None:
 def test_stalled_node_does_not_blame_its_neighbours(paper_plan: SwarmPlan,
                                                     udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 1)
-    t = 0.0
-    # Heard for a start-up grace and more: the links are measured clean (DESIGN
-    # "Detection"), so the control below is Fig. 7's t_max.
-    heard = udp_params.startup_grace + 0.5
-    while t < heard:
-        _feed_neighbours(node, paper_plan, t)
-        node.tick(t)
-        t += 0.1
+    # The control below is Fig. 7's t_max: the links are measured clean first.
+    heard = _heard_past_grace(node, paper_plan, udp_params)
     # the process froze for 10 s (SIGSTOP): neighbours kept heartbeating, we heard none
     actions = node.tick(heard + 10.0)
     assert not events(actions, ev.Suspect) and not events(actions, ev.Warn)
