@@ -232,8 +232,8 @@ class PeerChains:
 
     def commit(self, robot: int, n: int, link: bytes, now: float, *, anchor: bool) -> None:
         """Record an accepted heartbeat: a link moves the head `check` tied it to; an
-        anchor moves the head it continues, moves nothing if it is at most `SLACK` links
-        behind one (a reordering channel brought it late), else starts a head."""
+        anchor moves the head it continues, moves nothing if it is behind one (at most
+        `WALK` links: it came late), else starts a head."""
         heads = self._at.setdefault(robot, [])
         hit = self._hit
         if hit is not None and hit[:3] == (robot, n, link) and hit[3] in heads:
@@ -242,9 +242,13 @@ class PeerChains:
             head = next((h for h in heads if (h.n == n and h.link == link)
                          or self._continues(robot, h, n, link, now)), None)
         if head is None and anchor:
-            if any(0 < (h.n - n) % _WRAP <= SLACK
-                   and _back(robot, h.link, (h.n - n) % _WRAP) == link for h in heads):
-                return  # behind a head of its chain: reordered, late; keep the newer
+            if any(0 < (h.n - n) % _WRAP <= WALK
+                   and hmac.compare_digest(_back(robot, h.link, (h.n - n) % _WRAP), link)
+                   for h in heads):
+                # Behind a head of its chain (a reordering channel, or a frame held in
+                # our start-up grace, brought it late): keep the newer. As a head of its
+                # own it would take links already revealed after it.
+                return
             # A chain none of the heads continues: first among them; heads no link can
             # reach any more without an anchor make room first, then the oldest.
             heads.sort(key=lambda h: not self._open(h, now))
