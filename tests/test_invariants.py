@@ -155,6 +155,33 @@ def test_a_warning_about_a_holder_that_then_fences_itself_is_answered_by_the_fen
     assert ("warning_unresolved", 1) in kinds(checker)
 
 
+@pytest.mark.parametrize("after", [6.5, 7.5])
+def test_a_warning_about_a_superseded_holder_ends_when_that_holder_restarts(
+        paper: tuple[SwarmPlan, Params], after: float) -> None:
+    # As above, but 2 never hears 6's epoch: it restarts at 7.0 s and comes back a
+    # standby. Its stale hold ended there, so robot 1's warning about it, before the
+    # restart or after it (1 still had not heard 6), is answered by 6's takeover,
+    # which robot 1 then learns.
+    resumed = {"t": 5.5, "robot": 2, "event": "started", "role": "active", "function": "f2"}
+    back = {"t": 7.2, "robot": 2, "event": "started", "role": "standby"}
+    events = sorted([takeover(4.5, 6, "f2", 2), resumed, back, warn(after, 1, 2, "f2")],
+                    key=lambda e: float(e["t"]))
+    checker = judge(paper, ["restart:2@3", "restart:2@7"], events, duration=16.0)
+    assert ("warning_unresolved", 1) not in kinds(checker)
+
+
+def test_two_liars_are_a_quorum_one_is_not(paper: tuple[SwarmPlan, Params]) -> None:
+    # f2's watchers are robots 1 and 3: both lying, their warnings are a quorum (two
+    # insiders, which DESIGN does not claim to stop); the false takeover is counted,
+    # not judged. One of them alone never gets a live robot replaced.
+    events = [takeover(4.5, 6, "f2", 2),
+              {"t": 4.6, "robot": 2, "event": "fenced", "function": "f2", "epoch": 1}]
+    two = judge(paper, ["liar:1@3", "liar:3@3"], events)
+    assert kinds(two) == [] and len(two.false_takeovers) == 1
+    one = judge(paper, ["liar:1@3"], events)
+    assert kinds(one) == [("false_takeover", 6)] and len(one.false_takeovers) == 1
+
+
 def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace(
         paper: tuple[SwarmPlan, Params]) -> None:
     # Standby 6 restarted at 2.9 s (logged `started` again at 3.0 s); robot 2 crashes at

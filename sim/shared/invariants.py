@@ -37,12 +37,16 @@ Invariants (each violation names the time, robot and what went wrong):
    is judged as a fade of that link, since no protocol converges over a link that
    carries nothing, and `t_max` of silence is what the protocol itself calls gone;
 3. liars: a takeover of a healthy, reachable robot is a false takeover; without loss it
-   is a violation (a single liar can never get a healthy robot replaced). A robot is
+   is a violation (a single liar can never get a healthy robot replaced), unless two
+   liars or more were at work by then: two witnesses are a quorum, DESIGN's two-insider
+   case, which the protocol does not claim to stop (counted, not judged). A robot is
    healthy only once its node has logged `started`: a process the machine could not
    start within the start-up grace is, to the swarm, a dead robot, and replacing it is
    the protocol working (the real-time summary warns about such a slow start);
 4. warnings: every `warn` episode ends in a takeover of the slot, a refutation, or an
-   alert (the paper's verified property, generalised);
+   alert (the paper's verified property, generalised); one about a holder a takeover
+   had already replaced (it resumed that slot after a restart, say) ends when that
+   holder stops holding it: fenced, crashed, restarted or gone;
 5. no node raises on any input (virtual simulator: exceptions are reported here);
 6. epochs come from takeovers: a robot fenced at an epoch that no takeover of its slot
    produced (`fenced_without_takeover`) was fenced by a forged or invented epoch, and
@@ -186,6 +190,10 @@ class Checker:
     replaced_at: dict[tuple[str, int], float] = field(default_factory=dict)
     """(function, robot) -> when a takeover last replaced the robot on the function, or
     the robot was fenced on it (a greater entry outranked its hold)."""
+    superseded: set[tuple[str, int]] = field(default_factory=set)
+    """(function, robot): the robot resumed the function (a restart on its state file)
+    after a takeover had replaced it there, so it holds an entry already outranked; its
+    own new takeover of the function ends that."""
     expects: list[_Expect] = field(default_factory=list)
     takeovers: list[dict[str, Any]] = field(default_factory=list)
     false_takeovers: list[dict[str, Any]] = field(default_factory=list)
@@ -260,6 +268,8 @@ class Checker:
     def _robot_fault(self, t: float, fault: Fault, phase: str) -> None:
         """What a fault on one robot changes of what the checker expects."""
         r = fault.robot
+        if phase == "begin" and fault.kind in (*_STOPPING_FAULTS, FaultKind.RESTART):
+            self._superseded_ends(r)
         if fault.kind in _SILENT and phase == "begin":
             self._close_watcher(r)  # a dead or frozen watcher's warnings end with it
         if fault.kind in _STOPPING_FAULTS and phase == "begin":
@@ -329,12 +339,16 @@ class Checker:
             self.started.add(r)
             self.started_at.setdefault(r, []).append(t)
             if rec.get("function") is not None:
-                self.held_since[(str(rec["function"]), r)] = t
+                key = (str(rec["function"]), r)
+                if self.replaced_at.get(key, -1.0) > self.held_since.get(key, -1.0):
+                    self.superseded.add(key)
+                self.held_since[key] = t
         elif name == "suspect":
             if self._healthy_and_reachable(int(rec["subject"]), t):
                 self.false_suspicions += 1
         elif name in ("fenced", "leave", "stopped"):
             self._close_watcher(r)
+            self._superseded_ends(r)
         elif name == "warn":
             self._on_warn(t, r, rec)
         elif name in ("refute", "alert"):
@@ -368,6 +382,7 @@ class Checker:
         for key in [k for k in self.episodes if k[1] == f]:
             del self.episodes[key]  # the warning ended in a takeover
         self.held_since[(f, r)] = t
+        self.superseded.discard((f, r))
         self.replaced_at[(f, int(rec.get("replaced", 0)))] = t
         self._takeover(t, r, f, int(rec.get("replaced", 0)))
 
@@ -404,6 +419,19 @@ class Checker:
     def _close_watcher(self, r: int) -> None:
         for key in [k for k in self.episodes if k[0] == r]:
             del self.episodes[key]
+
+    def _superseded_ends(self, r: int) -> None:
+        """Robot r stops holding what it resumed after being replaced (it is fenced,
+        crashes, restarts or leaves): the warnings about it there are answered by the
+        takeover that replaced it, which their watchers had missed (they learn that
+        entry, and invariant 8 holds their views to it), as a fence answers them."""
+        for f, robot in [k for k in self.superseded if k[1] == r]:
+            self.superseded.discard((f, robot))
+            # What it held is gone: a later warning about it there is about a replaced
+            # holder too (`_on_warn`).
+            self.held_since.pop((f, robot), None)
+            for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
+                del self.episodes[key]
 
     def _running(self) -> dict[int, str]:
         return {r: f for r, f in self.executing.items()
@@ -462,7 +490,10 @@ class Checker:
         if replaced == r or not self._healthy_and_reachable(replaced, t):
             return  # (a robot taking back its own slot, which it had left, replaces nobody)
         self.false_takeovers.append(rec)
-        liar = any(fl.kind is FaultKind.LIAR and ft <= t for ft, fl in self.faults)
+        liars = {fl.robot for ft, fl in self.faults if fl.kind is FaultKind.LIAR and ft <= t}
+        if len(liars) > 1:
+            return  # two insiders' warnings: a quorum (rule 3 above)
+        liar = bool(liars)
         if not self.loss:
             what = "a liar got" if liar else "false takeover without loss:"
             self.violations.append(Violation(
