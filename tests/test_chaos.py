@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
 from sim.shared.faults import parse_fault
+from sim.shared.invariants import Violation
 
 ROOT = Path(__file__).resolve().parent.parent
 SEEDS = 50
@@ -27,6 +29,12 @@ def _bench() -> ModuleType:
     sys.modules["bench_chaos"] = mod
     spec.loader.exec_module(mod)
     return mod
+
+
+def assert_clean(found: Mapping[str, Sequence[tuple[int, Violation]]]) -> None:
+    """No violation of any kind: the first three of each kind, seed and detail, if any."""
+    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
+    assert hits == {}, hits
 
 
 def test_drawn_cases_are_valid_and_replayable() -> None:
@@ -47,8 +55,7 @@ def test_drawn_cases_are_valid_and_replayable() -> None:
 def test_random_chaos_breaks_no_invariant_the_protocol_promises() -> None:
     bench = _bench()
     found = bench.chaos(range(SEEDS), max_robots=12, verbose=False)
-    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
-    assert hits == {}, hits
+    assert_clean(found)
 
 
 DENSE_FOUND = (543, 1104, 1669, 1672, 1867)
@@ -64,8 +71,7 @@ def test_dense_chaos_converges_in_every_auth_mode(auth: str) -> None:
     bench = _bench()
     seeds = [*range(25), *DENSE_FOUND]
     found = bench.chaos(seeds, max_robots=12, verbose=False, dense=True, auth=auth)
-    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
-    assert hits == {}, hits
+    assert_clean(found)
 
 
 CLASSIC_FINGERPRINT = "bbd90d62597ea7cc"
@@ -161,16 +167,14 @@ relayed back as part of a reassertion's proof, never certified at it.)"""
 def test_wide_seeds_fixed_run_clean_in_every_mode(auth: str) -> None:
     bench = _bench()
     found = bench.chaos(WIDE_FIXED, max_robots=60, verbose=False, auth=auth, wide=True)
-    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
-    assert hits == {}, hits
+    assert_clean(found)
 
 
 @pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
 def test_wide_small_seeds_run_clean_in_every_mode(auth: str) -> None:
     bench = _bench()
     found = bench.chaos(WIDE_SMALL, max_robots=12, verbose=False, auth=auth, wide=True)
-    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
-    assert hits == {}, hits
+    assert_clean(found)
 
 
 WIDE_DENSE: tuple[int, ...] = (200507, 201884)
@@ -191,8 +195,7 @@ def test_wide_dense_seeds_run_clean_in_every_mode(auth: str) -> None:
     bench = _bench()
     found = bench.chaos(WIDE_DENSE, max_robots=16, verbose=False, dense=True, auth=auth,
                         wide=True)
-    hits = {k: [(s, v.detail) for s, v in h[:3]] for k, h in found.items()}
-    assert hits == {}, hits
+    assert_clean(found)
 
 
 def test_a_few_wide_seeds_run_and_no_node_raises() -> None:
