@@ -489,12 +489,16 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     again.tick(5.0 + params.rejoin_hold)
     assert again.snapshot().function == "f2"
     assert again.snapshot().certificate == (leave,)
-    # The old holder's stale heartbeat gets the certificate and a fresh claim back.
+    # The old holder's stale heartbeat gets the whole proof back, in CERTs: the
+    # certificate and the claim it backs, which the restart lost and the resumed hold
+    # signed again.
     stale = signed_beat(res_ids[2], plan.swarm_id, 2, 800, slot, 0)
     out = [wire.decode(a.frame, (), res_ids[1].verifier).msg
            for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
-    assert any(isinstance(m, wire.Cert) for m in out)
-    assert any(isinstance(m, wire.Claim) and m.epoch == 1 for m in out)
+    inner = [m.inner for m in out if isinstance(m, wire.Cert)]
+    assert [f.msg for f in inner if f.sender == 2] == [wire.Leave(slot, 0, 0)]
+    assert [(f.sender, f.msg) for f in inner if isinstance(f.msg, wire.Claim)] == [
+        (6, wire.Claim(2, slot, 1))]
 
 
 # ---------------------------------------------------------------- fragments

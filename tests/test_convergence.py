@@ -295,7 +295,7 @@ def test_a_standby_alone_ahead_of_a_stale_holder_whose_new_holder_died_converges
     executes on; 5 takes f2 over at epoch 1, but its heartbeats reach neither watcher
     (1 and 3) before it crashes at 5 s: standby 6 alone holds (5, 1), the watchers
     and 2 hold (2, 0), and nobody warns about 5. After the heal only 6 can carry the
-    entry: per robot with its proof (`_relay_view`), unsigned and with a shared key
+    entry: per robot with its proof (`Signed._show`), unsigned and with a shared key
     with one warning about the silent holder (`Hearing._older_beat`, DESIGN
     "Convergence"); the digest alone only makes 2 heartbeat its older entry at 6.
     Without that warning, 6's view stays (5, 1) against (2, 0) for good."""

@@ -142,10 +142,11 @@ class Episode(Signed):
             return
         if evidence:
             self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
-        if self._holds(f) and (w.epoch, w.suspect) != (self._epoch, self._robot_id):
-            self._relay_cert(f, now)  # a watcher that missed our takeover
-        elif greater(self._known[f], Holder(w.suspect, w.epoch)):
-            self._relay_view(f, now)  # one that missed a takeover we certified
+        known, warned = self._known[f], Holder(w.suspect, w.epoch)
+        if warned != known and (self._holds(f) or greater(known, warned)):
+            # A watcher that missed our takeover, or one that missed a takeover we
+            # certified: it is shown the proof of our entry.
+            self._show(f, now)
 
     def _record_evidence(self, f: str, witness: int, suspect: int, epoch: int,
                          raw: bytes, now: float | None = None) -> None:
@@ -181,7 +182,7 @@ class Episode(Signed):
         the other witnesses' and the slot's standby would never count a quorum; a hold
         of ours it outranks ends (rule 2). In these modes any heartbeat moves a view as
         far (DESIGN section 2, "Who can still do what"); per robot, only a certificate
-        does (`_relay_view`)."""
+        does (`_show`)."""
         new = Holder(w.suspect, w.epoch)
         if w.suspect == sender or not greater(new, self._known[f]) \
                 or sender not in self._ev.may_watch(f, claimants=True):
@@ -301,10 +302,10 @@ class Episode(Signed):
     def _claim_certified(self, f: str, sender: int, c: wire.Claim, raw: bytes,
                          now: float) -> bool:
         """Per-robot mode: does this CLAIM (signed bytes `raw`) act here? Only with a
-        certificate this robot verified; its signed bytes are kept for `_relay_view`."""
+        certificate this robot verified; its signed bytes are kept for `_show`."""
         if (sender, c.epoch) == tuple(self._known[f]):
-            # The holder re-announcing its certificate (`_relay_cert`), or a relayed proof
-            # resting on it: certified here too (a restarted robot's view of it came from
+            # The holder's own proof shown (`_show`), or another proof resting on it:
+            # certified here too (a restarted robot's view of it came from
             # its state file, with no evidence), and its signed claim kept.
             if self._ev.certify(f, sender, c, self._known[f].epoch):
                 self._ev.keep_claim(f, sender, c.epoch, raw)
@@ -315,14 +316,14 @@ class Episode(Signed):
             # while in case its certificate comes later.
             self._ev.hold_pending(f, sender, c, now, raw)
             self._drops[DropReason.UNCERTIFIED] += 1
-            self._relay_refutes(f, now)
+            self._show(f, now, whole=False)  # refutes we hold may void it
             return False
         self._ev.keep_claim(f, sender, c.epoch, raw)
         return True
 
     def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
                           now: float) -> None:
-        """A signed CLAIM relayed inside a CERT (`_relay_view`): heard as a claim (rule
+        """A signed CLAIM relayed inside a CERT (`_show`): heard as a claim (rule
         10 bounds what a repeat does), and, if the evidence here certifies it and its
         entry is greater than our view of f, our view moves forward to it
         (`_learn_holder`) — as far as a heartbeat of its claimant would have moved it,

@@ -35,9 +35,10 @@ the oldest, it cannot grow the store):
   certificate (a channel that reorders), counted once it comes, if still fresh.
 - `claims`: {(claimant, epoch): the claimant's signed CLAIM} of the claims certified
   here, so that the whole certificate of a takeover — the evidence and the claim it
-  backs — can be shown to a robot whose view of f is older (`view_frames`).
-- `mine`: (failed, frames), the certificate of this robot's own hold of f.
-- `relayed_at`: when `mine`, or the refutes of f, were last relayed (once per T_max).
+  backs — can be shown to a robot whose view of f differs (`proof`).
+- `mine`: (epoch, failed, frames), the certificate of this robot's own hold of f.
+- `relayed_at`: when the proof of our entry for f was last relayed (once per T_max);
+  `digest_answered_at`, when a digest that showed f otherwise was last answered.
 
 Sans-IO and pure: every method takes what it needs (`now`, the epoch floor of f) and
 returns a decision or frames; the `Node` sends, emits and counts drops.
@@ -73,12 +74,9 @@ class EvidenceStore:
         self._certified: dict[str, dict[tuple[int, int], tuple[int, dict[int, int]]]] = {}
         self._pending: dict[str, dict[tuple[int, int], tuple[int, float, bytes]]] = {}
         self._claims: dict[str, dict[tuple[int, int], bytes]] = {}
-        self._mine: dict[str, tuple[int, tuple[bytes, ...]]] = {}
+        self._mine: dict[str, tuple[int, int, tuple[bytes, ...]]] = {}
         self._relayed_at: dict[str, float] = {}
-        self._refutes_relayed_at: dict[str, float] = {}
-        self._evidence_relayed_at: dict[str, float] = {}
         self._digest_answered_at: dict[str, float] = {}
-        self._mine_epoch: dict[str, int] = {}
         self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
 
     # ------------------------------------------------------------------ evidence
@@ -264,7 +262,7 @@ class EvidenceStore:
         pending[(claimant, c.epoch)] = (c.failed, now, raw)
 
     def keep_claim(self, f: str, claimant: int, epoch: int, raw: bytes) -> None:
-        """Keep the signed CLAIM of a takeover certified here (`view_frames` relays it).
+        """Keep the signed CLAIM of a takeover certified here (`proof` relays it).
         Bounded like the certificates: the oldest epoch goes first."""
         if not raw:
             return
@@ -281,32 +279,38 @@ class EvidenceStore:
         who = self._robot_id if claimant is None else claimant
         return tuple(got[w] for w in self._backers(f, suspect, epoch, who))
 
-    def view_frames(self, f: str, holder: int, epoch: int, now: float,
-                    every: float | None = None) -> tuple[bytes, ...]:
-        """Another robot's view of f is older than the takeover by `holder` at `epoch`
-        certified here (it heartbeats f at an older epoch, or warns about an older
-        holder): the whole certificate — the evidence against the robot replaced, then
-        `holder`'s signed CLAIM — to relay, so that a stale holder fences itself or
-        refutes and any other robot certifies the takeover and moves its view (DESIGN,
-        "Convergence"); at most once per T_max (empty otherwise, or when this robot
-        certified no such takeover)."""
+    def proof(self, f: str, holder: int, epoch: int, *, whole: bool = True,
+              ) -> tuple[bytes, ...]:
+        """The signed frames that prove the entry (`holder`, `epoch`) of f here, for a
+        robot whose view of f differs (DESIGN, "Convergence"): the certificate of the
+        takeover that made it — the evidence against the robot replaced, then `holder`'s
+        signed CLAIM — or, for a reassertion, the takeover it outranks and the REFUTE
+        that voids it; then the REFUTEs `holder` signed at `epoch`, which void every
+        claim against the entry that still goes round. A stale holder fences itself or
+        refutes, any other robot certifies the entry and moves its view, and one that
+        acts on a voided claim drops it. Empty when nothing here proves the entry (the
+        plan's own holder at epoch 0 needs no proof) and nothing refutes a claim
+        against it. Not `whole`: the REFUTEs alone, for a robot that acts on a claim
+        against the entry (its certificate would not change its mind)."""
+        refutes = self._refutes.get(f, {}).get((holder, epoch))
+        signed = tuple(raw for _, raw in refutes.values()) if refutes else ()
+        if not whole:
+            return signed
         voided = self.reasserted(f, holder, epoch)
         if voided is not None:
-            # A reassertion: the takeover it outranks, then the refute that voids it.
             refute = self._voiding(f, voided, epoch - 1)
             frames = self._takeover_frames(f, voided, epoch - 1) \
                 + ((refute,) if refute is not None else ())
         else:
             frames = self._takeover_frames(f, holder, epoch)
-        if not frames or not self._due(self._evidence_relayed_at, f, now, every):
-            return ()
-        return frames
+        return frames + signed
 
-    def relay_due(self, f: str, now: float) -> bool:
-        """May this robot show another its view of f now? At most once per T_max per
-        slot, shared with `view_frames` (unsigned and shared-key modes relay a warning
-        instead of a certificate: `Hearing._older_beat`)."""
-        return self._due(self._evidence_relayed_at, f, now)
+    def due(self, f: str, now: float, every: float | None = None) -> bool:
+        """May this robot show another its view of f now (`proof`; unsigned and
+        shared-key modes relay a warning instead, `Hearing._older_beat`)? One relay of
+        f at most per `every` (default T_max), whoever asked: True, and the time
+        stamped, if one is due now."""
+        return self._due(self._relayed_at, f, now, every)
 
     def answer_due(self, f: str, now: float, every: float) -> bool:
         """May the holder of f answer a view digest that shows f otherwise
@@ -326,38 +330,31 @@ class EvidenceStore:
 
     def _takeover_frames(self, f: str, holder: int, epoch: int) -> tuple[bytes, ...]:
         """The evidence against the robot `holder` replaced at `epoch`, then `holder`'s
-        signed CLAIM (empty when no such takeover is certified here)."""
-        failed = self.replaced(f, holder, epoch)
-        if failed is None or epoch == 0:
-            return ()
-        frames = self.cert_frames(f, failed, epoch - 1, holder)
+        signed CLAIM (empty when no such takeover is certified here). For this robot's
+        own hold, the certificate it keeps (`took_over`), refreshed to its backers'
+        latest frames while they are here: a flood of invented episodes may push the
+        evidence out of the store, never the hold's own proof."""
+        mine = self._mine.get(f)
+        if holder == self._robot_id and mine is not None and mine[0] == epoch:
+            frames = self.cert_frames(f, mine[1], epoch - 1) or mine[2]
+            self._mine[f] = (epoch, mine[1], frames)
+        else:
+            failed = self.replaced(f, holder, epoch)
+            if failed is None or epoch == 0:
+                return ()
+            frames = self.cert_frames(f, failed, epoch - 1, holder)
         claim = self._claims.get(f, {}).get((holder, epoch))
         return (*frames, claim) if claim is not None and frames else frames
 
     def took_over(self, f: str, failed: int, old_epoch: int, epoch: int) -> None:
         """This robot holds f at `epoch` now: keep the certificate of its hold."""
-        self._mine[f] = (failed, self.cert_frames(f, failed, old_epoch))
-        self._mine_epoch[f] = old_epoch
+        self._mine[f] = (epoch, failed, self.cert_frames(f, failed, old_epoch))
         self._certified.setdefault(f, {})[(self._robot_id, epoch)] = (
             failed, self._backers(f, failed, old_epoch, self._robot_id))
 
     def certificate(self, f: str | None) -> tuple[bytes, ...]:
         """The frames certifying this robot's hold of f (empty if none)."""
-        return self._mine[f][1] if f is not None and f in self._mine else ()
-
-    def relay(self, f: str, now: float, every: float | None = None,
-              ) -> tuple[int, tuple[bytes, ...]] | None:
-        """(failed, frames) of our hold of f to relay now, at most once per `every`
-        (default T_max)."""
-        mine = self._mine.get(f)
-        if mine is None or not self._due(self._relayed_at, f, now, every):
-            return None
-        # The latest unrefuted warnings, not those of the moment we took over: a holder
-        # may have refuted those since, while later ones still back our hold.
-        fresh = self.cert_frames(f, mine[0], self._mine_epoch.get(f, -1))
-        if fresh:
-            mine = self._mine[f] = (mine[0], fresh)
-        return mine
+        return self._mine[f][2] if f is not None and f in self._mine else ()
 
     def restore(self, f: str, epoch: int, frames: tuple[bytes, ...],
                 verifier: Verifier) -> bool:
@@ -412,16 +409,6 @@ class EvidenceStore:
             return False
         got[r.witness] = (r.seq, raw)
         return True
-
-    def refute_frames(self, f: str, holder: int, epoch: int, now: float,
-                      every: float | None = None) -> tuple[bytes, ...]:
-        """The signed REFUTEs `holder` made about f at `epoch`, to relay to a robot that
-        still acts on a claim they void; at most once per `every` (default T_max; empty
-        otherwise)."""
-        got = self._refutes.get(f, {}).get((holder, epoch))
-        if not got or not self._due(self._refutes_relayed_at, f, now, every):
-            return ()
-        return tuple(raw for _, raw in got.values())
 
 
 def _says(frame: wire.Frame) -> tuple[int, int, int] | None:

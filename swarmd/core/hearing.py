@@ -54,7 +54,7 @@ class Hearing(Episode):
             # Per robot: a takeover that the robot it replaced refuted. Its holder is
             # outranked by that robot's reassertion; show it why.
             self._learn_reassertion(f, ahead, now)
-            self._relay_view(f, now)
+            self._show(f, now)
             return
         self._known.merge(f, entry)
         self._ears.slot_beat(f, sender, hb.epoch, now)
@@ -70,7 +70,7 @@ class Hearing(Episode):
         """A heartbeat without a slot shows, in its epoch field, its sender's view of
         the slots it covers (`digest.py`). If it shows the slot we hold at an entry
         other than ours, one of us is behind: we answer at once with our entry (per
-        robot its certificate, `_relay_cert`), and an extra heartbeat, whose entry it
+        robot its proof, `_show`), and an extra heartbeat, whose entry it
         merges (per robot an anchor: a robot that restarted has lost our chain). So a
         standby that missed a takeover learns it within one standby period rather than
         the unasked relay's RELAY_EVERY T_max (DESIGN, "Convergence"). If the sender
@@ -91,7 +91,7 @@ class Hearing(Episode):
             # The gate above bounds it: a relay of ours to someone else within T_max
             # before (the unasked one, say) did not reach this robot, or it would not
             # show an older view.
-            self._relay_cert(f, now, 0.0)
+            self._show(f, now, 0.0)
         if not self._heartbeat_now(now) and self._chain is not None:
             # Too soon after our last heartbeat for an extra one: the next one, within
             # a heartbeat period, carries our entry, and per robot as an anchor.
@@ -109,14 +109,13 @@ class Hearing(Episode):
             # ours): every other heartbeat period rather than every T_max, so a
             # lossy channel does not keep two robots executing one slot (rule 2).
             rival = hb.epoch == self._epoch
-            self._relay_cert(f, now, 2 * self._params.heartbeat_interval if rival
-                             else None)
+            self._show(f, now, 2 * self._params.heartbeat_interval if rival else None)
             self._heartbeat_now(now)
         elif self._identity is not None:
             # Per-robot mode, a takeover it missed whose new holder may be gone:
             # whoever certified it shows the stale holder the evidence against it
             # (it fences itself, or refutes and keeps its slot everywhere).
-            if self._relay_view(f, now) and sender == known.robot \
+            if self._show(f, now) and sender == known.robot \
                     and self._ev.reasserted(f, sender, known.epoch) is not None:
                 # Its own hold, below the reassertion our view holds: it refuted a
                 # recorded takeover that we took before its word reached us and did not
@@ -125,7 +124,7 @@ class Hearing(Episode):
                 self._send(wire.Warn(sender, hb.function, known.epoch, 0))
         elif not self._ears.heard_lately(f, known.robot, known.epoch, now,
                                          self._params.t_max) \
-                and self._ev.relay_due(f, now):
+                and self._ev.due(f, now):
             # Unsigned or shared key: a takeover it missed whose new holder is silent
             # here too. Our warning about that holder carries the entry (DESIGN,
             # "Convergence"): the stale holder and anyone else that missed it move
@@ -140,9 +139,8 @@ class Hearing(Episode):
         """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
         epoch or a holder by itself; only the certified new holder's does."""
         self._drops[DropReason.UNCERTIFIED] += 1
-        if self._holds(f):
-            self._relay_cert(f, now)
-        self._relay_refutes(f, now)  # it may act on a claim they void
+        # It may act on a claim our refutes void; to the holder it is a stale view.
+        self._show(f, now, whole=self._holds(f))
         if self._rejoin is not None and self._rejoin.function == f:
             # Not believed, but enough to stay a standby rather than resume: the
             # cautious side of rule 2 across a reboot (the slot's watchers and
@@ -162,7 +160,7 @@ class Hearing(Episode):
         if f is None:
             return
         if self._holds(f):
-            self._relay_cert(f, now)
+            self._show(f, now)
             if hb.epoch <= self._epoch:
                 self._heartbeat_now(now)
         if self._rejoin is not None and self._rejoin.function == f:

@@ -400,7 +400,7 @@ class Node(Restart):
                 self._watch_fired(g, watch, now)
         if self._heartbeating() and now >= self._beat.next:
             self._send_heartbeat(now)
-            self._relay_unasked(now)
+            self._show_unasked(now)
             self._beat.scheduled(now, self._role)
         return self._drain()
 

@@ -151,8 +151,15 @@ class Restart(Hearing):
             self._to(Trigger.OUTDATED, Standby())
             self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
             return
-        self._emit(ev.Started(role=ev.RoleName.ACTIVE, function=rejoin.function))
-        self._become_holder(Trigger.REJOIN, rejoin.function, rejoin.epoch, now)
+        f, epoch = rejoin.function, rejoin.epoch
+        failed = self._ev.replaced(f, self._robot_id, epoch) if self._identity else None
+        if failed is not None:
+            # Per robot, a hold resumed at a takeover's epoch: its signed CLAIM went down
+            # with the robot; signed again, so the proof we show is whole (`_show`).
+            claim = self._sign_only(wire.Claim(failed, self._plan.slot(f), epoch))
+            self._ev.keep_claim(f, self._robot_id, epoch, claim)
+        self._emit(ev.Started(role=ev.RoleName.ACTIVE, function=f))
+        self._become_holder(Trigger.REJOIN, f, epoch, now)
 
 
 __all__ = ["Restart"]

@@ -71,51 +71,38 @@ class Signed(Views):
         msg = wire.Refute(claimant, self._plan.slot(f), epoch, seq)
         self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
 
-    def _relay_cert(self, f: str | None, now: float, every: float | None = None) -> None:
-        """Someone still believes an older holder of our slot: relay the certificate of
-        our hold and re-announce the claim it backs, at most once per T_max (`every`)."""
-        if f is None:
-            return
-        if self._identity is not None \
-                and self._ev.reasserted(f, self._robot_id, self._epoch) is not None:
-            self._relay_view(f, now, every)  # a reassertion: its proof is the view's
-            return
-        mine = self._ev.relay(f, now, every)
-        if mine is None:
-            return
-        failed, frames = mine
-        for raw in frames:
-            self._send_cert(f, raw)
-        self._send(wire.Claim(failed, self._plan.slot(f), self._epoch))
-
-    def _relay_unasked(self, now: float) -> None:
-        """Anti-entropy: a robot that restarted, or missed the takeover (or its undoing)
-        and heard nothing since that would make us relay, learns it within RELAY_EVERY
-        T_max (DESIGN, "Convergence")."""
-        if self._identity is None or self._role != Role.ACTIVE or self._function is None:
-            return
-        every = RELAY_EVERY * self._params.t_max
-        if self._epoch:
-            self._relay_cert(self._function, now, every)
-        # And the refutes of a takeover of our slot we undid: a robot that restarted
-        # with it in its view learns it is void (`_rejudge`).
-        for raw in self._ev.refute_frames(self._function, self._robot_id, self._epoch, now,
-                                          every):
-            self._send_cert(self._function, raw)
-
-    def _relay_view(self, f: str, now: float, every: float | None = None) -> bool:
-        """Someone's view of f is older than ours (it heartbeats f, or warns about f's
-        holder, at an older epoch): if a certificate here backs our view, relay it
-        whole, the signed CLAIM last (`EvidenceStore.view_frames`), at most once per
-        T_max. Without it, a robot that missed a takeover whose new holder died before
-        it heard a heartbeat would warn about the old holder for ever, the others
-        about the new one, and the slot's standby would count no quorum (DESIGN,
-        "Convergence"). True if it relayed anything."""
+    def _show(self, f: str, now: float, every: float | None = None, *,
+              whole: bool = True) -> bool:
+        """Per robot: a robot's view of f differs from ours (it heartbeats f, warns
+        about f's holder or shows a digest at another entry, or acts on a claim against
+        ours): relay the proof of our entry (`EvidenceStore.proof`: the takeover's
+        certificate and signed CLAIM, or a reassertion's, and the holder's REFUTEs at
+        it), inside CERTs (they may be older than its replay window), at most once per
+        `every` (T_max by default). The one way a proof travels (DESIGN,
+        "Convergence"): a stale holder fences itself or refutes, a robot that missed a
+        takeover certifies it and moves forward, one that acts on a voided claim drops
+        it. Without it, a robot that missed a takeover whose new holder died before it
+        heard a heartbeat would warn about the old holder for ever, the others about
+        the new one, and the slot's standby would count no quorum. Not `whole`: only
+        the REFUTEs, to a robot that acts on a claim they void. True if it relayed
+        anything."""
+        if self._identity is None:
+            return False
         holder, epoch = self._known[f]
-        frames = self._ev.view_frames(f, holder, epoch, now, every)
+        frames = self._ev.proof(f, holder, epoch, whole=whole)
+        if not frames or not self._ev.due(f, now, every):
+            return False
         for raw in frames:
             self._send_cert(f, raw)
-        return bool(frames)
+        return True
+
+    def _show_unasked(self, now: float) -> None:
+        """Anti-entropy: the holder shows the proof of its entry every RELAY_EVERY T_max
+        even unasked, so a robot that restarted, or missed the takeover (or its undoing)
+        and heard nothing since that would make us show it, learns it within that bound
+        (DESIGN, "Convergence")."""
+        if self._role == Role.ACTIVE and self._function is not None:
+            self._show(self._function, now, RELAY_EVERY * self._params.t_max)
 
     # ------------------------------------------------------------------ refutes
     # A holder's signed word that it was alive after a warning voids that warning
@@ -134,7 +121,7 @@ class Signed(Views):
             return
         if seq <= self._ev.refuted_up_to(f, self._robot_id, epoch, witness):
             # Refuted already: whoever shows it to us again missed our refutes.
-            self._relay_refutes(f, now)
+            self._show(f, now, whole=False)
             return
         msg = wire.Refute(witness, self._plan.slot(f), epoch, seq)
         self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
@@ -171,16 +158,6 @@ class Signed(Views):
             if epoch <= EPOCH_MAX and greater(mine, self._known[f]) \
                     and self._ev.reasserted(f, mine.robot, mine.epoch) is not None:
                 self._learn_reassertion(f, mine, now)
-
-    def _relay_refutes(self, f: str, now: float) -> None:
-        """Someone acts on a takeover of f that refutes we hold void (an uncertified
-        heartbeat or claim): relay them, inside CERTs (they may be older than its replay
-        window), at most once per T_max."""
-        if self._identity is None:
-            return
-        holder, epoch = self._known[f]
-        for raw in self._ev.refute_frames(f, holder, epoch, now):
-            self._send_cert(f, raw)
 
 
 __all__ = ["RELAY_EVERY", "Signed"]

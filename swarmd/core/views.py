@@ -21,10 +21,11 @@ from swarmd.core.state import Active, Fenced, Standby
 class Views(NodeBase):
     def _learn_holder(self, f: str, new: Holder, now: float) -> None:
         """Our view of f moves forward to `new`, a takeover we learn of without hearing
-        its holder (`_warned_newer`, `_relay_view`'s receivers). Not a sign of life: the
-        watch treats it as a CLAIM heard (the new holder gets `claim_hold + t_max` to
-        heartbeat; rule 10, once an episode), then suspects it. A hold of ours it
-        outranks ends (rule 2); a claim of ours it supersedes backs off."""
+        its holder (`_warned_newer`, or a proof another robot showed, `Signed._show`).
+        Not a sign of life: the watch treats it as a CLAIM heard (the new holder gets
+        `claim_hold + t_max` to heartbeat; rule 10, once an episode), then suspects it.
+        A hold of ours it outranks ends (rule 2); a claim of ours it supersedes backs
+        off."""
         if not self._known.merge(f, new):
             return
         if self._holds(f) and new.robot == self._robot_id:
