@@ -32,7 +32,7 @@ import collections
 import random
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -99,13 +99,17 @@ def draw_swarm(rng: random.Random, max_robots: int = 60) -> SwarmPlan:
 
 
 def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
-              wide: bool = False) -> Case:
+              wide: int = 0) -> Case:
     """The swarm and schedule of one seed. `dense`: 4-8 faults within 1.5 s, mostly on
-    neighbours (clustered failures). `wide`: the same draw, then one or two compound
-    link faults (`WIDE_KINDS`, `_draw_compound`) on top; a seed drawn without it
-    replays exactly as it always did."""
+    neighbours (clustered failures). `wide` (1, or True): the same draw, then one or two
+    compound link faults (`WIDE_KINDS`, `_draw_compound`) on top; 2 (`--wider`): drawn
+    from `WIDER_KINDS`. A seed drawn without it replays exactly as it always did, and a
+    wide seed as it did before `--wider` existed."""
     case = _draw_classic(seed, max_robots, dense)
-    return _widen(case, random.Random(f"wide-{seed}")) if wide else case
+    if not wide:
+        return case
+    kinds = WIDE_KINDS if wide == 1 else WIDER_KINDS
+    return _widen(case, random.Random(f"wide-{seed}"), kinds)
 
 
 def _draw_classic(seed: int, max_robots: int, dense: bool) -> Case:
@@ -171,15 +175,21 @@ WIDE_KINDS = ("overlapping-cuts", "muted-while-cut", "fade-restart", "deaf-takeo
   to the robots it needs to hear (the watchers, or the standby);
 - `burst-40`: bursty loss (Gilbert-Elliott) of 20 to 40 %."""
 
+WIDER_KINDS = (*WIDE_KINDS, "split-groups")
+"""`--wider`: the wide kinds, and
+- `split-groups`: the swarm split in three or four groups, each pair of groups cut both
+  ways from a start and for a length of its own, so that the cuts overlap and heal one
+  pair at a time (a group hears a second one again while a third is still cut off)."""
 
-def _widen(case: Case, rng: random.Random) -> Case:
-    """`case` with one or two compound faults (`WIDE_KINDS`) drawn by `rng` on top."""
+
+def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS) -> Case:
+    """`case` with one or two compound faults of `kinds` drawn by `rng` on top."""
     plan, ids = case.plan, sorted(case.plan.robots)
     faults = list(case.faults)
     loss, model, burst = case.loss, case.loss_model, case.burst_len
     base = min(f.at for f in faults)
-    kinds = tuple(rng.sample(WIDE_KINDS, rng.randint(1, 2)))
-    for kind in kinds:
+    drawn = tuple(rng.sample(kinds, rng.randint(1, 2)))
+    for kind in drawn:
         at = round(base + rng.uniform(0.0, 2.0), 3)
         if kind == "burst-40":
             loss, model, burst = round(rng.uniform(0.2, 0.4), 2), "burst", \
@@ -188,12 +198,12 @@ def _widen(case: Case, rng: random.Random) -> Case:
             faults += _draw_compound(rng, plan, ids, kind, at)
     last = max((f.end or f.at) for f in faults)
     return Case(case.seed, plan, tuple(faults), loss, round(last + 8.0, 3), model, burst,
-                kinds)
+                drawn)
 
 
 def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str,
                    at: float) -> list[Fault]:
-    """The faults of one compound kind (`WIDE_KINDS`, all but the loss) from `at`."""
+    """The faults of one compound kind (`WIDER_KINDS`, all but the loss) from `at`."""
     def length() -> float:
         return round(rng.uniform(0.5, 3.0), 2)
 
@@ -204,7 +214,9 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
             near = _neighbours(plan, a) or [r for r in ids if r != a]
             b = tuple(sorted(rng.sample(near, rng.randint(1, min(2, len(near))))))
             out.append(Fault(FaultKind.PARTITION, t, (a, *b), length(), ((a,), b), oneway=True))
-            t = round(t + rng.uniform(0.0, 0.8), 3)  # starts while the one before lasts
+            # Within 0.8 s of the one before: mostly while it lasts (it lasts 0.5-3 s);
+            # `wide_kinds` names the case by the overlap it finds.
+            t = round(t + rng.uniform(0.0, 0.8), 3)
         return out
     if kind == "muted-while-cut":
         group = tuple(sorted(rng.sample(ids, rng.randint(1, len(ids) - 1))))
@@ -221,6 +233,8 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
                             (group, rest), oneway=True),
                 Fault(FaultKind.PARTITION, cut_at, (*rest, *group), cut_for, (rest, group),
                       oneway=True)]
+    if kind == "split-groups":
+        return _split_groups(rng, ids, at, length)
     if kind == "fade-restart":
         r = rng.choice(ids)
         back = round(at + rng.uniform(0.1, 1.5), 3)
@@ -229,6 +243,25 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
         return [Fault(FaultKind.FADE, round(at - 0.2, 3), (r,), fade_for), *crash,
                 Fault(FaultKind.RESTART, back, (r,))]
     return _deaf_takeover(rng, plan, ids, at, length())
+
+
+def _split_groups(rng: random.Random, ids: list[int], at: float,
+                  length: Callable[[], float]) -> list[Fault]:
+    """Three or four groups (as many as there are robots, at most), each pair cut both
+    ways from its own start within 0.6 s of `at`, for its own length. Each cut is one
+    one-way partition each way: the virtual medium holds one two-way partition at a
+    time, one-way cuts overlap anything."""
+    order = list(ids)
+    rng.shuffle(order)
+    k = min(len(order), rng.randint(3, 4))
+    groups = [tuple(sorted(order[i::k])) for i in range(k)]
+    out = []
+    for i, a in enumerate(groups):
+        for b in groups[i + 1:]:
+            start, span = round(at + rng.uniform(0.0, 0.6), 3), length()
+            out += [Fault(FaultKind.PARTITION, start, (*a, *b), span, (a, b), oneway=True),
+                    Fault(FaultKind.PARTITION, start, (*b, *a), span, (b, a), oneway=True)]
+    return out
 
 
 def _deaf_takeover(rng: random.Random, plan: SwarmPlan, ids: list[int], at: float,
@@ -269,10 +302,19 @@ def wide_kinds(case: Case) -> list[str]:
     if any(r.kind is FaultKind.RESTART and r.robots[0] in fd.robots and _overlap(fd, r)
            for fd in fades for r in case.faults):
         out.append("fade-restart")
+    if len(_cut_both_ways(oneways)) >= 3:
+        out.append("split-groups")
     deafs = [f for f in case.faults if f.kind is FaultKind.DEAF]
     if any(c.kind is FaultKind.CRASH and _overlap(d, c) for d in deafs for c in case.faults):
         out.append("deaf-takeover")
     return out
+
+
+def _cut_both_ways(oneways: list[Fault]) -> set[frozenset[tuple[int, ...]]]:
+    """The pairs of groups that one-way cuts in both directions, from the same instant
+    for the same length, part: each a two-way cut."""
+    return {frozenset(a.groups) for a in oneways for b in oneways
+            if a.groups == b.groups[::-1] and (a.at, a.end) == (b.at, b.end)}
 
 
 def _overlap(a: Fault, b: Fault) -> bool:
@@ -304,7 +346,7 @@ DRAWN: collections.Counter[str] = collections.Counter()
 
 
 def chaos(seeds: Sequence[int], max_robots: int, verbose: bool, dense: bool = False,
-          auth: str | None = None, wide: bool = False
+          auth: str | None = None, wide: int = 0
           ) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
@@ -379,7 +421,7 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
-def _chaos_chunk(args: tuple[int, int, int, bool, str, bool]
+def _chaos_chunk(args: tuple[int, int, int, bool, str, int]
                  ) -> tuple[dict[str, list[tuple[int, Violation]]], collections.Counter[str]]:
     first, last, max_robots, dense, auth, wide = args
     DRAWN.clear()
@@ -387,7 +429,7 @@ def _chaos_chunk(args: tuple[int, int, int, bool, str, bool]
 
 
 def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
-                    auth: str, wide: bool = False) -> dict[str, list[tuple[int, Violation]]]:
+                    auth: str, wide: int = 0) -> dict[str, list[tuple[int, Violation]]]:
     from concurrent.futures import ProcessPoolExecutor
 
     step = 50
@@ -419,11 +461,15 @@ def main() -> None:
                     help="4-8 faults a run within 1.5 s, mostly on neighbours")
     ap.add_argument("--auth", choices=("per-robot", "shared", "none"), default="per-robot",
                     help="authentication mode (default per-robot, as shipped)")
-    ap.add_argument("--wide", action="store_true",
+    ap.add_argument("--wide", action="store_const", const=1, default=0,
                     help="add compound link faults: overlapping one-way cuts, a robot muted "
                          "while a group is cut, fades during restarts, deafness during a "
                          "takeover, bursty loss up to 40 %% (a seed without it replays as "
                          "before)")
+    ap.add_argument("--wider", action="store_const", const=2, dest="wide",
+                    help="--wide, and the swarm split in three or four groups cut both "
+                         "ways, the cuts healing one pair at a time (a --wide seed "
+                         "replays as before)")
     a = ap.parse_args()
     global AUTH
     AUTH = a.auth
@@ -438,7 +484,8 @@ def main() -> None:
         found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
-    print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{' (wide)' if a.wide else ''}, "
+    wide = ("", " (wide)", " (wider)")[a.wide]
+    print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{wide}, "
           f"auth {a.auth}, {total} violation(s) in {wall:.1f} s")
     print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
     for kind, hits in sorted(found.items()):
@@ -446,7 +493,7 @@ def main() -> None:
         print(f"  {kind}: {len(hits)} in {len(runs)} run(s)")
         for seed, v in hits[:5]:
             extra = ("" if a.max_robots == 60 else f" --max-robots {a.max_robots}") \
-                + (" --dense" if a.dense else "") + (" --wide" if a.wide else "") \
+                + (" --dense" if a.dense else "") + ("", " --wide", " --wider")[a.wide] \
                 + ("" if a.auth == "per-robot" else f" --auth {a.auth}")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")

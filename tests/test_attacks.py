@@ -501,6 +501,36 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
         (6, wire.Claim(2, slot, 1))]
 
 
+
+def test_per_robot_a_proof_is_shown_once_per_t_max_whoever_asks(paper: Paper) -> None:
+    """A holder shows the proof of its entry one way (`Signed._show`): to the old
+    holder's stale heartbeat, its certificate and its own signed CLAIM, inside CERTs; a
+    watcher's warning about the old holder within T_max gets nothing more (one gate a
+    slot, whoever asked), and after T_max the whole proof again."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    node = Node(6, plan, params, 0.0, identity=ids[6])
+    node.tick(0.0)
+    slot = plan.slot("f2")
+    leave = _signed(ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
+    node.receive(signed_beat(ids[2], plan.swarm_id, 2, 600, slot, 0), 0.1)
+    node.receive(leave, 1.0)
+    node.tick(1.0 + params.claim_hold + 0.01)
+    assert (node.snapshot().function, node.snapshot().epoch) == ("f2", 1)
+
+    def shown(frame: bytes, now: float) -> list[tuple[int, wire.Message]]:
+        return [(c.inner.sender, c.inner.msg) for a in node.receive(frame, now)
+                if isinstance(a, Broadcast)
+                and isinstance(c := wire.decode(a.frame, (), ids[1].verifier).msg, wire.Cert)]
+
+    t = 2.0
+    stale = signed_beat(ids[2], plan.swarm_id, 2, 800, slot, 0)
+    assert shown(stale, t) == [(2, wire.Leave(slot, 0, 0)), (6, wire.Claim(2, slot, 1))]
+    warn = _signed(ids[1], plan, 1, 900, wire.Warn(2, slot, 0))
+    assert shown(warn, t + params.t_max / 2) == []
+    again = _signed(ids[1], plan, 1, 901, wire.Warn(2, slot, 0))
+    assert (6, wire.Claim(2, slot, 1)) in shown(again, t + params.t_max + 0.01)
+
 # ---------------------------------------------------------------- fragments
 # (DESIGN section 2, "Fragments"): a forger spoils at most the messages it has seen.
 class _Air:

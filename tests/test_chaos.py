@@ -114,6 +114,36 @@ def test_the_wide_draw_draws_every_compound_link_fault() -> None:
     assert drawn == set(bench.WIDE_KINDS)
 
 
+def test_the_wider_draw_splits_the_swarm_in_groups_cut_both_ways() -> None:
+    """`--wider` draws from the wide kinds and `split-groups`: three or four groups, every
+    pair cut both ways (a one-way cut each way, same start and length), the pairs
+    starting and healing at their own times. A `--wide` seed draws what it always drew."""
+    bench = _bench()
+    drawn: set[str] = set()
+    alone = 0
+    for seed in range(60):
+        case = bench.draw_case(seed, 12, wide=2)
+        assert case == bench.draw_case(seed, 12, wide=2)
+        assert bench.draw_case(seed, 12, wide=1) == bench.draw_case(seed, 12, wide=True)
+        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
+        drawn.update(case.compound)
+        if case.compound != ("split-groups",):
+            continue  # alone, so that its cuts are the only one-way cuts added
+        alone += 1
+        classic = bench.draw_case(seed, 12)
+        cuts = [f for f in case.faults[len(classic.faults):] if f.oneway]
+        pairs = {frozenset(f.groups) for f in cuts}
+        groups = {g for pair in pairs for g in pair}
+        assert len(groups) in (3, 4) and len(pairs) == len(groups) * (len(groups) - 1) // 2
+        assert sorted(r for g in groups for r in g) == sorted(case.plan.robots)
+        for f in cuts:
+            if frozenset(f.groups) in pairs:
+                assert any(g.groups == f.groups[::-1] and (g.at, g.end) == (f.at, f.end)
+                           for g in cuts)
+        assert len({(f.at, f.end) for f in cuts}) > 1  # the pairs heal at their own times
+    assert drawn == set(bench.WIDER_KINDS) and alone >= 3
+
+
 WIDE_FIXED: tuple[int, ...] = (21,)
 """Wide seeds (`python bench/bench_chaos.py --seed N --wide --verbose`, 3-60 robots) that
 broke an invariant on the core before the slot table (swarmd/core/slots.py) and run
