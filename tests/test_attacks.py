@@ -478,20 +478,29 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     slot = plan.slot("f2")
     leave = _signed(res_ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
     node.receive(signed_beat(res_ids[2], plan.swarm_id, 2, 600, slot, 0), 0.1)
-    node.receive(leave, 1.0)
+    sent = [a.frame for a in node.receive(leave, 1.0) if isinstance(a, Broadcast)]
+    claimed = [raw for raw in sent if isinstance(wire.decode(raw, (), res_ids[1].verifier).msg,
+                                                 wire.Claim)]
     node.tick(1.0 + params.claim_hold + 0.01)
     snap = node.snapshot()
     assert (snap.function, snap.epoch) == ("f2", 1) and snap.certificate == (leave,)
-    again = Node(6, plan, params, 5.0, identity=res_ids[6], restored=Restored(
+    # Its seq a clock that a restart does not set back (DESIGN, "Sequence numbers").
+    again = Node(6, plan, params, 5.0, identity=res_ids[6], seq_start=snap.seq + 100,
+                 restored=Restored(
         known=dict(snap.known), held=("f2", 1), peer_seq=dict(snap.peer_seq),
         certificate=snap.certificate))
     again.tick(5.0)
     again.tick(5.0 + params.rejoin_hold)
     assert again.snapshot().function == "f2"
     assert again.snapshot().certificate == (leave,)
+    # Its claim from before the restart, relayed back by a robot that kept it: older
+    # than the standby heartbeats of the rejoin, so outdated wherever they were heard.
+    blank = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
+    again.receive(wire.encode(wire.Frame(plan.swarm_id, 1, 50, wire.Cert(slot, blank,
+                                                                         claimed[0]))), 5.9)
     # The old holder's stale heartbeat gets the whole proof back, in CERTs: the
     # certificate and the claim it backs, which the restart lost and the resumed hold
-    # signed again.
+    # signed again (the latest, not the one relayed back).
     stale = signed_beat(res_ids[2], plan.swarm_id, 2, 800, slot, 0)
     out = [wire.decode(a.frame, (), res_ids[1].verifier).msg
            for a in again.receive(stale, 6.0) if isinstance(a, Broadcast)]
@@ -499,6 +508,8 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     assert [f.msg for f in inner if f.sender == 2] == [wire.Leave(slot, 0, 0)]
     assert [(f.sender, f.msg) for f in inner if isinstance(f.msg, wire.Claim)] == [
         (6, wire.Claim(2, slot, 1))]
+    old_seq = wire.decode(claimed[0], (), res_ids[1].verifier).seq
+    assert all(f.seq > old_seq for f in inner if isinstance(f.msg, wire.Claim))
 
 
 

@@ -262,12 +262,18 @@ class EvidenceStore:
         pending[(claimant, c.epoch)] = (c.failed, now, raw)
 
     def keep_claim(self, f: str, claimant: int, epoch: int, raw: bytes) -> None:
-        """Keep the signed CLAIM of a takeover certified here (`proof` relays it).
-        Bounded like the certificates: the oldest epoch goes first."""
+        """Keep the signed CLAIM of a takeover certified here (`proof` relays it): the
+        latest its claimant signed, as for evidence. An earlier one relayed back must
+        not replace it: a claimant that heartbeated as a standby since (a rejoin after
+        a restart, which signs its claim again) made that one `outdated` at every robot
+        that heard it so. Bounded like the certificates: the oldest epoch goes first."""
         if not raw:
             return
         kept = self._claims.setdefault(f, {})
-        if (claimant, epoch) not in kept and len(kept) >= CLAIMS_REMEMBERED:
+        old = kept.get((claimant, epoch))
+        if old is not None and seq_of(old) >= seq_of(raw):
+            return
+        if old is None and len(kept) >= CLAIMS_REMEMBERED:
             del kept[min(kept, key=lambda k: k[1])]
         kept[(claimant, epoch)] = raw
 
