@@ -16,6 +16,7 @@ the fault kinds drawn and the violations by kind, each with the command that rep
     python bench/bench_chaos.py --seed 1234 --verbose     # replay one seed
     python bench/bench_chaos.py --seeds 600 --wide        # compound link faults too
     python bench/bench_chaos.py --seeds 500 --first 40000 --wide   # fresh seeds
+    python bench/bench_chaos.py --seeds 500 --wider       # and groups cut both ways
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
 `--ring8`: configs/ring8.yaml (eight actives in a ring, three standbys covering all
@@ -63,7 +64,8 @@ class Case:
     loss_model: str = "bernoulli"
     burst_len: float = 4.0
     compound: tuple[str, ...] = ()
-    """`--wide`: the compound link faults (`WIDE_KINDS`) drawn on top of the classic draw."""
+    """`--wide` (`--wider`): the compound link faults (`WIDE_KINDS`, `WIDER_KINDS`) drawn
+    on top of the classic draw."""
 
     def describe(self) -> str:
         model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
@@ -75,7 +77,7 @@ class Case:
                          else f"standby, subs {', '.join(p.subs)}"))
         lines.append("  faults: " + " ".join(f.spec() for f in self.faults))
         if self.compound:
-            lines.append("  compound (--wide): " + ", ".join(self.compound))
+            lines.append("  compound (--wide/--wider): " + ", ".join(self.compound))
         return "\n".join(lines)
 
 

@@ -233,6 +233,23 @@ def test_wide_dense_seeds_run_clean_in_every_mode(auth: str) -> None:
     assert_clean(found)
 
 
+WIDER_DENSE: tuple[int, ...] = (500025,)
+"""Seeds of the wider draw made dense (`python bench/bench_chaos.py --seed N --wider
+--dense --max-robots 16 --verbose`) that the checker judged wrongly, the core being right:
+- 500025 (with a shared key): the channel (29 % loss) lost the last ten heartbeats of
+  robot 5 to robot 10, and the run ended; invariant 7 called 5 muted. Nothing of 5
+  reached 10 in that second, so nothing was dropped: the judge now calls a robot muted
+  only when its frames reached the other and were refused."""
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_wider_dense_seeds_run_clean_in_every_mode(auth: str) -> None:
+    bench = _bench()
+    found = bench.chaos(WIDER_DENSE, max_robots=16, verbose=False, dense=True, auth=auth,
+                        wide=2)
+    assert_clean(found)
+
+
 def test_a_few_wide_seeds_run_and_no_node_raises() -> None:
     """Wide runs complete, every compound kind is drawn, and no node raises on any
     input (invariant 5), whatever else they find."""

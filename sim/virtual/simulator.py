@@ -177,6 +177,9 @@ class VirtualSwarm:
         self._losing: dict[tuple[int, int], tuple[float, float]] = {}
         """(sender, receiver) -> the first and last frame the channel lost in the link's
         current run of losses: a run spanning `t_max` or more is an outage to the checker."""
+        self._arrived: dict[tuple[int, int], float] = {}
+        """(sender, receiver) -> when the latest frame the channel carried on that link
+        reached the receiver (`last_arrival`)."""
         if self.channel.loss_model not in LOSS_MODELS:
             raise ValueError(f"loss model must be one of {', '.join(LOSS_MODELS)}")
         self._burst = GilbertElliott(self.channel.loss, self.channel.burst_len, self.rng) \
@@ -308,6 +311,11 @@ class VirtualSwarm:
         return self._relevant_to.get(slot, ()) if slot else \
             self._standby_targets.get(sender, ())
 
+    def last_arrival(self, sender: int, receiver: int) -> float | None:
+        """When the latest frame of `sender` the channel carried reached `receiver`
+        (None: none ever did)."""
+        return self._arrived.get((sender, receiver))
+
     def checker_last_change(self, rid: int) -> float:
         """When robot `rid` last started, took over or was fenced (its heartbeat's
         audience changes then)."""
@@ -392,6 +400,8 @@ class VirtualSwarm:
                 continue
             at = self.now + ch.delay + (rng.random() * ch.jitter if ch.jitter else 0.0)
             self._push(at, Deliver(rid, frame))
+            if at > self._arrived.get((sender, rid), 0.0):
+                self._arrived[(sender, rid)] = at
             if ch.duplicate and rng.random() < ch.duplicate:
                 self._push(at + rng.random() * ch.jitter, Deliver(rid, frame))
 

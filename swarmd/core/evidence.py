@@ -38,7 +38,8 @@ the oldest, it cannot grow the store):
   backs — can be shown to a robot whose view of f differs (`proof`).
 - `mine`: (epoch, failed, frames), the certificate of this robot's own hold of f.
 - `relayed_at`: when the proof of our entry for f was last relayed (once per T_max);
-  `digest_answered_at`, when a digest that showed f otherwise was last answered.
+  `refutes_relayed_at`, its REFUTEs alone; `digest_answered_at`, when a digest that
+  showed f otherwise was last answered.
 
 Sans-IO and pure: every method takes what it needs (`now`, the epoch floor of f) and
 returns a decision or frames; the `Node` sends, emits and counts drops.
@@ -76,6 +77,7 @@ class EvidenceStore:
         self._claims: dict[str, dict[tuple[int, int], bytes]] = {}
         self._mine: dict[str, tuple[int, int, tuple[bytes, ...]]] = {}
         self._relayed_at: dict[str, float] = {}
+        self._refutes_relayed_at: dict[str, float] = {}
         self._digest_answered_at: dict[str, float] = {}
         self._may_watch_cache: dict[tuple[str, bool], frozenset[int]] = {}
 
@@ -311,12 +313,16 @@ class EvidenceStore:
             frames = self._takeover_frames(f, holder, epoch)
         return frames + signed
 
-    def due(self, f: str, now: float, every: float | None = None) -> bool:
+    def due(self, f: str, now: float, every: float | None = None, *,
+            whole: bool = True) -> bool:
         """May this robot show another its view of f now (`proof`; unsigned and
         shared-key modes relay a warning instead, `Hearing._older_beat`)? One relay of
         f at most per `every` (default T_max), whoever asked: True, and the time
-        stamped, if one is due now."""
-        return self._due(self._relayed_at, f, now, every)
+        stamped, if one is due now. The REFUTEs alone (not `whole`) are timed on a
+        clock of their own: sent to a robot that acts on a voided claim, they must not
+        hold the whole proof back from a robot that lost the last one."""
+        return self._due(self._relayed_at if whole else self._refutes_relayed_at, f, now,
+                         every)
 
     def answer_due(self, f: str, now: float, every: float) -> bool:
         """May the holder of f answer a view digest that shows f otherwise

@@ -90,7 +90,7 @@ class Signed(Views):
             return False
         holder, epoch = self._known[f]
         frames = self._ev.proof(f, holder, epoch, whole=whole)
-        if not frames or not self._ev.due(f, now, every):
+        if not frames or not self._ev.due(f, now, every, whole=whole):
             return False
         for raw in frames:
             self._send_cert(f, raw)
