@@ -233,13 +233,18 @@ def test_wide_dense_seeds_run_clean_in_every_mode(auth: str) -> None:
     assert_clean(found)
 
 
-WIDER_DENSE: tuple[int, ...] = (500025,)
+WIDER_DENSE: tuple[int, ...] = (500025, 500273)
 """Seeds of the wider draw made dense (`python bench/bench_chaos.py --seed N --wider
---dense --max-robots 16 --verbose`) that the checker judged wrongly, the core being right:
-- 500025 (with a shared key): the channel (29 % loss) lost the last ten heartbeats of
-  robot 5 to robot 10, and the run ended; invariant 7 called 5 muted. Nothing of 5
-  reached 10 in that second, so nothing was dropped: the judge now calls a robot muted
-  only when its frames reached the other and were refused."""
+--dense --max-robots 16 --verbose`) that broke an invariant:
+- 500025 (with a shared key and unsigned), the checker's fault: the channel (29 % loss)
+  lost the last ten heartbeats of robot 5 to robot 10, and the run ended; invariant 7
+  called 5 muted. Nothing of 5 reached 10 in that second, so nothing was dropped: the
+  judge now calls a robot muted only when its frames reached the other and were refused;
+- 500273 (per robot, 37 % loss in bursts): robot 1, heard by nobody for 2.3 s, was taken
+  over by 7 and reasserted its slot; 1's proof of the reassertion was lost on the way
+  to 7, and a REFUTE that 1 sent alone to a watcher held the next whole proof back for
+  T_max: 7 executed beside 1 for 3.60 s against a bound of 3.58 s. The REFUTEs alone
+  now have a clock of their own."""
 
 
 @pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
