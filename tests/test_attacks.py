@@ -468,20 +468,31 @@ def test_replay_filter_clock_and_limits() -> None:
     assert ReplayFilter().check(2, wire.SEQ_MAX, 5.0) is None  # no origin, no bound
 
 
+def _six_takes_f2_on_robot_2s_leave(paper: Paper) -> tuple[dict[int, Identity], Node,
+                                                             bytes, bytes]:
+    """Per robot, standby 6 takes f2 over on robot 2's signed LEAVE: the robots'
+    identities, 6's node holding f2 at epoch 1, the LEAVE and the CLAIM 6 signed."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    node = Node(6, plan, params, 0.0, identity=ids[6])
+    node.tick(0.0)
+    slot = plan.slot("f2")
+    leave = _signed(ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
+    node.receive(signed_beat(ids[2], plan.swarm_id, 2, 600, slot, 0), 0.1)
+    sent = [a.frame for a in node.receive(leave, 1.0) if isinstance(a, Broadcast)]
+    claim = next(raw for raw in sent
+                 if isinstance(wire.decode(raw, (), ids[1].verifier).msg, wire.Claim))
+    node.tick(1.0 + params.claim_hold + 0.01)
+    assert (node.snapshot().function, node.snapshot().epoch) == ("f2", 1)
+    return ids, node, leave, claim
+
+
 def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     """The new holder persists its certificate; after a restart it can still prove its
     hold to the old holder back from a partition."""
     plan, params = paper
-    res_ids = fake_identities(plan.robots)
-    node = Node(6, plan, params, 0.0, identity=res_ids[6])
-    node.tick(0.0)
+    res_ids, node, leave, claim = _six_takes_f2_on_robot_2s_leave(paper)
     slot = plan.slot("f2")
-    leave = _signed(res_ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
-    node.receive(signed_beat(res_ids[2], plan.swarm_id, 2, 600, slot, 0), 0.1)
-    sent = [a.frame for a in node.receive(leave, 1.0) if isinstance(a, Broadcast)]
-    claimed = [raw for raw in sent if isinstance(wire.decode(raw, (), res_ids[1].verifier).msg,
-                                                 wire.Claim)]
-    node.tick(1.0 + params.claim_hold + 0.01)
     snap = node.snapshot()
     assert (snap.function, snap.epoch) == ("f2", 1) and snap.certificate == (leave,)
     # Its seq a clock that a restart does not set back (DESIGN, "Sequence numbers").
@@ -496,8 +507,8 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     # Its claim from before the restart, relayed back by a robot that kept it: older
     # than the standby heartbeats of the rejoin, so outdated wherever they were heard.
     blank = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
-    again.receive(wire.encode(wire.Frame(plan.swarm_id, 1, 50, wire.Cert(slot, blank,
-                                                                         claimed[0]))), 5.9)
+    again.receive(wire.encode(wire.Frame(plan.swarm_id, 1, 50, wire.Cert(slot, blank, claim))),
+                  5.9)
     # The old holder's stale heartbeat gets the whole proof back, in CERTs: the
     # certificate and the claim it backs, which the restart lost and the resumed hold
     # signed again (the latest, not the one relayed back).
@@ -508,7 +519,7 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     assert [f.msg for f in inner if f.sender == 2] == [wire.Leave(slot, 0, 0)]
     assert [(f.sender, f.msg) for f in inner if isinstance(f.msg, wire.Claim)] == [
         (6, wire.Claim(2, slot, 1))]
-    old_seq = wire.decode(claimed[0], (), res_ids[1].verifier).seq
+    old_seq = wire.decode(claim, (), res_ids[1].verifier).seq
     assert all(f.seq > old_seq for f in inner if isinstance(f.msg, wire.Claim))
 
 
@@ -519,15 +530,8 @@ def test_per_robot_a_proof_is_shown_once_per_t_max_whoever_asks(paper: Paper) ->
     watcher's warning about the old holder within T_max gets nothing more (one gate a
     slot, whoever asked), and after T_max the whole proof again."""
     plan, params = paper
-    ids = fake_identities(plan.robots)
-    node = Node(6, plan, params, 0.0, identity=ids[6])
-    node.tick(0.0)
+    ids, node, _, _ = _six_takes_f2_on_robot_2s_leave(paper)
     slot = plan.slot("f2")
-    leave = _signed(ids[2], plan, 2, 700, wire.Leave(slot, 0, 0))
-    node.receive(signed_beat(ids[2], plan.swarm_id, 2, 600, slot, 0), 0.1)
-    node.receive(leave, 1.0)
-    node.tick(1.0 + params.claim_hold + 0.01)
-    assert (node.snapshot().function, node.snapshot().epoch) == ("f2", 1)
 
     def shown(frame: bytes, now: float) -> list[tuple[int, wire.Message]]:
         return [(c.inner.sender, c.inner.msg) for a in node.receive(frame, now)
