@@ -1,7 +1,8 @@
 """Per-robot mode's part of the node (DESIGN section 2, "Who may say what" and
-"Convergence"): relaying certificates and refutes, signing refutes, undoing a takeover
-the refutes void. The evidence itself — which claim a certificate backs — is
-`evidence.py`'s; `Signed` turns its answers into frames, events and view changes.
+"Convergence"): showing the proof of an entry (`_show`, the one way a proof travels),
+signing refutes, undoing a takeover the refutes void. The evidence itself — which claim
+a certificate backs — is `evidence.py`'s; `Signed` turns its answers into frames, events
+and view changes.
 
 `Signed` is the layer of `Node` on `Views` (how a view moves forward) and `NodeBase`;
 it calls only methods defined there or here. Keeping a signed warning as evidence
@@ -84,8 +85,8 @@ class Signed(Views):
         it. Without it, a robot that missed a takeover whose new holder died before it
         heard a heartbeat would warn about the old holder for ever, the others about
         the new one, and the slot's standby would count no quorum. Not `whole`: only
-        the REFUTEs, to a robot that acts on a claim they void. True if it relayed
-        anything."""
+        the REFUTEs, to a robot that acts on a claim they void, on a clock of their own
+        (`EvidenceStore.due`). True if it relayed anything."""
         if self._identity is None:
             return False
         holder, epoch = self._known[f]
