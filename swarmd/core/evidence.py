@@ -314,15 +314,17 @@ class EvidenceStore:
         return frames + signed
 
     def due(self, f: str, now: float, every: float | None = None, *,
-            whole: bool = True) -> bool:
+            whole: bool = True, stamp: bool = True) -> bool:
         """May this robot show another its view of f now (`proof`; unsigned and
         shared-key modes relay a warning instead, `Hearing._older_beat`)? One relay of
         f at most per `every` (default T_max), whoever asked: True, and the time
-        stamped, if one is due now. The REFUTEs alone (not `whole`) are timed on a
-        clock of their own: sent to a robot that acts on a voided claim, they must not
-        hold the whole proof back from a robot that lost the last one."""
+        stamped, if one is due now (not `stamp`: only asked, so that a proof is built
+        only when it may go, and the clock starts only when it went). The REFUTEs alone
+        (not `whole`) are timed on a clock of their own: sent to a robot that acts on a
+        voided claim, they must not hold the whole proof back from a robot that lost
+        the last one."""
         return self._due(self._relayed_at if whole else self._refutes_relayed_at, f, now,
-                         every)
+                         every, stamp)
 
     def answer_due(self, f: str, now: float, every: float) -> bool:
         """May the holder of f answer a view digest that shows f otherwise
@@ -331,13 +333,14 @@ class EvidenceStore:
         return self._due(self._digest_answered_at, f, now, every)
 
     def _due(self, stamps: dict[str, float], f: str, now: float,
-             every: float | None = None) -> bool:
+             every: float | None = None, stamp: bool = True) -> bool:
         """One relay of f at most per `every` (default T_max), timed by `stamps`: True,
-        and the time stamped, if one is due now."""
+        and (with `stamp`) the time stamped, if one is due now."""
         gap = self._params.t_max if every is None else every
         if now - stamps.get(f, -1e18) < gap:
             return False
-        stamps[f] = now
+        if stamp:
+            stamps[f] = now
         return True
 
     def _takeover_frames(self, f: str, holder: int, epoch: int) -> tuple[bytes, ...]:

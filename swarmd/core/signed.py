@@ -87,12 +87,16 @@ class Signed(Views):
         the new one, and the slot's standby would count no quorum. Not `whole`: only
         the REFUTEs, to a robot that acts on a claim they void, on a clock of their own
         (`EvidenceStore.due`). True if it relayed anything."""
-        if self._identity is None:
+        # The clock asked first: the unasked relay asks at every heartbeat of a holder,
+        # and building the proof each time would put that work on the frame path.
+        if self._identity is None \
+                or not self._ev.due(f, now, every, whole=whole, stamp=False):
             return False
         holder, epoch = self._known[f]
         frames = self._ev.proof(f, holder, epoch, whole=whole)
-        if not frames or not self._ev.due(f, now, every, whole=whole):
+        if not frames:
             return False
+        self._ev.due(f, now, every, whole=whole)  # due (asked above): the clock starts
         for raw in frames:
             self._send_cert(f, raw)
         return True
