@@ -229,12 +229,7 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
             Fault(FaultKind.PARTITION, at, (muted, *others), length(), ((muted,), others),
                   oneway=True)
         cut_at, cut_for = round(at + rng.uniform(0.0, 0.5), 3), length()
-        # The group's cut as one one-way partition each way: the virtual medium holds
-        # one two-way partition at a time, one-way cuts overlap anything.
-        return [mute, Fault(FaultKind.PARTITION, cut_at, (*group, *rest), cut_for,
-                            (group, rest), oneway=True),
-                Fault(FaultKind.PARTITION, cut_at, (*rest, *group), cut_for, (rest, group),
-                      oneway=True)]
+        return [mute, *_two_way_cut(cut_at, group, rest, cut_for)]
     if kind == "split-groups":
         return _split_groups(rng, ids, at, length)
     if kind == "fade-restart":
@@ -247,12 +242,19 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
     return _deaf_takeover(rng, plan, ids, at, length())
 
 
+def _two_way_cut(at: float, a: tuple[int, ...], b: tuple[int, ...],
+                 span: float) -> list[Fault]:
+    """Groups `a` and `b` cut both ways from `at` for `span` s, as one one-way partition
+    each way: the virtual medium holds one two-way partition at a time, one-way cuts
+    overlap anything (`_cut_both_ways` tells such a pair)."""
+    return [Fault(FaultKind.PARTITION, at, (*a, *b), span, (a, b), oneway=True),
+            Fault(FaultKind.PARTITION, at, (*b, *a), span, (b, a), oneway=True)]
+
+
 def _split_groups(rng: random.Random, ids: list[int], at: float,
                   length: Callable[[], float]) -> list[Fault]:
     """Three or four groups (as many as there are robots, at most), each pair cut both
-    ways from its own start within 0.6 s of `at`, for its own length. Each cut is one
-    one-way partition each way: the virtual medium holds one two-way partition at a
-    time, one-way cuts overlap anything."""
+    ways (`_two_way_cut`) from its own start within 0.6 s of `at`, for its own length."""
     order = list(ids)
     rng.shuffle(order)
     k = min(len(order), rng.randint(3, 4))
@@ -261,8 +263,7 @@ def _split_groups(rng: random.Random, ids: list[int], at: float,
     for i, a in enumerate(groups):
         for b in groups[i + 1:]:
             start, span = round(at + rng.uniform(0.0, 0.6), 3), length()
-            out += [Fault(FaultKind.PARTITION, start, (*a, *b), span, (a, b), oneway=True),
-                    Fault(FaultKind.PARTITION, start, (*b, *a), span, (b, a), oneway=True)]
+            out += _two_way_cut(start, a, b, span)
     return out
 
 
