@@ -6,13 +6,17 @@ udp timing: the takeover bound is t_max + vote_window + claim_hold = 1.7 s."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import pytest
 
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import Checker, check_events
+from sim.virtual.judge import muted
+from swarmd.core import wire
 from swarmd.core.actions import Assign, Release
+from swarmd.core.node import Node
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
@@ -266,32 +270,29 @@ def test_the_simulator_reports_the_channels_fades_and_only_those(
     assert clean.checker.outages == []
 
 
+@dataclass
+class _Robot:
+    node: Node
+    alive: bool = True
+    paused: bool = False
+
+
+@dataclass
+class _Channel:
+    loss: float = 0.29
+    loss_model: str = "bernoulli"
+    burst_len: float = 4.0
+
+
 class _EndOfRun:
     """A finished virtual run, as far as invariant 7 (`sim.virtual.judge.muted`) reads
     it: the paper swarm's nodes, robot 3 the only one that should hear robot 2."""
 
     def __init__(self, paper: tuple[SwarmPlan, Params], arrived: float) -> None:
-        from dataclasses import dataclass
-
-        from swarmd.core import wire
-        from swarmd.core.node import Node
-
-        @dataclass
-        class Robot:
-            node: Node
-            alive: bool = True
-            paused: bool = False
-
-        @dataclass
-        class Channel:
-            loss: float = 0.29
-            loss_model: str = "bernoulli"
-            burst_len: float = 4.0
-
         self.plan, self.params = paper
         self.duration, self.faults, self.partition, self.cuts_seen = 5.0, (), None, ()
-        self.channel, self.checker = Channel(), None
-        self.robots = {r: Robot(Node(r, self.plan, self.params, 0.0)) for r in self.plan.robots}
+        self.channel, self.checker = _Channel(), None
+        self.robots = {r: _Robot(Node(r, self.plan, self.params, 0.0)) for r in self.plan.robots}
         beat = wire.Heartbeat(self.plan.slot("f2"), 0, 1, 0)
         self.robots[3].node.receive_frame(wire.Frame(self.plan.swarm_id, 2, 5, beat), 1.0)
         self._arrived = arrived
@@ -311,8 +312,6 @@ def test_a_robot_whose_frames_arrive_and_are_dropped_is_muted_not_one_the_channe
     """Invariant 7: robot 3 accepted robot 2's heartbeat at 1.0 s and none in the four
     seconds since. If later frames of 2 reached it, it dropped them: muted. If none did,
     the channel lost them all (at 29 % loss, ten in a row happen): no violation."""
-    from sim.virtual.judge import muted
-
     found = muted(_EndOfRun(paper, arrived=4.9))  # type: ignore[arg-type]
     assert [(v.kind, v.robot) for v in found] == [("muted", 2)]
     assert muted(_EndOfRun(paper, arrived=1.0)) == []  # type: ignore[arg-type]
