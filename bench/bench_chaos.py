@@ -17,6 +17,8 @@ the fault kinds drawn and the violations by kind, each with the command that rep
     python bench/bench_chaos.py --seeds 600 --wide        # compound link faults too
     python bench/bench_chaos.py --seeds 500 --first 40000 --wide   # fresh seeds
     python bench/bench_chaos.py --seeds 500 --wider       # and groups cut both ways
+    python bench/bench_chaos.py --seeds 500 --widest      # and flapping links, handovers
+                                                          # and pauses inside cuts
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
 `--ring8`: configs/ring8.yaml (eight actives in a ring, three standbys covering all
@@ -64,8 +66,8 @@ class Case:
     loss_model: str = "bernoulli"
     burst_len: float = 4.0
     compound: tuple[str, ...] = ()
-    """`--wide` (`--wider`): the compound link faults (`WIDE_KINDS`, `WIDER_KINDS`) drawn
-    on top of the classic draw."""
+    """`--wide` (`--wider`, `--widest`): the compound link faults (`WIDE_KINDS`,
+    `WIDER_KINDS`, `WIDEST_KINDS`) drawn on top of the classic draw."""
 
     def describe(self) -> str:
         model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
@@ -77,7 +79,7 @@ class Case:
                          else f"standby, subs {', '.join(p.subs)}"))
         lines.append("  faults: " + " ".join(f.spec() for f in self.faults))
         if self.compound:
-            lines.append("  compound (--wide/--wider): " + ", ".join(self.compound))
+            lines.append("  compound (--wide/--wider/--widest): " + ", ".join(self.compound))
         return "\n".join(lines)
 
 
@@ -105,12 +107,13 @@ def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
     """The swarm and schedule of one seed. `dense`: 4-8 faults within 1.5 s, mostly on
     neighbours (clustered failures). `wide` (1, or True): the same draw, then one or two
     compound link faults (`WIDE_KINDS`, `_draw_compound`) on top; 2 (`--wider`): drawn
-    from `WIDER_KINDS`. A seed drawn without it replays exactly as it always did, and a
-    wide seed as it did before `--wider` existed."""
+    from `WIDER_KINDS`; 3 (`--widest`): from `WIDEST_KINDS`. A seed drawn without it
+    replays exactly as it always did, and a wide (wider) seed as it did before the wider
+    (widest) draw existed."""
     case = _draw_classic(seed, max_robots, dense)
     if not wide:
         return case
-    kinds = WIDE_KINDS if wide == 1 else WIDER_KINDS
+    kinds = (WIDE_KINDS, WIDER_KINDS, WIDEST_KINDS)[min(wide, 3) - 1]
     return _widen(case, random.Random(f"wide-{seed}"), kinds)
 
 
@@ -183,6 +186,18 @@ WIDER_KINDS = (*WIDE_KINDS, "split-groups")
   ways from a start and for a length of its own, so that the cuts overlap and heal one
   pair at a time (a group hears a second one again while a third is still cut off)."""
 
+WIDEST_KINDS = (*WIDER_KINDS, "flapping", "handover-while-cut", "pause-while-cut")
+"""`--widest`: the wider kinds, and
+- `flapping`: a robot's link comes and goes, three to six times within a few seconds:
+  its transmissions fade, or its neighbours are cut from hearing it, for 0.1-0.6 s each,
+  with 0.1-0.6 s between (a marginal radio link, shorter than a suspicion or not);
+- `handover-while-cut`: a holder and some robots around it cut off from the rest both
+  ways, and while the cut lasts the holder leaves or turns unhealthy (rule 7: its LEAVE
+  reaches only its own side);
+- `pause-while-cut`: a holder paused (its process stopped) for 0.5-4 s, and while it is
+  paused some of its neighbours go unheard by it one way for a while (back from the
+  pause, it may not hear the robot that took its slot over)."""
+
 
 def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS) -> Case:
     """`case` with one or two compound faults of `kinds` drawn by `rng` on top."""
@@ -205,7 +220,7 @@ def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS) 
 
 def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str,
                    at: float) -> list[Fault]:
-    """The faults of one compound kind (`WIDER_KINDS`, all but the loss) from `at`."""
+    """The faults of one compound kind (`WIDEST_KINDS`, all but the loss) from `at`."""
     def length() -> float:
         return round(rng.uniform(0.5, 3.0), 2)
 
@@ -232,6 +247,10 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
         return [mute, *_two_way_cut(cut_at, group, rest, cut_for)]
     if kind == "split-groups":
         return _split_groups(rng, ids, at, length)
+    if kind == "flapping":
+        return _flapping(rng, plan, ids, at)
+    if kind in ("handover-while-cut", "pause-while-cut"):
+        return _holder_inside_a_cut(rng, plan, ids, kind, at, length)
     if kind == "fade-restart":
         r = rng.choice(ids)
         back = round(at + rng.uniform(0.1, 1.5), 3)
@@ -265,6 +284,46 @@ def _split_groups(rng: random.Random, ids: list[int], at: float,
             start, span = round(at + rng.uniform(0.0, 0.6), 3), length()
             out += _two_way_cut(start, a, b, span)
     return out
+
+
+def _flapping(rng: random.Random, plan: SwarmPlan, ids: list[int], at: float) -> list[Fault]:
+    """One robot's link going and coming back three to six times from `at`: each time its
+    transmissions fade, or (the same way every time) its neighbours cannot hear it."""
+    r = rng.choice(ids)
+    near = tuple(_neighbours(plan, r) or [x for x in ids if x != r])
+    fade = rng.random() < 0.5
+    out, t = [], at
+    for _ in range(rng.randint(3, 6)):
+        span = round(rng.uniform(0.1, 0.6), 2)
+        out.append(Fault(FaultKind.FADE, t, (r,), span) if fade else
+                   Fault(FaultKind.PARTITION, t, (r, *near), span, ((r,), near), oneway=True))
+        t = round(t + span + rng.uniform(0.1, 0.6), 3)
+    return out
+
+
+def _holder_inside_a_cut(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str,
+                         at: float, length: Callable[[], float]) -> list[Fault]:
+    """`handover-while-cut`: a holder and some of its neighbours cut off from the rest
+    both ways from `at`, the holder leaving or unhealthy while the cut lasts.
+    `pause-while-cut`: a holder paused from `at`, and while it is paused some of its
+    neighbours unheard by it (a one-way cut) for a while."""
+    actives = [r for r in ids if plan.robots[r].function is not None]
+    holder = rng.choice(actives)
+    near = _neighbours(plan, holder) or [r for r in ids if r != holder]
+    side = tuple(sorted(rng.sample(near, rng.randint(0, min(2, len(near) - 1)))))
+    if kind == "handover-while-cut":
+        group = tuple(sorted((holder, *side)))
+        rest = tuple(r for r in ids if r not in group)
+        span = length()
+        act = FaultKind.LEAVE if rng.random() < 0.5 else FaultKind.UNHEALTHY
+        when = round(at + rng.uniform(0.0, span), 3)
+        return [*_two_way_cut(at, group, rest, span), Fault(act, when, (holder,))]
+    pause = round(rng.uniform(0.5, 4.0), 2)
+    unheard = tuple(sorted(rng.sample(near, rng.randint(1, min(2, len(near))))))
+    start = round(at + rng.uniform(0.0, pause), 3)
+    return [Fault(FaultKind.PAUSE, at, (holder,), pause),
+            Fault(FaultKind.PARTITION, start, (*unheard, holder), length(),
+                  (unheard, (holder,)), oneway=True)]
 
 
 def _deaf_takeover(rng: random.Random, plan: SwarmPlan, ids: list[int], at: float,
@@ -310,6 +369,15 @@ def wide_kinds(case: Case) -> list[str]:
     deafs = [f for f in case.faults if f.kind is FaultKind.DEAF]
     if any(c.kind is FaultKind.CRASH and _overlap(d, c) for d in deafs for c in case.faults):
         out.append("deaf-takeover")
+    if any(len([f for f in fades if f.robots == (r,)]) >= 3 for r in case.plan.robots) \
+            or any(len([c for c in oneways if c.groups == o.groups]) >= 3 for o in oneways):
+        out.append("flapping")
+    handovers = [f for f in case.faults if f.kind in (FaultKind.LEAVE, FaultKind.UNHEALTHY)]
+    if any(_overlap(h, c) and h.robots[0] in c.robots for h in handovers for c in cuts):
+        out.append("handover-while-cut")
+    pauses = [f for f in case.faults if f.kind is FaultKind.PAUSE]
+    if any(_overlap(p, c) and set(p.robots) & set(c.robots) for p in pauses for c in cuts):
+        out.append("pause-while-cut")
     return out
 
 
@@ -343,6 +411,9 @@ def run_case(case: Case, auth: str | None = None) -> VirtualResult:
                        loss=case.loss, seed=case.seed, auth=auth or AUTH,
                        loss_model=case.loss_model, burst_len=case.burst_len)
 
+
+WIDE_FLAGS = ("", " --wide", " --wider", " --widest")
+"""The flag of each `wide` level, for the replay command a violation prints."""
 
 DRAWN: collections.Counter[str] = collections.Counter()
 """Fault kinds drawn by `chaos` in this process (one-way partitions as `oneway`)."""
@@ -473,6 +544,10 @@ def main() -> None:
                     help="--wide, and the swarm split in three or four groups cut both "
                          "ways, the cuts healing one pair at a time (a --wide seed "
                          "replays as before)")
+    ap.add_argument("--widest", action="store_const", const=3, dest="wide",
+                    help="--wider, and a robot's link flapping, a holder leaving or "
+                         "turning unhealthy inside a cut, a holder paused while it cannot "
+                         "hear some neighbours (a --wider seed replays as before)")
     a = ap.parse_args()
     global AUTH
     AUTH = a.auth
@@ -487,7 +562,7 @@ def main() -> None:
         found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
-    wide = ("", " (wide)", " (wider)")[a.wide]
+    wide = f" ({WIDE_FLAGS[a.wide][3:]})" if a.wide else ""
     print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{wide}, "
           f"auth {a.auth}, {total} violation(s) in {wall:.1f} s")
     print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
@@ -496,7 +571,7 @@ def main() -> None:
         print(f"  {kind}: {len(hits)} in {len(runs)} run(s)")
         for seed, v in hits[:5]:
             extra = ("" if a.max_robots == 60 else f" --max-robots {a.max_robots}") \
-                + (" --dense" if a.dense else "") + ("", " --wide", " --wider")[a.wide] \
+                + (" --dense" if a.dense else "") + WIDE_FLAGS[a.wide] \
                 + ("" if a.auth == "per-robot" else f" --auth {a.auth}")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")

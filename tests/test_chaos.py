@@ -8,6 +8,7 @@ over while a neighbour failed with it: DESIGN rule 9 covers it)."""
 from __future__ import annotations
 
 import importlib.util
+import itertools
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -142,6 +143,44 @@ def test_the_wider_draw_splits_the_swarm_in_groups_cut_both_ways() -> None:
                            for g in cuts)
         assert len({(f.at, f.end) for f in cuts}) > 1  # the pairs heal at their own times
     assert drawn == set(bench.WIDER_KINDS) and alone >= 3
+
+
+def test_the_widest_draw_flaps_links_and_fails_holders_inside_cuts() -> None:
+    """`--widest` draws from the wider kinds and three more: a robot's link flapping
+    (three to six short fades, or cuts from it to its neighbours, one after the other), a
+    holder leaving or turning unhealthy inside a two-way cut around it, a holder paused
+    while some neighbours are unheard by it. Each has the shape it names, and a
+    `--wider` seed draws what it always drew."""
+    bench = _bench()
+    drawn: set[str] = set()
+    for seed in range(60):
+        case = bench.draw_case(seed, 12, wide=3)
+        assert case == bench.draw_case(seed, 12, wide=3)
+        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
+        for f in case.faults:
+            assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
+        drawn.update(case.compound)
+        if len(case.compound) != 1 or case.compound[0] not in bench.WIDEST_KINDS[-3:]:
+            continue
+        added = case.faults[len(bench.draw_case(seed, 12).faults):]
+        kind = case.compound[0]
+        if kind == "flapping":
+            assert 3 <= len(added) <= 6 and len({f.robots[0] for f in added}) == 1
+            for one, then in itertools.pairwise(added):  # one after the other
+                assert one.end is not None and one.end < then.at
+        elif kind == "handover-while-cut":
+            *cut, act = added
+            holder = act.robots[0]
+            assert act.kind in ("leave", "unhealthy")
+            assert case.plan.robots[holder].function is not None
+            assert len(cut) == 2 and cut[0].groups == cut[1].groups[::-1]
+            assert holder in cut[0].groups[0] and cut[0].at <= act.at <= (cut[0].end or 0)
+        else:
+            pause, cut = added
+            assert pause.kind == "pause" and cut.oneway and cut.groups[1] == pause.robots
+            assert pause.at <= cut.at <= (pause.end or 0)
+    assert drawn == set(bench.WIDEST_KINDS)
+    assert bench.WIDEST_KINDS[:len(bench.WIDER_KINDS)] == bench.WIDER_KINDS
 
 
 WIDE_FIXED: tuple[int, ...] = (21,)
