@@ -101,8 +101,7 @@ class Episode(Signed):
         holder, epoch = self._known[f]
         if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
             return
-        if self._rejoin is not None and self._rejoin.function == f:
-            self._rejoin_superseded(f, w.epoch)
+        self._rejoin_superseded(f, w.epoch)
         if not strong or f not in self._covers or not self._standing_by():
             return
         if greater(Holder(holder, epoch), Holder(w.suspect, w.epoch)):
@@ -296,8 +295,7 @@ class Episode(Signed):
         votes = self._votes.get(f)
         if votes is not None:
             votes.clear()
-        if self._rejoin is not None and self._rejoin.function == f:
-            self._rejoin_superseded(f, c.epoch)
+        self._rejoin_superseded(f, c.epoch)
 
     def _claim_certified(self, f: str, sender: int, c: wire.Claim, raw: bytes,
                          now: float) -> bool:

@@ -20,7 +20,7 @@ from swarmd.core.evidence import cert_says
 from swarmd.core.records import Holder
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.slots import greater
-from swarmd.core.state import Active, Claiming, Rejoining, Standby
+from swarmd.core.state import Active, Claiming, Standby
 
 
 class Hearing(Episode):
@@ -141,11 +141,10 @@ class Hearing(Episode):
         self._drops[DropReason.UNCERTIFIED] += 1
         # It may act on a claim our refutes void; to the holder it is a stale view.
         self._show(f, now, whole=self._holds(f))
-        if self._rejoin is not None and self._rejoin.function == f:
-            # Not believed, but enough to stay a standby rather than resume: the
-            # cautious side of rule 2 across a reboot (the slot's watchers and
-            # standbys take it over if nobody really holds it).
-            self._rejoin_superseded(f, hb.epoch)
+        # Not believed, but enough to stay a standby rather than resume f: the cautious
+        # side of rule 2 across a reboot (the slot's watchers and standbys take it over
+        # if nobody really holds it).
+        self._rejoin_superseded(f, hb.epoch)
 
     def _unanchored_beat(self, sender: int, hb: wire.Heartbeat, now: float) -> None:
         """Per-robot mode: a heartbeat whose link we cannot tie to its sender's chain
@@ -163,8 +162,7 @@ class Hearing(Episode):
             self._show(f, now)
             if hb.epoch <= self._epoch:
                 self._heartbeat_now(now)
-        if self._rejoin is not None and self._rejoin.function == f:
-            self._rejoin_superseded(f, hb.epoch)
+        self._rejoin_superseded(f, hb.epoch)
 
     def _holder_heard(self, f: str, sender: int, epoch: int, before: Holder,
                       now: float) -> None:
@@ -199,8 +197,7 @@ class Hearing(Episode):
             elif sender == state.wait.failed:
                 self._emit(ev.Refute(subject=sender, function=f))
                 self._to(Trigger.REFUTED, Standby())
-        if isinstance(state, Rejoining) and state.rejoin.function == f \
-                and sender != self._robot_id:
+        if sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
 
     # ------------------------------------------------------------------ LEAVE

@@ -38,8 +38,7 @@ class Views(NodeBase):
         watch = self._watches.get(f)
         if watch is not None:
             watch.claim_heard(now)
-        if self._rejoin is not None and self._rejoin.function == f:
-            self._rejoin_superseded(f, new.epoch)
+        self._rejoin_superseded(f, new.epoch)
 
     def _reassert(self, f: str, epoch: int, now: float) -> None:
         """We hold f, and a takeover of our hold that our refutes void reached us: we
@@ -66,10 +65,13 @@ class Views(NodeBase):
 
     # ------------------------------------------------------------------ rejoin (rule 2)
     def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
-        """Someone holds, warns about or claims our old slot at `seen_epoch`: newer than
-        the one we held (or held by another robot), we stay a standby."""
-        assert self._rejoin is not None
-        if self._rejoin.superseded(self._known[f], seen_epoch):
+        """Someone holds, warns about or claims slot f at `seen_epoch`: if we are
+        rejoining f and that is newer than the entry we held (or held by another robot),
+        we stay a standby. Every frame that names f at an epoch tells it; anything else
+        than a rejoin of f ignores it."""
+        rejoin = self._rejoin
+        if rejoin is not None and rejoin.function == f \
+                and rejoin.superseded(self._known[f], seen_epoch):
             self._to(Trigger.OUTDATED, Standby())
             self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
 
