@@ -43,7 +43,7 @@ class Hearing(Episode):
             return
         if entry != known and self._identity is not None \
                 and not self._ev.is_certified(f, sender, hb.epoch):
-            self._uncertified_beat(f, hb, now)
+            self._unproven_beat(f, hb, DropReason.UNCERTIFIED, now)
             return
         # Ours, heard from another robot: the one case below that moves our role.
         rival = sender != self._robot_id and self._holds(f)
@@ -135,33 +135,27 @@ class Hearing(Episode):
             level = self._ears.level_now(known.robot, now)
             self._send(wire.Warn(known.robot, hb.function, known.epoch, level_byte(level)))
 
-    def _uncertified_beat(self, f: str, hb: wire.Heartbeat, now: float) -> None:
-        """Per-robot mode: a heartbeat is not signed by its sender, so it never moves an
-        epoch or a holder by itself; only the certified new holder's does."""
-        self._drops[DropReason.UNCERTIFIED] += 1
-        # It may act on a claim our refutes void; to the holder it is a stale view.
-        self._show(f, now, whole=self._holds(f))
-        # Not believed, but enough to stay a standby rather than resume f: the cautious
-        # side of rule 2 across a reboot (the slot's watchers and standbys take it over
-        # if nobody really holds it).
-        self._rejoin_superseded(f, hb.epoch)
-
-    def _unanchored_beat(self, sender: int, hb: wire.Heartbeat, now: float) -> None:
-        """Per-robot mode: a heartbeat whose link we cannot tie to its sender's chain
-        (`chain.py`: we lost the chain, or it is forged). It proves no liveness and moves
-        nothing, but the answers cost nothing to give: a holder shown another view of its
-        slot sends its certificate and, to a stale one, an anchored heartbeat (it may
-        have lost our chain too: rule 2 within a frame); a robot rejoining that slot
-        stays a standby (the cautious side, as for an uncertified heartbeat)."""
-        self._drops[DropReason.UNANCHORED] += 1
-        self._peer_back(sender, now)  # it may have lost our chain as we lost its
-        f = self._plan.function_at(hb.function) if hb.function else None
+    def _unproven_beat(self, f: str | None, hb: wire.Heartbeat, reason: str,
+                       now: float) -> None:
+        """Per-robot mode: a heartbeat (naming slot f) that proves nothing here, counted
+        as `reason`: its link is not tied to its sender's chain (`unanchored`,
+        `chain.py`: we lost the chain, or it is forged), or no certificate here backs
+        the hold it names (`uncertified`: a heartbeat is not signed by its sender, so it
+        never moves an epoch or a holder by itself; only the certified new holder's
+        does). It moves nothing, but the answers cost nothing to give. If we hold f, its
+        sender shows another view of our slot: we show it our proof and, to a stale one,
+        an anchored heartbeat (it may have lost our chain too: rule 2 within a frame).
+        Otherwise we show the REFUTEs we hold: it may act on a claim they void. And a
+        robot rejoining f stays a standby rather than resume it: the cautious side of
+        rule 2 across a reboot (the slot's watchers and standbys take it over if nobody
+        really holds it)."""
+        self._drops[reason] += 1
         if f is None:
             return
-        if self._holds(f):
-            self._show(f, now)
-            if hb.epoch <= self._epoch:
-                self._heartbeat_now(now)
+        holds = self._holds(f)
+        self._show(f, now, whole=holds)
+        if holds and hb.epoch <= self._epoch:
+            self._heartbeat_now(now)
         self._rejoin_superseded(f, hb.epoch)
 
     def _holder_heard(self, f: str, sender: int, epoch: int, before: Holder,

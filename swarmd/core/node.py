@@ -235,7 +235,9 @@ class Node(Restart):
         if isinstance(msg, wire.Heartbeat) and self._verifier is not None \
                 and not self._chains.check(sender, msg.n, msg.link, now, anchor=msg.anchor):
             # Before the replay filter: a heartbeat not from its sender moves no counter.
-            self._unanchored_beat(sender, msg, now)
+            self._peer_back(sender, now)  # it may have lost our chain as we lost its
+            self._unproven_beat(self._plan.function_at(msg.function), msg,
+                                DropReason.UNANCHORED, now)
             return self._drain()
         reason = self._replay.check(sender, frame.seq, now)
         if reason is not None:
