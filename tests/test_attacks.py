@@ -524,6 +524,32 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
 
 
 
+def test_per_robot_a_heartbeat_that_proves_nothing_gets_the_refutes_that_void_it(
+        paper: Paper) -> None:
+    """Watcher 1 holds robot 2's signed REFUTE of a warning about it (f2 at epoch 0). A
+    heartbeat in 6's name holding f2 at epoch 1, on a link of no chain 1 follows
+    (`unanchored`: a forger, or a robot whose chain 1 lost), proves nothing; 1 answers it
+    as it answers an uncertified one (`Hearing._unproven_beat`, DESIGN "How entries
+    spread"): with the REFUTE, which voids any claim against 2's entry, inside a CERT,
+    at most once per T_max; its view stays 2's."""
+    plan, params = paper
+    ids = fake_identities(plan.robots)
+    one = Node(1, plan, params, 0.0, identity=ids[1])
+    one.tick(0.0)
+    slot = plan.slot("f2")
+    refute = _signed(ids[2], plan, 2, 40, wire.Refute(3, slot, 0, 9))
+    one.receive(refute, 0.5)
+    unanchored = signed_beat(None, plan.swarm_id, 6, 10**6, slot, 1, link=b"\x07" * 8, n=1)
+    shown = []
+    for t in (1.0, 1.0 + params.t_max / 2, 1.0 + params.t_max + 0.01):
+        out = [wire.decode(a.frame, (), ids[1].verifier).msg
+               for a in one.receive(unanchored, t) if isinstance(a, Broadcast)]
+        shown.append([m.inner.raw for m in out if isinstance(m, wire.Cert)])
+    assert shown == [[refute], [], [refute]]
+    assert one.drops["unanchored"] == 3
+    assert one.snapshot().known["f2"] == (2, 0)
+
+
 def test_per_robot_a_proof_is_shown_once_per_t_max_whoever_asks(paper: Paper) -> None:
     """A holder shows the proof of its entry one way (`Signed._show`): to the old
     holder's stale heartbeat, its certificate and its own signed CLAIM, inside CERTs; a
