@@ -186,7 +186,8 @@ WIDER_KINDS = (*WIDE_KINDS, "split-groups")
   ways from a start and for a length of its own, so that the cuts overlap and heal one
   pair at a time (a group hears a second one again while a third is still cut off)."""
 
-WIDEST_KINDS = (*WIDER_KINDS, "flapping", "handover-while-cut", "pause-while-cut")
+WIDEST_KINDS = (*WIDER_KINDS, "flapping", "handover-while-cut", "pause-while-cut",
+                "pause-claimant", "restart-new-holder")
 """`--widest`: the wider kinds, and
 - `flapping`: a robot's link comes and goes, three to six times within a few seconds:
   its transmissions fade, or its neighbours are cut from hearing it, for 0.1-0.6 s each,
@@ -196,7 +197,13 @@ WIDEST_KINDS = (*WIDER_KINDS, "flapping", "handover-while-cut", "pause-while-cut
   reaches only its own side);
 - `pause-while-cut`: a holder paused (its process stopped) for 0.5-4 s, and while it is
   paused some of its neighbours go unheard by it one way for a while (back from the
-  pause, it may not hear the robot that took its slot over)."""
+  pause, it may not hear the robot that took its slot over);
+- `pause-claimant`: a holder crashes, and the standby that covers its slot is paused
+  around the time it would claim (its own stall, noticed when it wakes: DESIGN
+  "Sequence numbers" and the claim's wait state);
+- `restart-new-holder`: a holder crashes or is paused for 2-4 s, and once its standby
+  has taken the slot over, that new holder restarts (it resumes its hold from its state
+  file, its certificate and its claim signed again, while the old one may come back)."""
 
 
 def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS) -> Case:
@@ -251,6 +258,8 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
         return _flapping(rng, plan, ids, at)
     if kind in ("handover-while-cut", "pause-while-cut"):
         return _holder_inside_a_cut(rng, plan, ids, kind, at, length)
+    if kind in ("pause-claimant", "restart-new-holder"):
+        return _standby_after_a_failure(rng, plan, ids, kind, at)
     if kind == "fade-restart":
         r = rng.choice(ids)
         back = round(at + rng.uniform(0.1, 1.5), 3)
@@ -326,6 +335,29 @@ def _holder_inside_a_cut(rng: random.Random, plan: SwarmPlan, ids: list[int], ki
                   (unheard, (holder,)), oneway=True)]
 
 
+def _standby_after_a_failure(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str,
+                             at: float) -> list[Fault]:
+    """A holder that a standby covers fails at `at` (`pause-claimant`: it crashes;
+    `restart-new-holder`: it crashes or is paused for 2-4 s), and the first standby
+    covering its slot is paused
+    0.3-1.2 s later for 0.3-2 s (around its claim), or restarts 0-1.5 s after the
+    takeover bound (once it holds the slot)."""
+    # A holder whose slot a standby covers (every drawn swarm has one: each standby
+    # covers at least one slot).
+    covered = {r: by for r in ids if (g := plan.robots[r].function) is not None
+               and (by := [s for s in plan.covered_by(g) if s != r])}
+    holder = rng.choice(sorted(covered))
+    standby = covered[holder][0]
+    if kind == "pause-claimant":
+        return [Fault(FaultKind.CRASH, at, (holder,)),
+                Fault(FaultKind.PAUSE, round(at + rng.uniform(0.3, 1.2), 3), (standby,),
+                      round(rng.uniform(0.3, 2.0), 2))]
+    fail = Fault(FaultKind.CRASH, at, (holder,)) if rng.random() < 0.5 else \
+        Fault(FaultKind.PAUSE, at, (holder,), round(rng.uniform(2.0, 4.0), 2))
+    back = round(at + udp().takeover_bound() + rng.uniform(0.0, 1.5), 3)
+    return [fail, Fault(FaultKind.RESTART, back, (standby,))]
+
+
 def _deaf_takeover(rng: random.Random, plan: SwarmPlan, ids: list[int], at: float,
                    length: float) -> list[Fault]:
     """A holder crashes at `at`; from just before, its standby is deaf to its watchers,
@@ -378,7 +410,24 @@ def wide_kinds(case: Case) -> list[str]:
     pauses = [f for f in case.faults if f.kind is FaultKind.PAUSE]
     if any(_overlap(p, c) and set(p.robots) & set(c.robots) for p in pauses for c in cuts):
         out.append("pause-while-cut")
+    failed = [(f.robots[0], f.at) for f in case.faults
+              if f.kind in (FaultKind.CRASH, FaultKind.PAUSE) and len(f.robots) == 1
+              and case.plan.robots[f.robots[0]].function is not None]
+    if any(p.robots[0] in case.plan.covered_by(_slot_of(case.plan, r)) and 0 < p.at - t <= 1.2
+           for p in pauses for r, t in failed):
+        out.append("pause-claimant")
+    restarts = [f for f in case.faults if f.kind is FaultKind.RESTART]
+    bound = udp().takeover_bound()
+    if any(b.robots[0] in case.plan.covered_by(_slot_of(case.plan, r))
+           and bound <= b.at - t <= bound + 1.5 for b in restarts for r, t in failed):
+        out.append("restart-new-holder")
     return out
+
+
+def _slot_of(plan: SwarmPlan, robot: int) -> str:
+    f = plan.robots[robot].function
+    assert f is not None
+    return f
 
 
 def _cut_both_ways(oneways: list[Fault]) -> set[frozenset[tuple[int, ...]]]:

@@ -18,6 +18,7 @@ import pytest
 
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import Violation
+from swarmd.core.params import udp
 
 ROOT = Path(__file__).resolve().parent.parent
 SEEDS = 50
@@ -146,24 +147,27 @@ def test_the_wider_draw_splits_the_swarm_in_groups_cut_both_ways() -> None:
 
 
 def test_the_widest_draw_flaps_links_and_fails_holders_inside_cuts() -> None:
-    """`--widest` draws from the wider kinds and three more: a robot's link flapping
+    """`--widest` draws from the wider kinds and five more: a robot's link flapping
     (three to six short fades, or cuts from it to its neighbours, one after the other), a
     holder leaving or turning unhealthy inside a two-way cut around it, a holder paused
-    while some neighbours are unheard by it. Each has the shape it names, and a
-    `--wider` seed draws what it always drew."""
+    while some neighbours are unheard by it, a crashed holder's standby paused around
+    its claim, a new holder restarting after its takeover. Each has the shape it names,
+    and a `--wider` seed draws what it always drew."""
     bench = _bench()
     drawn: set[str] = set()
-    for seed in range(60):
+    alone: set[str] = set()
+    for seed in range(120):
         case = bench.draw_case(seed, 12, wide=3)
         assert case == bench.draw_case(seed, 12, wide=3)
         assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
         for f in case.faults:
             assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
         drawn.update(case.compound)
-        if len(case.compound) != 1 or case.compound[0] not in bench.WIDEST_KINDS[-3:]:
+        if len(case.compound) != 1 or case.compound[0] in bench.WIDER_KINDS:
             continue
         added = case.faults[len(bench.draw_case(seed, 12).faults):]
         kind = case.compound[0]
+        alone.add(kind)
         if kind == "flapping":
             assert 3 <= len(added) <= 6 and len({f.robots[0] for f in added}) == 1
             for one, then in itertools.pairwise(added):  # one after the other
@@ -175,11 +179,23 @@ def test_the_widest_draw_flaps_links_and_fails_holders_inside_cuts() -> None:
             assert case.plan.robots[holder].function is not None
             assert len(cut) == 2 and cut[0].groups == cut[1].groups[::-1]
             assert holder in cut[0].groups[0] and cut[0].at <= act.at <= (cut[0].end or 0)
-        else:
+        elif kind == "pause-while-cut":
             pause, cut = added
             assert pause.kind == "pause" and cut.oneway and cut.groups[1] == pause.robots
             assert pause.at <= cut.at <= (pause.end or 0)
+        else:  # the standby of a holder that failed: paused, or restarted
+            fail, then = added
+            holder, standby = fail.robots[0], then.robots[0]
+            g = case.plan.robots[holder].function
+            assert g is not None and standby != holder and standby in case.plan.covered_by(g)
+            if kind == "pause-claimant":
+                assert (fail.kind, then.kind) == ("crash", "pause")
+                assert 0.3 <= then.at - fail.at <= 1.2
+            else:
+                assert fail.kind in ("crash", "pause") and then.kind == "restart"
+                assert then.at - fail.at >= udp().takeover_bound()
     assert drawn == set(bench.WIDEST_KINDS)
+    assert alone == set(bench.WIDEST_KINDS) - set(bench.WIDER_KINDS)  # each shape checked
     assert bench.WIDEST_KINDS[:len(bench.WIDER_KINDS)] == bench.WIDER_KINDS
 
 
