@@ -67,8 +67,8 @@ class Views(NodeBase):
     def _rejoin_superseded(self, f: str, seen_epoch: int) -> None:
         """Someone holds, warns about or claims slot f at `seen_epoch`: if we are
         rejoining f and that is newer than the entry we held (or held by another robot),
-        we stay a standby. Every frame that names f at an epoch tells it; anything else
-        than a rejoin of f ignores it."""
+        we stay a standby. Every frame that names f at an epoch says so here; for a
+        robot not rejoining f it changes nothing."""
         rejoin = self._rejoin
         if rejoin is not None and rejoin.function == f \
                 and rejoin.superseded(self._known[f], seen_epoch):
