@@ -319,6 +319,8 @@ def _holder_inside_a_cut(rng: random.Random, plan: SwarmPlan, ids: list[int], ki
     actives = [r for r in ids if plan.robots[r].function is not None]
     holder = rng.choice(actives)
     near = _neighbours(plan, holder) or [r for r in ids if r != holder]
+    # Drawn for both kinds (only a handover's cut uses it), so that each replays as
+    # the figures in docs/sim.md were measured.
     side = tuple(sorted(rng.sample(near, rng.randint(0, min(2, len(near) - 1)))))
     if kind == "handover-while-cut":
         group = tuple(sorted((holder, *side)))
@@ -339,9 +341,8 @@ def _standby_after_a_failure(rng: random.Random, plan: SwarmPlan, ids: list[int]
                              at: float) -> list[Fault]:
     """A holder that a standby covers fails at `at` (`pause-claimant`: it crashes;
     `restart-new-holder`: it crashes or is paused for 2-4 s), and the first standby
-    covering its slot is paused
-    0.3-1.2 s later for 0.3-2 s (around its claim), or restarts 0-1.5 s after the
-    takeover bound (once it holds the slot)."""
+    covering its slot is paused 0.3-1.2 s later for 0.3-2 s (around its claim), or
+    restarts 0-1.5 s after the takeover bound (once it holds the slot)."""
     # A holder whose slot a standby covers (every drawn swarm has one: each standby
     # covers at least one slot).
     covered = {r: by for r in ids if (g := plan.robots[r].function) is not None
