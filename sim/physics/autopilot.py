@@ -133,6 +133,9 @@ class MavlinkAutopilot:
         loop = asyncio.get_running_loop()
         transport, _ = await loop.create_datagram_endpoint(
             lambda: _Udp(self), local_addr=(self.host, self.port))
+        # Port 0 asks the kernel for a free one at the bind itself: nothing else can take
+        # it between a probe and the bind, as a port probed free and closed again can.
+        self.port = transport.get_extra_info("sockname")[1]
         self._transport = transport
         self._task = loop.create_task(self._run(), name=f"autopilot{self.core.sysid}")
 
@@ -223,13 +226,15 @@ class SimMavlinkLink:
     `fail_motor` / `set_health` / `refuse_arm` act on the autopilot: the daemon learns
     of them only through MAVLink."""
 
-    def __init__(self, quad: QuadLink, flavour: Flavour, port: int, *,
+    def __init__(self, quad: QuadLink, flavour: Flavour, port: int = 0, *,
                  release: Release = "rtl", refuse_arm: bool = False,
                  heartbeat_timeout: float = 3.0,
                  wall: Callable[[], float] = time.time) -> None:
         self.quad = quad
         self.flavour = flavour
         self.port = port
+        """The autopilot's UDP port on loopback. 0 (the default): the one the kernel gives
+        it when it binds (`start`), which the daemon's link then talks to."""
         home = quad.home
         from swarmd.link.mavlink_health import Thresholds
 
@@ -254,6 +259,8 @@ class SimMavlinkLink:
     async def start(self, on_health: HealthCallback) -> None:
         self.autopilot = await start_autopilot(self.quad, self.flavour, self.port)
         self.autopilot.refuse_arm = self._refuse_arm
+        self.port = self.autopilot.port
+        self.link.url = f"udpout:127.0.0.1:{self.port}"  # bound now: the link opens it
         await self.link.start(on_health)
 
     def assign(self, function: str, epoch: int, params: Any) -> None:

@@ -131,13 +131,13 @@ def _quad_link(spec: RobotSpec, cfg: Any) -> RobotLink:
 def _mavlink_link(flavour: str) -> Callable[[RobotSpec, Any], RobotLink]:
     def build(spec: RobotSpec, cfg: Any) -> RobotLink:
         from sim.physics.autopilot import SimMavlinkLink
-        from sim.realtime.robotfiles import free_udp_port
 
         # The daemon's MAVLink link and a simulated autopilot (its own UDP port, as PX4
-        # SITL gives each vehicle) flying the craft: the daemon learns of a `motor` or
-        # `unhealthy` fault only through MAVLink health (docs/mavlink.md).
+        # SITL gives each vehicle, the kernel's pick when it binds) flying the craft: the
+        # daemon learns of a `motor` or `unhealthy` fault only through MAVLink health
+        # (docs/mavlink.md).
         link: RobotLink = SimMavlinkLink.for_robot(
-            cfg, flavour, free_udp_port(), restart_of=spec.t0,  # type: ignore[arg-type]
+            cfg, flavour, 0, restart_of=spec.t0,  # type: ignore[arg-type]
             craft=spec.craft, refuse_arm=spec.refuse_arm)
         return link
 
