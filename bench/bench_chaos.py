@@ -411,24 +411,18 @@ def wide_kinds(case: Case) -> list[str]:
     pauses = [f for f in case.faults if f.kind is FaultKind.PAUSE]
     if any(_overlap(p, c) and set(p.robots) & set(c.robots) for p in pauses for c in cuts):
         out.append("pause-while-cut")
-    failed = [(f.robots[0], f.at) for f in case.faults
+    # Each holder that crashed or was paused: the robots covering its slot, and when.
+    failed = [(case.plan.covered_by(g), f.at) for f in case.faults
               if f.kind in (FaultKind.CRASH, FaultKind.PAUSE) and len(f.robots) == 1
-              and case.plan.robots[f.robots[0]].function is not None]
-    if any(p.robots[0] in case.plan.covered_by(_slot_of(case.plan, r)) and 0 < p.at - t <= 1.2
-           for p in pauses for r, t in failed):
+              and (g := case.plan.robots[f.robots[0]].function) is not None]
+    if any(p.robots[0] in by and 0 < p.at - t <= 1.2 for p in pauses for by, t in failed):
         out.append("pause-claimant")
     restarts = [f for f in case.faults if f.kind is FaultKind.RESTART]
     bound = udp().takeover_bound()
-    if any(b.robots[0] in case.plan.covered_by(_slot_of(case.plan, r))
-           and bound <= b.at - t <= bound + 1.5 for b in restarts for r, t in failed):
+    if any(b.robots[0] in by and bound <= b.at - t <= bound + 1.5
+           for b in restarts for by, t in failed):
         out.append("restart-new-holder")
     return out
-
-
-def _slot_of(plan: SwarmPlan, robot: int) -> str:
-    f = plan.robots[robot].function
-    assert f is not None
-    return f
 
 
 def _cut_both_ways(oneways: list[Fault]) -> set[frozenset[tuple[int, ...]]]:

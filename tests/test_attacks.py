@@ -523,7 +523,6 @@ def test_per_robot_certificate_survives_a_restart(paper: Paper) -> None:
     assert all(f.seq > old_seq for f in inner if isinstance(f.msg, wire.Claim))
 
 
-
 def test_per_robot_a_heartbeat_that_proves_nothing_gets_the_refutes_that_void_it(
         paper: Paper) -> None:
     """Watcher 1 holds robot 2's signed REFUTE of a warning about it (f2 at epoch 0). A
