@@ -36,7 +36,8 @@ async def run_vehicle(flavour: Flavour, port: int, sysid: int, *, physics: bool 
     """Serve one vehicle on UDP `HOST:port` until `stop` is set or SIGINT / SIGTERM.
     Telemetry goes to every peer heard from, and to `gcs_port` (if not 0) from the
     start, as PX4 SITL sends to a ground station's 14550. Raises OSError if the port
-    cannot be opened."""
+    cannot be opened. Port 0: the one the kernel gives it when it binds, which the
+    connect line names."""
     from sim.physics.autopilot import start_autopilot
     from sim.physics.link import QuadLink
     from sim.physics.point import PointLink
@@ -52,6 +53,10 @@ async def run_vehicle(flavour: Flavour, port: int, sysid: int, *, physics: bool 
     except OSError:
         await craft.close()
         raise
+    # The port it listens on: `port`, or the kernel's pick for port 0. A client started
+    # after it reads this one from the connect line, so that nobody has to probe a free
+    # port and hope that no other process takes it before the vehicle binds it.
+    port = ap.port
     try:
         lat, lon, alt = ap.core.home_geo()
         say(f"vehicle: {flavour} autopilot, MAVLink system {sysid}, "

@@ -17,9 +17,10 @@ def register(sim_app: typer.Typer) -> None:
             "--autopilot", metavar="NAME", help="Firmware the simulated autopilot answers "
             "as: px4 or ardupilot. Default: px4.")] = "px4",
         port: Annotated[int, typer.Option(
-            "--port", metavar="PORT", min=1, max=65535, help="UDP port on 127.0.0.1 the "
+            "--port", metavar="PORT", min=0, max=65535, help="UDP port on 127.0.0.1 the "
             "vehicle listens on; clients send to it first (MAVSDK "
-            "udpout://127.0.0.1:PORT). Default: 14580 (PX4 SITL's).")] = 14580,
+            "udpout://127.0.0.1:PORT). 0: a free port the kernel picks, printed in the "
+            "connect line. Default: 14580 (PX4 SITL's).")] = 14580,
         sysid: Annotated[int, typer.Option(
             "--sysid", metavar="N", min=1, max=250,
             help="MAVLink system id of the vehicle. Default: 1.")] = 1,
