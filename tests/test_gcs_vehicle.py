@@ -15,27 +15,17 @@ from __future__ import annotations
 
 import math
 import signal
-import socket
 import subprocess
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import pytest
 from pymavlink import mavutil
+from vehicles import start_vehicle
 
 pytestmark = pytest.mark.slow
-ROOT = Path(__file__).resolve().parent.parent
 EARTH_RADIUS = 6_371_000.0
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 class Station:
@@ -175,12 +165,9 @@ def fly(st: Station, flavour: str, count: int) -> list[int]:
 
 @pytest.mark.parametrize("flavour", ["px4", "ardupilot"])
 def test_a_ground_station_flies_a_mission(flavour: str) -> None:
-    port = free_port()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", flavour,
-         "--port", str(port), "--sysid", "1", "--gcs-port", "0", "--no-physics"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    st = Station(port)
+    vehicle = start_vehicle(flavour, "--sysid", "1", "--gcs-port", "0", "--no-physics")
+    proc = vehicle.proc
+    st = Station(vehicle.port)
     try:
         t0 = time.monotonic()
         n_params = connect(st, flavour)

@@ -27,7 +27,6 @@ import math
 import queue
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -35,6 +34,7 @@ import time
 from pathlib import Path
 
 import pytest
+from vehicles import start_vehicle
 
 from sim.physics.mavlink_defs import GEO_ORIGIN
 from swarmd.link.mavlink_modes import Flavour
@@ -44,15 +44,7 @@ if importlib.util.find_spec("MAVProxy") is None:
                 allow_module_level=True)
 
 pytestmark = pytest.mark.slow
-ROOT = Path(__file__).resolve().parent.parent
 EARTH_RADIUS = 6_371_000.0
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 def plan_rows(flavour: Flavour) -> list[tuple[float, ...]]:
@@ -158,16 +150,13 @@ def start_and_follow(mp: Console, flavour: str, count: int) -> None:
 
 @pytest.mark.parametrize("flavour", ["px4", "ardupilot"])
 def test_mavproxy_flies_a_mission(flavour: Flavour, tmp_path: Path) -> None:
-    port = free_port()
-    vehicle = subprocess.Popen(
-        [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", flavour,
-         "--port", str(port), "--gcs-port", "0", "--no-physics"],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    started = start_vehicle(flavour, "--gcs-port", "0", "--no-physics")
+    vehicle = started.proc
     rows = plan_rows(flavour)
     (tmp_path / "plan.txt").write_text(
         "QGC WPL 110\n" + "".join("\t".join(str(v) for v in r) + "\n" for r in rows))
     mp = Console([sys.executable, "-m", "MAVProxy.mavproxy",
-                  f"--master=udpout:127.0.0.1:{port}", "--source-system=255",
+                  f"--master=udpout:127.0.0.1:{started.port}", "--source-system=255",
                   "--default-modules=wp,mode,arm,param,cmdlong,misc,link",
                   f"--state-basedir={tmp_path}"], tmp_path)
     times: list[tuple[str, float]] = []

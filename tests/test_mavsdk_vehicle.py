@@ -15,15 +15,13 @@ from __future__ import annotations
 import asyncio
 import math
 import signal
-import socket
 import subprocess
-import sys
 import time
 from collections.abc import Awaitable, Callable
-from pathlib import Path
 from typing import Any
 
 import pytest
+from vehicles import start_vehicle
 
 mavsdk = pytest.importorskip("mavsdk", reason="the mavsdk wheel (the dev extra) is needed")
 
@@ -40,15 +38,7 @@ from mavsdk.asyncio.plugins.telemetry import (  # noqa: E402
 )
 
 pytestmark = pytest.mark.slow
-ROOT = Path(__file__).resolve().parent.parent
 EARTH_RADIUS = 6_371_000.0
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 async def until(check: Callable[[], Awaitable[bool]], timeout: float, what: str) -> None:
@@ -171,16 +161,15 @@ async def test_mavsdk_flies_a_mission(flavour: str) -> None:
 async def with_vehicle(flavour: str,
                        flight: Callable[[System, str, Steps], Awaitable[None]]) -> None:
     """Start a vehicle process, connect MAVSDK, run `flight`, stop the vehicle."""
-    port = free_port()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", flavour,
-         "--port", str(port), "--sysid", "1", "--gcs-port", "0", "--no-physics"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Off the loop: the wait for the vehicle's connect line blocks.
+    vehicle = await asyncio.to_thread(start_vehicle, flavour, "--sysid", "1", "--gcs-port",
+                                      "0", "--no-physics")
+    proc = vehicle.proc
     steps = Steps(flavour)
     try:
         config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
         async with Mavsdk(config) as sdk:
-            await sdk.add_any_connection(f"udpout://127.0.0.1:{port}")
+            await sdk.add_any_connection(f"udpout://127.0.0.1:{vehicle.port}")
             system = await steps.run("connect", sdk.first_autopilot(timeout_s=15.0), 20.0)
             assert system is not None, "no autopilot heard"
             await flight(system, flavour, steps)
@@ -194,7 +183,8 @@ async def with_vehicle(flavour: str,
             proc.communicate()
             raise
     assert proc.returncode == 0, err[-2000:]
-    assert f"udpout://127.0.0.1:{port}" in out and "vehicle: stopped" in out
+    out = vehicle.head + out
+    assert f"udpout://127.0.0.1:{vehicle.port}" in out and "vehicle: stopped" in out
 
 
 def mission_items(home: Any, flavour: str) -> list[Any]:
