@@ -6,14 +6,10 @@ Real time over UDP loopback (a MuJoCo craft in this process), short and bounded.
 from __future__ import annotations
 
 import asyncio
-import select
 import signal
-import socket
 import subprocess
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -21,6 +17,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from pymavlink import mavutil
+from vehicles import ROOT, start_vehicle, vehicle_args
 
 from sim.physics.autopilot import SimMavlinkLink, start_autopilot
 from sim.physics.autopilot_core import AutopilotCore
@@ -29,14 +26,6 @@ from sim.physics.robot import QuadRobot
 from swarmd.core.roles import Health
 
 pytestmark = pytest.mark.slow
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 async def until(cond: Callable[[], bool], timeout: float, what: str) -> None:
@@ -75,11 +64,14 @@ def ground_station(port: int, arm: bool) -> dict[str, Any]:
 async def test_a_ground_station_sees_the_vehicle_its_position_and_mode(
         flavour: str, mode: str, refused: int) -> None:
     quad = QuadLink(3, (2.0, -1.0, 0.0))
-    port = free_port()
-    ap = await start_autopilot(quad, flavour, port)  # type: ignore[arg-type]
+    # Port 0: the autopilot binds the port the kernel gives it, and the ground station
+    # sends to that one. A port probed free before could be taken by another process
+    # before the autopilot bound it.
+    ap = await start_autopilot(quad, flavour, 0)  # type: ignore[arg-type]
     ap.refuse_arm = True
     try:
-        seen = await asyncio.to_thread(ground_station, port, True)
+        assert ap.port != 0
+        seen = await asyncio.to_thread(ground_station, ap.port, True)
     finally:
         await ap.close()
         await quad.close()
@@ -162,28 +154,24 @@ async def test_a_refused_arm_is_reported_as_a_health_problem() -> None:
         await link.close()
 
 
-def _vehicle(port: int) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", "ardupilot",
-         "--port", str(port), "--sysid", "7", "--gcs-port", "0", "--no-physics"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+OPTIONS = ("--sysid", "7", "--gcs-port", "0", "--no-physics")
 
 
 def test_sim_vehicle_says_where_to_connect_and_ends_cleanly_on_ctrl_c() -> None:
-    port = free_port()
-    proc = _vehicle(port)
+    # On `--port 0` (tests/vehicles.py): its first lines come once it listens, and they
+    # name the port the kernel gave it (bounded: a silent process fails here).
+    vehicle = start_vehicle("ardupilot", *OPTIONS)
+    proc, port = vehicle.proc, vehicle.port
     try:
-        assert proc.stdout is not None
-        # Its first lines come once it listens (bounded: a silent process fails here).
-        ready, _, _ = select.select([proc.stdout], [], [], 30.0)
-        assert ready, "the vehicle printed nothing in 30 s"
-        first = [proc.stdout.readline() for _ in range(2)]
+        first = vehicle.head.splitlines()[:2]
+        assert port != 0
         assert any(f"udpout://127.0.0.1:{port}" in line for line in first), first
         seen = ground_station(port, arm=False)
         assert seen["system"] == 7 and seen["HEARTBEAT"].autopilot == 3
-        # A second vehicle on the same port: one line, exit 1.
-        busy = subprocess.run(_vehicle(port).args, cwd=ROOT, capture_output=True, text=True,
-                              timeout=60)
+        # A second vehicle on the same port: one line, exit 1. The first one holds the
+        # port all along, so no other process can have it.
+        busy = subprocess.run(vehicle_args("ardupilot", port, *OPTIONS), cwd=ROOT,
+                              capture_output=True, text=True, timeout=60)
         assert busy.returncode == 1 and busy.stderr.strip().startswith(
             f"--port: cannot listen on 127.0.0.1:{port}"), busy.stderr
         assert len(busy.stderr.strip().splitlines()) == 1
@@ -196,4 +184,4 @@ def test_sim_vehicle_says_where_to_connect_and_ends_cleanly_on_ctrl_c() -> None:
             proc.communicate()
             raise
     assert proc.returncode == 0, err[-2000:]
-    assert out.rstrip().endswith("vehicle: stopped")
+    assert (vehicle.head + out).rstrip().endswith("vehicle: stopped")
