@@ -449,13 +449,6 @@ def test_robot_file_mavlink_link(tmp_path: Path) -> None:
 # -- the whole link over UDP loopback -----------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
 class UdpAutopilot:
     """An autopilot on a UDP socket: heartbeats to the link's port while `beating`."""
 
@@ -483,13 +476,26 @@ async def _until(cond: Any, timeout: float, ap: UdpAutopilot | None = None) -> N
 async def test_udp_link_reports_health_loses_and_regains_the_autopilot() -> None:
     from swarmd.link.mavlink import MavlinkLink
 
-    port = _free_port()
+    class KernelPortLink(MavlinkLink):
+        """The link listening on port 0: its socket gets a port from the kernel at the
+        bind itself, which `port` tells once the I/O thread opened it. A port probed
+        free before could be taken by another process before the link bound it."""
+
+        port = 0
+
+        def _open(self) -> Any:
+            conn = super()._open()
+            self.port = conn.port.getsockname()[1]
+            return conn
+
     cfg = PilotConfig(health=Thresholds(heartbeat_timeout=0.6))
-    link = MavlinkLink(f"udpin:127.0.0.1:{port}", pilot=cfg, health_period=0.1)
+    link = KernelPortLink("udpin:127.0.0.1:0", pilot=cfg, health_period=0.1)
     got: list[Health] = []
     await link.start(got.append)
-    ap = UdpAutopilot(port)
+    ap = UdpAutopilot(0)  # sends to the link's port, once its I/O thread has bound it
     try:
+        await _until(lambda: link.port != 0, 10.0)
+        ap.port = link.port
         await _until(lambda: got and got[-1] is Health.OK, 10.0, ap)
         await _until(lambda: got[-1] is Health.FAULTY, 10.0)  # silent: faulty by itself
         assert link.pilot is not None and not link.pilot.connected
