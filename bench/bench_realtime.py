@@ -32,7 +32,7 @@ from typing import Any
 from grids import grid_swarm  # bench/grids.py (scripts run with bench/ on sys.path)
 
 from sim.realtime.orchestrator import run_realtime_async
-from sim.realtime.robotfiles import free_udp_port
+from sim.realtime.ports import PortLease
 from sim.shared.faults import Fault, parse_fault
 from sim.shared.invariants import check_events
 from sim.shared.summary import lateness_figures
@@ -131,7 +131,11 @@ class _Unchecked:
 
 async def bench_scale(n: int, seconds: float) -> dict[str, Any]:
     load_before = os.getloadavg()[0]
-    with tempfile.TemporaryDirectory() as tmp:
+    # The run's multicast port, leased here rather than by the run, because the listener
+    # below must bind it before the robots start. The lease holds it until the run ended:
+    # a port probed free and closed again could go to another run meanwhile, whose robots
+    # the listener would time too (sim/realtime/ports.py).
+    with tempfile.TemporaryDirectory() as tmp, PortLease() as lease:
         directory = Path(tmp)
         swarm_path = grid_swarm(n, directory)
         cfg = load_swarm(swarm_path)
@@ -139,7 +143,7 @@ async def bench_scale(n: int, seconds: float) -> dict[str, Any]:
         # Per robot, heartbeats carry chain links (and anchors a signature): read them in
         # that layout. The listener only times them; it trusts nothing it reads.
         verifier = _Unchecked() if cfg.auth_mode == "per-robot" else None
-        port = free_udp_port()
+        port = lease.port
         arrivals: dict[int, list[tuple[float, int]]] = {}
         loop = asyncio.get_running_loop()
 
