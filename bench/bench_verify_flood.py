@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from sim.realtime.orchestrator import run_realtime_async
-from sim.realtime.robotfiles import free_udp_port
+from sim.realtime.ports import PortLease
 from sim.shared.invariants import check_events
 from sim.shared.summary import lateness_figures
 from sim.shared.summary import percentile as pct
@@ -134,10 +134,19 @@ class _Unchecked:
 
 
 async def bench_flood(rate: float, flood_s: float, settle: float = 4.0) -> dict[str, Any]:
+    # The run's multicast port, leased here rather than by the run, because the listener
+    # and the flooder need it before the robots start. The lease holds it until the run
+    # ended: a port probed free and closed again could go to another run meanwhile, whose
+    # robots would then be flooded and timed too (sim/realtime/ports.py).
+    with PortLease() as lease:
+        return await _bench_flood(lease.port, rate, flood_s, settle)
+
+
+async def _bench_flood(port: int, rate: float, flood_s: float,
+                       settle: float) -> dict[str, Any]:
     load_before = os.getloadavg()[0]
     cfg = load_swarm(PAPER)
     params, plan = cfg.params(), cfg.to_plan()
-    port = free_udp_port()
     arrivals: dict[int, list[tuple[float, int]]] = {}
     loop = asyncio.get_running_loop()
 
