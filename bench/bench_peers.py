@@ -297,7 +297,7 @@ async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None,
                       channel: tuple[float, float], seed: int,
                       ) -> tuple[dict[str, Any], list[tuple[float, int]], float]:
     from sim.realtime.orchestrator import run_realtime_async
-    from sim.realtime.robotfiles import free_udp_port
+    from sim.realtime.ports import PortLease
     from sim.realtime.summary import summarize_realtime
     from sim.shared.faults import parse_fault
     from swarmd.config import load_swarm
@@ -305,22 +305,28 @@ async def _swarmd_run(path: Path, *, duration: float, crash_at: float | None,
     from swarmd.transport.udp import UdpTransport
 
     cfg = load_swarm(path)
-    port = free_udp_port()
+    # The run's multicast port, leased here rather than by the run, because the listener
+    # must bind it before the robots start. The lease holds it until the run ended: a
+    # port probed free and closed again could go to another run meanwhile, whose
+    # datagrams the listener would count too (sim/realtime/ports.py).
+    lease = PortLease()
+    port = lease.port
     heard: list[tuple[float, int]] = []
     listener = UdpTransport(group="239.255.77.7", port=port, interface="127.0.0.1")
 
     def on_event(_event: ChannelEvent) -> None:
         pass
 
-    await listener.start(lambda data: heard.append((time.time(), len(data))), on_event)
     faults = [parse_fault(f"crash:{VICTIM}@{crash_at}")] if crash_at is not None else []
     loss, burst = channel
     try:
+        await listener.start(lambda data: heard.append((time.time(), len(data))), on_event)
         result = await run_realtime_async(
             path, duration=duration, faults=faults, loss=loss, seed=seed, port=port,
             loss_model="burst" if burst else "bernoulli", burst_len=burst or 4.0)
     finally:
         await listener.close()
+        lease.release()
     summary = summarize_realtime(result, faults, cfg.to_plan(), cfg.params(), loss=loss)
     return summary.as_dict(), heard, result.t0
 
