@@ -72,7 +72,8 @@ def main() -> int:
     if args.stack is not None:
         _stack(args.stack, args.seconds)
         return 0
-    from sim.realtime.robotfiles import free_udp_port, sign_for_run, write_robot_file
+    from sim.realtime.ports import PortLease
+    from sim.realtime.robotfiles import sign_for_run, write_robot_file
     from sim.realtime.ros2_robot import DomainLease
 
     run_dir = Path(tempfile.mkdtemp(prefix="swarmd-bench-ros2-"))
@@ -81,8 +82,12 @@ def main() -> int:
     results: dict[str, dict[str, float]] = {}
     try:
         for link in ("none", "ros2"):
+            # The daemon's own multicast port, held until it ended: a port probed free
+            # and closed again could go to another run's robots meanwhile, which this
+            # daemon would then hear (sim/realtime/ports.py).
+            port_lease = PortLease()
             config = write_robot_file(run_dir / link, swarm, 1, group="239.255.77.7",
-                                      port=free_udp_port(), identity_file=identities[1],
+                                      port=port_lease.port, identity_file=identities[1],
                                       link=lease.link_doc(1) if link == "ros2" else None)
             stack = None
             if link == "ros2":
@@ -94,6 +99,7 @@ def main() -> int:
                                        "--seconds", str(args.seconds)], capture_output=True,
                                       text=True, timeout=args.seconds + 60, check=True)
             finally:
+                port_lease.release()
                 if stack is not None:
                     stack.kill()
                     stack.wait()
