@@ -7,7 +7,6 @@ a swarm file's real keys are never needed, nor touched, to simulate it."""
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,18 +16,6 @@ from swarmd.transport.addresses import DEFAULT_INTERFACE, DEFAULT_TTL
 
 if TYPE_CHECKING:
     from sim.xbee_emu.medium import Medium
-
-
-def free_udp_port() -> int:
-    """A UDP port nothing on 127.0.0.1 uses now, for a unicast socket its user binds
-    right away without reuse options (a simulated autopilot): should another program
-    take it first, that bind fails loudly. Never a swarm's multicast port: robots share
-    that one with SO_REUSEPORT, so a second run handed it would hear the first; see
-    `sim.realtime.ports.PortLease`."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 def start_medium(robots: int, run_dir: Path, seed: int, transport: str) -> Medium:
