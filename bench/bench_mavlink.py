@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
-import socket
 import statistics
 import sys
 import time
@@ -40,13 +39,6 @@ from sim.realtime.orchestrator import run_realtime_async  # noqa: E402
 from sim.shared.faults import parse_fault  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
 from swarmd.core.roles import Health  # noqa: E402
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 async def until(cond: Callable[[], object], timeout: float) -> bool:
@@ -74,7 +66,9 @@ async def fly(link: SimMavlinkLink, healths: list[Health], slot: tuple[float, fl
 
 async def detect_once(flavour: str) -> float | None:
     healths: list[Health] = []
-    link = SimMavlinkLink(QuadLink(1, (0.0, 0.0, 0.0)), flavour, free_port())  # type: ignore[arg-type]
+    # Port 0 (the default): the autopilot binds the port the kernel gives it and the link
+    # talks to that one; a port probed free before could be taken by another process.
+    link = SimMavlinkLink(QuadLink(1, (0.0, 0.0, 0.0)), flavour)  # type: ignore[arg-type]
     try:
         if not await fly(link, healths, (1.0, 1.0, 1.5)):
             return None
@@ -94,7 +88,7 @@ def thread_cpu(tid: int) -> float:
 
 
 async def cpu(n: int, seconds: float) -> tuple[float, float, float]:
-    links = [SimMavlinkLink(QuadLink(i + 1, (1.5 * i, -5.0, 0.0)), "px4", free_port())
+    links = [SimMavlinkLink(QuadLink(i + 1, (1.5 * i, -5.0, 0.0)), "px4")
              for i in range(n)]
     healths: list[list[Health]] = [[] for _ in links]
     try:
