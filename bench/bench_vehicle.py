@@ -15,11 +15,12 @@ flavour, a point mass, loopback UDP; a pymavlink client as system 255):
 from __future__ import annotations
 
 import argparse
+import re
 import signal
-import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -29,11 +30,28 @@ from pymavlink import mavutil
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
+def start_vehicle(flavour: str) -> tuple[subprocess.Popen[str], int]:
+    """A vehicle process on `--port 0`, and the port the kernel gave it, read from its
+    connect line. A port probed free here and handed to it could be taken by another
+    process before the vehicle bound it."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", flavour,
+         "--port", "0", "--gcs-port", "0", "--no-physics"], cwd=ROOT,
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    assert proc.stdout is not None
+    # A vehicle silent for 30 s is killed, which ends the read below.
+    watchdog = threading.Timer(30.0, proc.kill)
+    watchdog.start()
+    try:
+        for line in proc.stdout:
+            found = re.search(r"udpout://127\.0\.0\.1:(\d+)", line)
+            if found:
+                return proc, int(found.group(1))
+    finally:
+        watchdog.cancel()
+    proc.wait()
+    raise RuntimeError(f"the {flavour} vehicle ended (exit {proc.returncode}) before it "
+                       "named its port")
 
 
 class Client:
@@ -122,11 +140,7 @@ def main() -> None:
     ap.add_argument("--flavours", default="px4,ardupilot")
     args = ap.parse_args()
     for flavour in args.flavours.split(","):
-        port = free_port()
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "swarmd.cli", "sim", "vehicle", "--autopilot", flavour,
-             "--port", str(port), "--gcs-port", "0", "--no-physics"], cwd=ROOT,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc, port = start_vehicle(flavour)
         try:
             c = Client(port)
             c.wait("HEARTBEAT", 15.0)
