@@ -104,21 +104,31 @@ def status_kb(pid: int, key: str) -> int:
     raise KeyError(key)
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-    return port
+def lease_port() -> socket.socket:
+    """A socket on a UDP port of 127.0.0.1 the kernel picked, bound without reuse
+    options: while it is open, no other bind of 127.0.0.1 gets that port, and the
+    daemons, which bind the multicast group's address on it, are not in its way. A port
+    probed free and closed again could go to another swarm (another bench, a test) before
+    or while these daemons bound it, and the two would hear each other. The socket of
+    sim/realtime/ports.py's PortLease, written out here because the bench may measure a
+    tree from before that module (`--compare`, `--tree`), whose code it imports."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind(("127.0.0.1", 0))
+    except BaseException:
+        sock.close()
+        raise
+    return sock
 
 
 def measure(args: argparse.Namespace, root: Path) -> dict[str, Any] | None:
     """Run the swarm of `root` (robot 1 alone with `--alone`) and measure robot 1 and
     the standby (robot 6) for `args.duration` s after READY; None if robot 1 never
     became ready."""
-    port = free_port()
     env = {k: v for k, v in os.environ.items() if k != "NOTIFY_SOCKET"}
     env["PYTHONPATH"] = str(root)
-    with tempfile.TemporaryDirectory() as tmp:
+    with lease_port() as lease, tempfile.TemporaryDirectory() as tmp:
+        port: int = lease.getsockname()[1]
         swarm = swarm_file(root, Path(tmp), args.auth)
         private_key_path: Any = importlib.import_module("swarmd.base.identity").private_key_path
 
