@@ -8,7 +8,8 @@ Per robot, every attack leaves the swarm whole: no live holder fenced and no hea
 robot replaced (the checker's violations), no robot muted (a muted holder would be
 suspected and taken over: the holders and the takeover count say so), a dead robot taken
 over within the checker's takeover bound plus one T_max, and the attack shows in the
-daemons' counted drops. In shared-key mode the test pins down what DESIGN says still gets through.
+daemons' counted drops. Unsigned and with a shared key, a heartbeat or a claim alone
+proves nothing either; the tests pin down what DESIGN says still gets through there.
 
 The runs are independent processes, so the module starts them a few at a time and each
 test judges its own."""
@@ -168,43 +169,32 @@ def test_per_robot_a_forged_epoch_is_seen_by_the_robot_it_names(
     assert any("sending as robot 1" in w for w in out["warnings"])
 
 
-def test_unsigned_a_forged_epoch_fences_the_live_holder(
-        runs: dict[tuple[str, str], Run]) -> None:
+def test_unsigned_a_forged_epoch_fences_nobody(runs: dict[tuple[str, str], Run]) -> None:
+    """Unsigned, anyone can send the heartbeat; it moves no view without the certificate
+    of a takeover (DESIGN, "Convergence")."""
     code, out = runs["none", "epoch"].result()
-    kinds = {(v["kind"], v["robot"]) for v in out["violations"]}
-    assert ("fenced_without_takeover", 2) in kinds
-    assert "f2" not in out["holders"]
-    assert code == 1 and out["ok"] is False
+    assert out["violations"] == [] and code == 0
+    assert out["holders"] == {"f1": [1], "f2": [2], "f3": [3], "f4": [4]}
+    hit = {r for r, d in out["drops"].items() if d.get("uncertified", 0) > 0}
+    assert len(hit) >= 3, out["drops"]
 
 
-# ------------------------------------------------ shared key: what still gets through
+# ------------------------------------------------ shared key: what is stopped
 # (DESIGN section 2, "Shared-key mode: what an insider can do")
 
 
-def test_shared_key_a_forged_epoch_fences_the_live_holder(
-        runs: dict[tuple[str, str], Run]) -> None:
-    code, out = runs["shared", "epoch"].result()
-    kinds = {(v["kind"], v["robot"]) for v in out["violations"]}
-    assert ("fenced_without_takeover", 2) in kinds and code == 1
-
-
-def test_shared_key_claim_spam_keeps_a_dead_robot_unreplaced(
-        runs: dict[tuple[str, str], Run]) -> None:
-    code, out = runs["shared", "claim"].result()
-    kinds = {(v["kind"], v["robot"]) for v in out["violations"]}
-    assert ("no_takeover", 2) in kinds and "f2" not in out["holders"] and code == 1
-
-
-@pytest.mark.parametrize("attack", ["seq", "warn", "replay", "ahead", "ahead_all"])
+@pytest.mark.parametrize("attack",
+                         ["epoch", "claim", "seq", "warn", "replay", "ahead", "ahead_all"])
 def test_shared_key_what_is_still_stopped(runs: dict[tuple[str, str], Run],
                                           attack: str) -> None:
-    """A max seq is bounded (`seq_jump`), replays are replays, a frame in a robot's own
-    name ahead of it moves its counter no more and mutes it to nobody; WARNs in other
-    names do reach the quorum, but the standby's own ears (rule 9: it hears the suspect)
-    keep a healthy robot in its slot."""
+    """A heartbeat at a forged epoch and a stream of claims prove nothing without a
+    certificate (`uncertified`), a max seq is bounded (`seq_jump`), replays are replays,
+    a frame in a robot's own name ahead of it moves its counter no more and mutes it to
+    nobody; WARNs in other names do reach the quorum, but the standby's own ears (rule
+    9: it hears the suspect) keep a healthy robot in its slot."""
     code, out = runs["shared", attack].result()
     assert out["violations"] == [] and code == 0
-    dead = attack in ("replay", "ahead_all")
+    dead = attack in ("claim", "replay", "ahead_all")
     assert out["holders"] == {"f1": [1], "f2": [6 if dead else 2], "f3": [3], "f4": [4]}
     if attack != "warn":
         hit = {r for r, d in out["drops"].items() if d.get(DROPS[attack], 0) > 0}

@@ -338,21 +338,20 @@ def test_a_few_wide_seeds_run_and_no_node_raises() -> None:
     assert {f"wide {k}" for k in bench.WIDE_KINDS} <= set(bench.DRAWN)
 
 
-def test_the_virtual_medium_holds_overlapping_one_way_partitions() -> None:
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_the_virtual_medium_holds_overlapping_one_way_partitions(auth: str) -> None:
     """`partition:1>2@3+2` and `partition:1>3@4+2` overlap over [4, 5): each cut holds
     over its own window only. Robot 2 stops hearing 1 at 3 s and hears it again at
     5 s, robot 3 from 4 s to 6 s: each suspects 1 one `t_max` into its cut and hears it
     again (its `refute`) when its own cut heals, not when the other one does. The cuts
     come after the start-up grace: a link heard for less is not measured yet and waits
-    `t_max_bursty` (DESIGN "Detection"). Per robot, where a watcher hears a holder's
-    heartbeat first-hand only: with a shared key or unsigned, a robot that heard the
-    warning relays the holder's next heartbeat (DESIGN "Detection", `vouch.py`), and the
-    cut robot hears it through that one."""
+    `t_max_bursty` (DESIGN "Detection"). A watcher hears a holder's heartbeat
+    first-hand only, in every mode: nobody repeats another robot's heartbeat."""
     from sim.virtual.explore import swarm
     from sim.virtual.simulator import run_virtual
 
     plan, params = swarm("four")
-    res = run_virtual(plan, params, duration=8.0, auth="per-robot",
+    res = run_virtual(plan, params, duration=8.0, auth=auth,
                       faults=[parse_fault("partition:1>2@3+2"),
                               parse_fault("partition:1>3@4+2")])
     heard = {(e["robot"], e["event"]): e["t"] for e in reversed(res.events)

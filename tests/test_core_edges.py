@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import pytest
-from test_node import Driven, events, frame, hb, past_grace, sent, started
+from test_node import Driven, events, frame, hb, own, past_grace, sent, started
 
 from swarmd.core import events as ev
 from swarmd.core import wire
@@ -38,6 +38,18 @@ def shared_plan(paper_plan: SwarmPlan) -> SwarmPlan:
 
 def assigns(actions: Sequence[Action]) -> list[Assign]:
     return [a for a in actions if isinstance(a, Assign)]
+
+
+def proof_of(plan: SwarmPlan, holder: int, epoch: int, failed: int) -> list[bytes]:
+    """The proof of `holder`'s takeover of f2 at `epoch` from `failed`, as a robot
+    that holds it shows it (`Signed._show`): the warnings of f2's witnesses 1 and 3
+    about `failed` at the epoch before, then `holder`'s CLAIM, each inside a CERT."""
+    slot = plan.slot("f2")
+    warn = wire.Warn(failed, slot, epoch - 1)
+    inner = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))  # only `raw` goes on the wire
+    return [frame(plan, 5, wire.Cert(slot, inner, raw))
+            for raw in (frame(plan, 1, warn), frame(plan, 3, warn),
+                        frame(plan, holder, wire.Claim(failed, slot, epoch)))]
 
 
 def quorum_on(node: Driven, plan: SwarmPlan, suspect: int, f: str, epoch: int,
@@ -163,14 +175,17 @@ def test_a_fault_while_claiming_abandons_the_claim(paper_plan: SwarmPlan,
 @pytest.mark.parametrize("epoch", [1, 2])
 def test_a_heartbeat_at_the_claimed_epoch_supersedes_the_claim(
         shared_plan: SwarmPlan, udp_params: Params, epoch: int) -> None:
-    # 5 and 6 both claimed f2 after 2 died; 6 lost 5's CLAIM but hears 5's first
-    # heartbeat as the new holder: 6 backs off instead of executing f2 too (rule 2).
-    # Within 6's start-up grace 5 has said nothing else here, so that heartbeat is held
-    # (`held.py`), and 6's takeover waits for it: 6 backs off when the grace ends.
+    # 5 and 6 both claimed f2 after 2 died; 6 lost 5's CLAIM but is shown the proof of
+    # 5's takeover (a robot that holds it shows it to one that acts on an older view)
+    # and hears 5's heartbeat as the new holder: 6 backs off instead of executing f2
+    # too (rule 2).
     node, _ = started(shared_plan, udp_params, 6)
     quorum_on(node, shared_plan, 2, "f2", 0, 0.1)
     assert node.snapshot().role is Role.CLAIMING
-    out = node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=epoch)), 0.15)
+    out: list[Action] = []
+    for raw in proof_of(shared_plan, 5, epoch, 2):
+        out += node.receive(raw, 0.14)
+    out += node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=epoch)), 0.15)
     out += node.run_to(udp_params.startup_grace)
     assert [e.fields() for e in events(out, ev.Backoff)] == [
         {"subject": 2, "function": "f2", "winner": 5}]
@@ -202,7 +217,9 @@ def test_warnings_about_an_older_holder_are_not_counted(shared_plan: SwarmPlan,
                                                         udp_params: Params) -> None:
     node, _ = started(shared_plan, udp_params, 6)
     t = past_grace(node, udp_params)
-    node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), t + 0.1)  # 5 took f2
+    for raw in proof_of(shared_plan, 5, 1, 2):  # 5 took f2, and shows it
+        node.receive(raw, t + 0.05)
+    node.receive(frame(shared_plan, 5, hb(shared_plan, "f2", epoch=1)), t + 0.1)
     slot = shared_plan.slot("f2")
     # delayed warnings from before the takeover: about an entry below the slot's (the
     # slot table's order, `slots.py`: an older epoch is lower whoever it names)
@@ -220,16 +237,18 @@ def test_the_epoch_saturates_instead_of_wrapping(paper_plan: SwarmPlan,
     # The 65536th takeover of one slot: the epoch field is 16 bits on the wire, so the
     # claim saturates rather than wrap to 0 (which would rank below every entry). At
     # the last epoch the slot table has nowhere forward to go but a lower id (`slots.py`):
-    # standby 6 cannot outrank holder 2 there, so it backs off instead of taking over a
-    # slot whose every view would fence it at once.
+    # standby 6 cannot outrank holder 2 there, and no certificate backs a claim that
+    # does not move the epoch forward, so the claim ends in its wait state (logged as
+    # refuted) instead of taking over a slot whose every view would fence it at once.
     node, _ = started(paper_plan, udp_params, 6)
     t = past_grace(node, udp_params)
     out = quorum_on(node, paper_plan, 2, "f2", 0xFFFF, t + 0.1)
     assert events(out, ev.Claim)[0].fields()["epoch"] == 0xFFFF
-    assert sent(out) == [wire.Claim(2, paper_plan.slot("f2"), 0xFFFF)]
+    assert own(out) == [wire.Claim(2, paper_plan.slot("f2"), 0xFFFF)]
     out = node.run_to(t + 0.11 + udp_params.claim_hold)
-    assert assigns(out) == []
-    assert [e.fields()["winner"] for e in events(out, ev.Backoff)] == [2]
+    assert assigns(out) == [] and not events(out, ev.Takeover)
+    assert [e.fields() for e in events(out, ev.Refute)] == [{"subject": 2, "function": "f2"}]
+    assert node.snapshot().role is Role.STANDBY
 
 
 @pytest.mark.parametrize("suspect_alive", [True, False])
@@ -263,7 +282,11 @@ def test_a_stall_while_claiming_listens_again_before_taking_over(
 def test_restored_knowledge_of_a_newer_holder_ends_the_hold_as_standby(
         paper_plan: SwarmPlan, udp_params: Params, rid: int, known_f2: tuple[int, int],
         held: tuple[str, int]) -> None:
-    restored = Restored(known={"f2": known_f2}, held=held)
+    # The hold's certificate kept with it (a hold at epoch 1 is provable only with it,
+    # `Restart._verified_hold`): the warnings of f2's witnesses about 2 at epoch 0.
+    warn = wire.Warn(2, paper_plan.slot("f2"), 0)
+    proof = (frame(paper_plan, 1, warn), frame(paper_plan, 3, warn)) if held[1] else ()
+    restored = Restored(known={"f2": known_f2}, held=held, certificate=proof)
     node, out = started(paper_plan, udp_params, rid, restored=restored)
     assert not events(out, ev.Started)  # the hold still runs: others may know more
     out += node.run_to(udp_params.rejoin_hold + 0.05)
@@ -353,8 +376,11 @@ def test_a_fault_during_the_hold_still_tells_how_the_robot_started(
 def test_a_claim_at_a_newer_epoch_ends_the_hold(paper_plan: SwarmPlan,
                                                 udp_params: Params) -> None:
     # `_rejoin_superseded`: "Someone holds or claims our old slot at a newer epoch: stay
-    # a standby." 6's CLAIM for f2 at epoch 1 arrives; its heartbeats are lost.
-    feed: list[Feed] = [(0.1, 6, wire.Claim(2, paper_plan.slot("f2"), 1))]
+    # a standby." 6's CLAIM for f2 at epoch 1 arrives after the witnesses' warnings
+    # that certify it; its heartbeats are lost.
+    slot = paper_plan.slot("f2")
+    feed: list[Feed] = [(0.05, 1, wire.Warn(2, slot, 0)), (0.06, 3, wire.Warn(2, slot, 0)),
+                        (0.1, 6, wire.Claim(2, slot, 1))]
     _, out = _rejoin(paper_plan, udp_params, 2, _base(paper_plan), ("f2", 0), feed)
     assert Assign("f2", 0) not in out
     assert [e.fields() for e in events(out, ev.Started)] == [{"role": "standby",

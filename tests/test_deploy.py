@@ -100,7 +100,7 @@ def test_units_security_exposure_is_low(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("unit", UNITS)
-def test_units_say_what_issue_6_asks(unit: str) -> None:
+def test_units_run_the_daemon_as_a_watched_confined_service(unit: str) -> None:
     e = _unit_entries((DEPLOY / unit).read_text())
     assert e["Service.Type"] == ["notify"]
     assert e["Service.NotifyAccess"] == ["main"]

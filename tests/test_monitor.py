@@ -46,6 +46,17 @@ class Sender:
         return self.frame(sender, wire.Heartbeat(slot, epoch, role, Health.OK))
 
 
+def took_over(state: MonitorState, tx: Sender, now: float, claimant: int, failed: int,
+              epoch: int, slot: int = 2, witnesses: tuple[int, ...] = (1, 3)) -> None:
+    """`claimant`'s takeover of `slot` from `failed` at `epoch`, as the channel carries
+    it: the witnesses' warnings about `failed` at the epoch before (its certificate),
+    then the CLAIM. A heartbeat at a new entry is believed only with it, as by a daemon
+    (module docstring of `swarmd.daemon.monitor`)."""
+    for w in witnesses:
+        state.feed(tx.frame(w, wire.Warn(failed, slot, epoch - 1)), now)
+    state.feed(tx.frame(claimant, wire.Claim(failed, slot, epoch)), now)
+
+
 def healthy_swarm(state: MonitorState, tx: Sender, now: float) -> None:
     for r in range(1, 5):
         state.feed(tx.hb(r, r), now)
@@ -146,18 +157,27 @@ def test_monitor_silent_holder_is_no_alert_once_replaced() -> None:
     for r in (1, 3, 4):
         state.feed(tx.hb(r, r), now)
     assert any("holder of f2 silent" in a for a in state.alerts(now))
+    took_over(state, tx, now, 6, 2, 1)
     state.feed(tx.hb(6, 2, epoch=1), now)
     assert not any("f2" in a for a in state.alerts(now)), state.alerts(now)
     assert next(r for r in state.rows(now) if r["robot"] == 6)["function"] == "f2"
 
 
 def test_monitor_flags_split_brain_and_leave_without_claim() -> None:
+    """Standbys 5 and 6 both cover f2 here, and both take it over at epoch 1 (each
+    claim certified by the same warnings: a race won on each side of a partition)."""
     p = params.udp()
-    state = MonitorState(paper_plan(), p)
+    plan = paper_plan()
+    robots = dict(plan.robots)
+    robots[5] = RobotPlan(5, None, ("f1", "f2", "f4"))
+    state = MonitorState(SwarmPlan(plan.swarm_id, plan.functions, robots, plan.watches), p)
     tx = Sender()
     healthy_swarm(state, tx, 0.0)
-    state.feed(tx.hb(6, 2, epoch=0), 0.1)
-    assert any("split brain" in a and "[2, 6]" in a for a in state.alerts(0.1))
+    took_over(state, tx, 0.1, 5, 2, 1)
+    took_over(state, tx, 0.1, 6, 2, 1, witnesses=())
+    state.feed(tx.hb(5, 2, epoch=1), 0.1)
+    state.feed(tx.hb(6, 2, epoch=1), 0.1)
+    assert any("split brain" in a and "[5, 6]" in a for a in state.alerts(0.1))
     state.feed(tx.frame(4, wire.Leave(4, 0, wire.LeaveReason.FAULT)), 0.2)
     assert not any("left f4" in a for a in state.alerts(0.3))
     assert any("robot 4: left f4" in a for a in state.alerts(0.3 + p.alert_after))
@@ -231,6 +251,7 @@ def test_a_robot_taken_over_at_a_newer_epoch_is_superseded_and_a_quiet_one_silen
     status = {r["robot"]: r["status"] for r in state.rows(0.3)}
     assert set(status.values()) == {"live"}
     # Robot 2 dies; standby 6 takes f2 over at epoch 1 and heartbeats it; the rest go on.
+    took_over(state, tx, 1.0, 6, 2, 1)
     for t in (1.0, 1.1, 1.2, 3.1):
         for r in (1, 3, 4):
             state.feed(tx.hb(r, r), t)
@@ -249,6 +270,7 @@ def test_a_robot_taken_over_at_a_newer_epoch_is_superseded_and_a_quiet_one_silen
     assert {r["robot"]: r["status"] for r in state.rows(3.5)}[1] == "live"
     assert {r["robot"]: r["status"] for r in state.rows(3.7)}[1] == "silent"
     # Robot 2 restarts and wins f2 back at a newer epoch: now 6's heartbeat is the old one.
+    took_over(state, tx, 4.0, 2, 6, 2)
     state.feed(tx.hb(2, 2, epoch=2), 4.0)
     rows = {r["robot"]: r for r in state.rows(4.0)}
     assert rows[2]["status"] == "live" and rows[6]["status"] == "superseded, silent"
@@ -261,6 +283,7 @@ def test_the_table_shows_the_status() -> None:
     state = MonitorState(paper_plan(), params.udp())
     tx = Sender()
     healthy_swarm(state, tx, 0.0)
+    took_over(state, tx, 1.0, 6, 2, 1)
     state.feed(tx.hb(6, 2, epoch=1), 1.0)
     console = Console(width=200, record=True)
     console.print(state.table(1.0))
@@ -276,11 +299,12 @@ def test_the_table_fits_80_columns_without_cutting_a_word() -> None:
     tx = Sender()
     healthy_swarm(state, tx, 0.0)
     t = 1.0
-    while t < 1.0 + p.alert_after + 0.5:  # 1 and 3 warn about 2 and nobody claims
-        state.feed(tx.frame(1, wire.Warn(2, 2, 0)), t)
-        state.feed(tx.frame(3, wire.Warn(2, 2, 0)), t)
+    while t < 1.0 + p.alert_after + 0.5:  # 1 and 3 warn about 4 and nobody claims
+        state.feed(tx.frame(1, wire.Warn(4, 4, 0)), t)
+        state.feed(tx.frame(3, wire.Warn(4, 4, 0)), t)
         t += p.warn_interval
-    state.feed(tx.hb(6, 2, epoch=1), t)  # then 6 takes f2 over: 2 is superseded
+    took_over(state, tx, t, 6, 2, 1)  # and 6 takes f2 over: 2 is superseded
+    state.feed(tx.hb(6, 2, epoch=1), t)
     console = Console(width=80, record=True)
     console.print(state.table(t))
     lines = console.export_text().splitlines()
@@ -290,9 +314,12 @@ def test_the_table_fits_80_columns_without_cutting_a_word() -> None:
     assert header.split() == ["robot", "status", "role", "function", "epoch", "heard",
                               "health", "warned", "by", "votes"]
     row2 = next(line for line in lines if line.startswith("2 "))
-    assert row2.split() == ["2", "superseded,", "ACTIVE", "f2", "0", "3.5", "s", "OK", "1,",
-                            "3", "2"]
-    assert "ALERT robot 2: warned about by [1, 3] for 2.5 s and nobody claimed" in lines
+    assert row2.split() == ["2", "superseded,", "ACTIVE", "f2", "0", "3.5", "s", "OK", "-",
+                            "0"]
+    row4 = next(line for line in lines if line.startswith("4 "))
+    assert row4.split() == ["4", "silent", "ACTIVE", "f4", "0", "3.5", "s", "OK", "1,", "3",
+                            "2"]
+    assert "ALERT robot 4: warned about by [1, 3] for 2.5 s and nobody claimed" in lines
 
 
 def test_the_base_station_never_shows_ok_a_function_its_holder_does_not_execute() -> None:

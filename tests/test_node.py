@@ -44,6 +44,24 @@ def sent(actions: Sequence[Action]) -> list[wire.Message]:
     return [wire.decode(a.frame).msg for a in actions if isinstance(a, Broadcast)]
 
 
+def relayed(actions: Sequence[Action]) -> list[wire.Message]:
+    """What the CERTs among `actions` relay: the proof shown (`Signed._show`)."""
+    return [m.inner.msg for m in sent(actions) if isinstance(m, wire.Cert)]
+
+
+def own(actions: Sequence[Action]) -> list[wire.Message]:
+    """The frames among `actions` that are the node's own word, CERTs left out."""
+    return [m for m in sent(actions) if not isinstance(m, wire.Cert)]
+
+
+def takeover_of_2(plan: SwarmPlan) -> list[bytes]:
+    """The certificate of 6's takeover of f2 at epoch 1: the warnings of f2's witnesses
+    1 and 3 about holder 2 at epoch 0 (rule 3), and 6's CLAIM."""
+    warn = wire.Warn(2, plan.slot("f2"), 0)
+    return [frame(plan, 1, warn), frame(plan, 3, warn),
+            frame(plan, 6, wire.Claim(2, plan.slot("f2"), 1))]
+
+
 def events(actions: Sequence[Action], kind: type[E]) -> list[E]:
     return [a for a in actions if isinstance(a, kind)]
 
@@ -92,8 +110,8 @@ def started(plan: SwarmPlan, params: Params, rid: int,
 
 def past_grace(node: Driven, params: Params) -> float:
     """Runs `node` to the end of its start-up grace and returns that time: within it, a
-    frame that would raise a view entry waits for a later word of its sender
-    (`held.py`), and these rules are about a robot that has settled."""
+    LEAVE of a sender not heard yet is refused (`NodeBase._outdated`), and these rules
+    are about a robot that has settled."""
     node.run_to(params.startup_grace)
     return params.startup_grace
 
@@ -174,7 +192,10 @@ def test_active_answers_a_warning_about_itself(paper_plan: SwarmPlan,
                                                udp_params: Params) -> None:
     node, _ = started(paper_plan, udp_params, 2)
     actions = node.receive(frame(paper_plan, 1, wire.Warn(2, paper_plan.slot("f2"), 0)), 0.05)
-    assert sent(actions) == [hb(paper_plan, "f2")]  # at once, not at the next period
+    # At once, not at the next period: a REFUTE of that warning, and a heartbeat.
+    refute, beat = own(actions)
+    assert isinstance(refute, wire.Refute) and (refute.witness, refute.epoch) == (1, 0)
+    assert beat == hb(paper_plan, "f2")
     assert events(actions, ev.Refute)
 
 
@@ -191,7 +212,10 @@ def test_standby_counts_only_witnesses(paper_plan: SwarmPlan, udp_params: Params
     node.receive(frame(paper_plan, 1, warn), 0.4)
     actions = node.receive(frame(paper_plan, 3, warn), 0.45)
     assert events(actions, ev.Claim)[0].fields() == {"subject": 2, "function": "f2", "epoch": 1}
-    assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
+    # The claim, after its certificate: warnings about 2 at epoch 0 (here 2's own,
+    # heard at 0.2, is its word against itself, as a LEAVE would be: `evidence.py`).
+    assert own(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
+    assert relayed(actions) and all(m == warn for m in relayed(actions))
 
 
 def test_suspect_heartbeat_refutes_a_claim(paper_plan: SwarmPlan, udp_params: Params) -> None:
@@ -236,8 +260,13 @@ def test_the_suspect_heard_at_a_newer_epoch_ends_the_suspicion_in_a_refute(
     """Every warning ends in a takeover, a refutation or an alert (the paper's property):
     the suspect itself heard at a newer epoch is alive (it took its own slot over in a
     takeover we missed, restarted as a standby), so the watcher logs the refute; another
-    robot at a newer epoch ends it by its own takeover instead."""
+    robot at a newer epoch ends it by its own takeover instead. The takeover's
+    certificate comes first (a heartbeat alone moves no entry)."""
     node, t = _suspecting_2(paper_plan, udp_params)
+    warn = wire.Warn(2, paper_plan.slot("f2"), 0)
+    for raw in (frame(paper_plan, 3, warn), frame(paper_plan, 5, warn),
+                frame(paper_plan, sender, wire.Claim(2, paper_plan.slot("f2"), 1))):
+        node.receive(raw, t)
     actions = node.receive(frame(paper_plan, sender, hb(paper_plan, "f2", epoch=1)), t + 0.05)
     refutes = [e.fields() for e in events(actions, ev.Refute)]
     assert refutes == ([{"subject": 2, "function": "f2"}] if refuted else [])
@@ -263,7 +292,8 @@ def test_leave_heard_makes_the_covering_standby_claim_at_once(
     t = past_grace(node, udp_params)
     leave = wire.Leave(paper_plan.slot("f2"), 0, int(wire.LeaveReason.SHUTDOWN))
     actions = node.receive(frame(paper_plan, 2, leave), t + 0.3)
-    assert sent(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
+    assert own(actions) == [wire.Claim(2, paper_plan.slot("f2"), 1)]
+    assert relayed(actions) == [leave]  # its certificate: the holder's own LEAVE
     assert node.snapshot().role is Role.CLAIMING
     actions = node.tick(t + 0.3 + udp_params.claim_hold)
     assert Assign("f2", 1) in actions
@@ -279,10 +309,16 @@ def test_leave_from_a_non_holder_is_ignored(paper_plan: SwarmPlan, udp_params: P
 
 
 # ---------------------------------------------------------------------- epochs
-def test_active_hearing_its_slot_at_a_higher_epoch_is_fenced(
+def test_active_back_from_a_stall_hearing_its_slot_taken_over_is_fenced(
         paper_plan: SwarmPlan, udp_params: Params) -> None:
+    """2 was stalled (called far past its deadline: its silence was its own), then
+    hears 6's takeover of f2 with its certificate: the warnings were right, so it does
+    not refute them, and 6's heartbeat at epoch 1 fences it (rule 2)."""
     node, _ = started(paper_plan, udp_params, 2)
-    t = past_grace(node, udp_params)
+    t = past_grace(node, udp_params) + 1.0
+    node.tick(t)  # a second late: `_advance` notices our own stall
+    for raw in takeover_of_2(paper_plan):
+        node.receive(raw, t)
     actions = node.receive(frame(paper_plan, 6, hb(paper_plan, "f2", epoch=1)), t + 0.05)
     assert events(actions, ev.Fenced)[0].fields() == {"function": "f2", "epoch": 1}
     assert Release("f2") in actions
@@ -299,9 +335,11 @@ def test_older_epoch_does_not_fence_but_gets_an_answer(
     node.receive(frame(paper_plan, 2, wire.Leave(2, 0, 0)), t + 0.1)
     node.tick(t + 0.1 + udp_params.claim_hold)
     assert node.snapshot().function == "f2"
-    # the old holder (2) heartbeats f2 at epoch 0: the new holder answers at once
+    # the old holder (2) heartbeats f2 at epoch 0: the new holder answers at once, with
+    # its proof (2's LEAVE and its own CLAIM) and a heartbeat
     actions = node.receive(frame(paper_plan, 2, hb(paper_plan, "f2", epoch=0)), t + 0.6)
-    assert sent(actions) == [hb(paper_plan, "f2", epoch=1)]
+    assert own(actions) == [hb(paper_plan, "f2", epoch=1)]
+    assert relayed(actions) == [wire.Leave(2, 0, 0), wire.Claim(2, paper_plan.slot("f2"), 1)]
     assert node.snapshot().role is Role.ACTIVE
 
 

@@ -133,10 +133,10 @@ async def test_realtime_leave_and_unhealthy_hand_over_without_a_timeout(tmp_path
 async def test_realtime_partition_cutting_off_holder_and_watcher_is_healed(
         tmp_path: Path, auth: str) -> None:
     # {1,2} | {3,4,5,6}: to the standbys' side this is robots 1 and 2 failing together
-    # (each slot keeps one watcher there): DESIGN rule 9 takes both slots over. The
-    # paper swarm signs per robot: when the partition heals, the cut-off holders, alive
-    # all along, refute the warnings in the standbys' certificates and the standbys
-    # step down (DESIGN, "Convergence"); unsigned, rule 2 fences the cut-off holders.
+    # (each slot keeps one watcher there): DESIGN rule 9 takes both slots over. When the
+    # partition heals, the cut-off holders, alive all along, refute the warnings in the
+    # standbys' certificates and the standbys step down (DESIGN, "Convergence"), signed
+    # per robot or unsigned alike.
     swarm_file = PAPER if auth == "per-robot" else unsigned_paper(tmp_path)
     # The cut comes once the links are measured (a start-up grace in; DESIGN "Detection"),
     # so the takeovers come a clean patience into it, well before it heals.
@@ -148,12 +148,8 @@ async def test_realtime_partition_cutting_off_holder_and_watcher_is_healed(
     assert all(e["t"] < healed for e in named(result, "takeover"))
     fenced = {e["robot"]: e for e in named(result, "fenced")}
     assert all(e["t"] >= healed for e in fenced.values())
-    if auth == "per-robot":
-        assert set(fenced) == {5, 6}
-        assert holders_at_end(result) == {"f1": 1, "f2": 2, "f3": 3, "f4": 4}
-    else:
-        assert set(fenced) == {1, 2}
-        assert holders_at_end(result) == {"f1": 5, "f2": 6, "f3": 3, "f4": 4}
+    assert set(fenced) == {5, 6}
+    assert holders_at_end(result) == {"f1": 1, "f2": 2, "f3": 3, "f4": 4}
 
 
 def _alive(pid: int) -> bool:

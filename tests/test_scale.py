@@ -106,7 +106,7 @@ def test_what_a_robot_still_hears(tmp_path: Path) -> None:
         _frame(7, wire.Leave(slot("f7"), 0, 0)),
         _frame(standby_own, wire.Claim(2, slot("f2"), 2), seq=4),
     ]
-    # After the start-up grace: no frame waits for its sender's word (`held.py`).
+    # After the start-up grace: every sender's word is heard (`words.py`).
     start = udp().startup_grace
     for i, data in enumerate(frames):
         node.receive(data, start + 0.01 * (i + 1))

@@ -31,12 +31,12 @@ class DropReason(StrEnum):
     BAD_FUNCTION = "bad_function"
     """A slot index the plan does not have."""
     UNCERTIFIED = "uncertified"
-    """Per-robot mode: a new holder or epoch without a certificate this robot verified."""
+    """A new holder or epoch without a certificate this robot verified."""
     UNANCHORED = "unanchored"
     """Per-robot mode: a heartbeat whose chain link this robot cannot tie to its sender
     (it lost the chain, or the frame is forged): no liveness until the next anchor."""
     STALE_EVIDENCE = "stale_evidence"
-    """Per-robot mode: a warning its suspect refuted."""
+    """A warning its suspect refuted."""
     NOT_WITNESS = "not_witness"
     """A warning from a robot that does not watch the slot (rule 3)."""
     STALE_CLAIM = "stale_claim"
@@ -45,11 +45,6 @@ class DropReason(StrEnum):
     """A robot's older frame that its own later heartbeat contradicts: a LEAVE of the
     entry it holds since, a claim or hold it gave up since (a recording of an earlier
     run, or a reordered frame; DESIGN, "Every proof is bound to its run")."""
-
-    HELD_OVER = "held_over"
-    """A frame held within the start-up grace (numbered above its sender's word here)
-    pushed out by the bound on what is held (`held.py`; DESIGN, "Every proof is bound
-    to its run")."""
 
 
 __all__ = ["DropReason"]

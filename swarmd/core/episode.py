@@ -2,15 +2,15 @@
 wait state; DESIGN rules 2-4, 9, 10 and "One failover, crash to takeover"):
 
 1. suspect: a watchdog on a neighbour's slot fires (Fig. 7) and its robot warns;
-2. warn: a warning heard — its evidence kept (per robot), views moved, the suspect
-   answering it (rule 4);
+2. warn: a warning heard — its evidence kept, proofs shown, the suspect answering it
+   (rule 4);
 3. vote: a standby that covers the slot counts distinct witnesses (Fig. 9, rules 3, 9);
 4. claim: at the quorum it claims the slot and holds (the wait state); others' claims,
    heard directly or relayed with their certificate, make it back off or are refuted;
 5. take over: the hold ends, the claimant executes the slot at a new epoch (rule 2).
 
-`Episode` is the layer of `Node` on `Signed` (per-robot evidence relays and refutes,
-on `Views` and `NodeBase`): it calls only methods defined there or here. `hearing.py`,
+`Episode` is the layer of `Node` on `Signed` (proofs relayed and refutes, on `Views`
+and `NodeBase`): it calls only methods defined there or here. `hearing.py`,
 above it, hands it the other messages' parts of the episode (a LEAVE's handover, a
 CERT's evidence and relayed claims).
 """
@@ -88,8 +88,7 @@ class Episode(Signed):
         f = self._slot(w.function)
         if f is None:
             return
-        if self._identity is not None and w.suspect == self._robot_id and self._holds(f) \
-                and w.epoch > self._epoch:
+        if w.suspect == self._robot_id and self._holds(f) and w.epoch > self._epoch:
             # A live robot took a recorded takeover of our hold before our word reached
             # it (DESIGN, "Every proof is bound to its run"): ours must be provable.
             self._shown_newer.add(f)
@@ -108,10 +107,9 @@ class Episode(Signed):
             return  # about an older holder: stale
         # A warning at a newer epoch than we know means we missed a takeover (we were
         # partitioned, or lost its heartbeats) and the new holder may be dead already:
-        # count it, keyed by (suspect, epoch); per robot it does not move `known` (only
-        # a certificate does; in the other modes `_warned_newer` moved it forward
-        # above) — a single liar cannot reach the quorum, and the holder's heartbeat
-        # refutes it.
+        # count it, keyed by (suspect, epoch); it does not move `known` (only a
+        # certificate does) — a single liar cannot reach the quorum, and the holder's
+        # heartbeat refutes it.
         # Rule 3: only the holders of the slots that watch f are witnesses; never the
         # suspect itself.
         if sender == w.suspect or sender not in witnesses(self._plan, self._known, f):
@@ -132,13 +130,9 @@ class Episode(Signed):
 
     def _views_from_warn(self, f: str, sender: int, w: wire.Warn, raw: bytes,
                          now: float, *, evidence: bool = True) -> None:
-        """A warning about f's holder, before any standby counts it: per robot, its
-        evidence is kept (a suspicion's, not a doubt's), and a robot whose view of f is
-        newer than the warning's shows the warner its certificate; in the other modes a
-        newer epoch in it may raise our view (DESIGN, "Convergence")."""
-        if self._identity is None:
-            self._warned_newer(f, sender, w, now)
-            return
+        """A warning about f's holder, before any standby counts it: its evidence is kept
+        (a suspicion's, not a doubt's), and a robot whose view of f is newer than the
+        warning's shows the warner its certificate (DESIGN, "Convergence")."""
         if evidence:
             self._record_evidence(f, sender, w.suspect, w.epoch, raw, now)
         known, warned = self._known[f], Holder(w.suspect, w.epoch)
@@ -168,25 +162,9 @@ class Episode(Signed):
             if suspect != self._robot_id:  # what we refuted ourselves is no news
                 self._drops[DropReason.STALE_EVIDENCE] += 1
             return
-        for claimant, claim, signed in ready:
+        for claimant, claim, raw_claim in ready:
             assert now is not None  # `record` readies a claim only with a `now`
-            self._on_claim(claimant, claim, now, signed)
-
-    def _warned_newer(self, f: str, sender: int, w: wire.Warn, now: float) -> None:
-        """Unsigned or shared-key mode: a robot that may watch or hold f (a witness of
-        rule 3 by the plan, or a standby of f) warns about a holder whose entry is
-        greater than our view: it heard that holder's heartbeat, which we missed
-        (a partition, a fade), and the holder may be dead since. Our view moves forward
-        to it (DESIGN, "Convergence"), or our warnings would name an older holder than
-        the other witnesses' and the slot's standby would never count a quorum; a hold
-        of ours it outranks ends (rule 2). In these modes any heartbeat moves a view as
-        far (DESIGN section 2, "Who can still do what"); per robot, only a certificate
-        does (`_show`)."""
-        new = Holder(w.suspect, w.epoch)
-        if w.suspect == sender or not greater(new, self._known[f]) \
-                or sender not in self._ev.may_watch(f, claimants=True):
-            return
-        self._learn_holder(f, new, now)
+            self._on_claim(claimant, claim, now, raw_claim)
 
     def _ours_unheld(self, f: str, sender: int, w: wire.Warn, seq: int, now: float) -> bool:
         """A warning about ourselves. Holding the slot, we answer it (rule 4). Not
@@ -202,8 +180,8 @@ class Episode(Signed):
         return not greater(self._known[f], Holder(self._robot_id, w.epoch))
 
     def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
-        """Rule 4: a warning about ourselves is answered with a heartbeat at once (and,
-        per robot, a signed REFUTE)."""
+        """Rule 4: a warning about ourselves is answered with a heartbeat at once and a
+        REFUTE."""
         self._refute(f, sender, epoch, seq, now)
         if self._heartbeat_now(now):
             self._emit(ev.Refute(subject=self._robot_id, function=f))
@@ -221,8 +199,8 @@ class Episode(Signed):
             # Rule 9: correlated failures took watchers of f with the suspect; this
             # standby's own ears stand in for them, as one witness.
             mine = self._robot_id in votes.witnesses
-            if not mine and self._identity is not None:
-                # Its own "warning" is a signed one, so the certificate can carry it.
+            if not mine:
+                # Its own "warning" is a frame of its own, so the certificate can carry it.
                 self._record_evidence(f, self._robot_id, w.suspect, w.epoch,
                                       self._sign_only(wire.Warn(w.suspect, w.function,
                                                                 w.epoch)))
@@ -248,12 +226,10 @@ class Episode(Signed):
     def _send_claim(self) -> None:
         assert self._claim is not None
         c = self._claim
-        if self._identity is not None:
-            for raw in self._ev.cert_frames(c.function, c.failed, c.old_epoch):
-                self._send_cert(c.function, raw)
-        signed = self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
-        if self._identity is not None:
-            self._ev.keep_claim(c.function, self._robot_id, c.epoch, signed)
+        for raw in self._ev.cert_frames(c.function, c.failed, c.old_epoch):
+            self._send_cert(c.function, raw)
+        sent = self._send(wire.Claim(c.failed, self._plan.slot(c.function), c.epoch))
+        self._ev.keep_claim(c.function, self._robot_id, c.epoch, sent)
 
     def _claim_due(self, now: float) -> None:
         """The wait state's deadlines: take over at the end of the hold, else repeat the
@@ -261,7 +237,7 @@ class Episode(Signed):
         c = self._claim
         if c is None:
             return
-        if now >= self._after_held(c.function, c.until):
+        if now >= c.until:
             self._take_over(now)
         elif now >= c.resend:
             c.resend = now + self._params.warn_interval
@@ -271,7 +247,7 @@ class Episode(Signed):
         f = self._slot(c.function)
         if f is None:
             return
-        if self._identity is not None and not self._claim_certified(f, sender, c, raw, now):
+        if not self._claim_certified(f, sender, c, raw, now):
             return
         if not self._claims_seen.believed(f, sender, c.epoch, now):
             self._drops[DropReason.STALE_CLAIM] += 1
@@ -299,12 +275,12 @@ class Episode(Signed):
 
     def _claim_certified(self, f: str, sender: int, c: wire.Claim, raw: bytes,
                          now: float) -> bool:
-        """Per-robot mode: does this CLAIM (signed bytes `raw`) act here? Only with a
-        certificate this robot verified; its signed bytes are kept for `_show`."""
+        """Does this CLAIM (bytes `raw`) act here? Only with a certificate this robot
+        verified; its bytes are kept for `_show`."""
         if (sender, c.epoch) == tuple(self._known[f]):
             # The holder's own proof shown (`_show`), or another proof resting on it:
             # certified here too (a restarted robot's view of it came from
-            # its state file, with no evidence), and its signed claim kept.
+            # its state file, with no evidence), and its claim kept.
             if self._ev.certify(f, sender, c, self._known[f].epoch):
                 self._ev.keep_claim(f, sender, c.epoch, raw)
             return False
@@ -321,7 +297,7 @@ class Episode(Signed):
 
     def _on_relayed_claim(self, f: str, claimant: int, c: wire.Claim, raw: bytes,
                           now: float) -> None:
-        """A signed CLAIM relayed inside a CERT (`_show`): heard as a claim (rule
+        """A CLAIM relayed inside a CERT (`_show`): heard as a claim (rule
         10 bounds what a repeat does), and, if the evidence here certifies it and its
         entry is greater than our view of f, our view moves forward to it
         (`_learn_holder`) — as far as a heartbeat of its claimant would have moved it,
@@ -351,7 +327,7 @@ class Episode(Signed):
     def _take_over(self, now: float) -> None:
         assert self._claim is not None
         c = self._claim
-        if self._identity is not None and not self._ev.certify(
+        if not self._ev.certify(
                 c.function, self._robot_id,
                 wire.Claim(c.failed, self._plan.slot(c.function), c.epoch),
                 self._known[c.function].epoch, refutes=True):
@@ -374,8 +350,7 @@ class Episode(Signed):
             # lowered (`slots.py`), so ours would be fenced at once.
             self._back_off(self._known[c.function].robot)
             return
-        if self._identity is not None:
-            self._ev.took_over(c.function, c.failed, c.old_epoch, c.epoch)
+        self._ev.took_over(c.function, c.failed, c.old_epoch, c.epoch)
         self._emit(ev.Takeover(function=c.function, epoch=c.epoch, replaced=c.failed))
         self._become_holder(Trigger.CLAIM_HELD, c.function, c.epoch, now)
 

@@ -47,6 +47,8 @@ returns a decision or frames; the `Node` sends, emits and counts drops.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from swarmd.core import wire
 from swarmd.core.auth import Verifier
 from swarmd.core.claims import CLAIMS_REMEMBERED
@@ -372,18 +374,24 @@ class EvidenceStore:
         return self._mine[f][2] if f is not None and f in self._mine else ()
 
     def restore(self, f: str, epoch: int, frames: tuple[bytes, ...],
-                verifier: Verifier) -> bool:
+                keys: Sequence[bytes], verifier: Verifier | None) -> bool:
         """The certificate of a hold of f at `epoch` kept across a reboot, verified as if
         it had just been received: frames that verify, about one and the same robot at
         `epoch - 1`, enough of them (a quorum of witnesses or that robot's LEAVE). True
         if it certifies the hold; then it is this robot's certificate again."""
         failed: int | None = None
-        for raw in frames:
+        for kept in frames:
+            raw = bytes(kept)
+            if verifier is None:
+                # With a shared key or unsigned, a tag proves no more than our own
+                # memory: the frames are ours to vouch for again under the key in force
+                # (`wire.retag`), as when we relay them.
+                raw = wire.retag(raw, keys[0] if keys else None)
             try:
-                # Judged as the frames of a relayed certificate are (`inner`): keys no
-                # longer in force for new frames still verify these (DESIGN, "Key
+                # Judged as the frames of a relayed certificate are (`inner`): per robot,
+                # keys no longer in force for new frames still verify these (DESIGN, "Key
                 # changes never rewrite history").
-                got = wire.decode(bytes(raw), (), verifier, inner=True)
+                got = wire.decode(raw, keys, verifier, inner=True)
             except wire.CodecError:
                 continue
             said = _says(got)

@@ -1,7 +1,7 @@
 """What a robot does with each message it accepts that the takeover episode does not
 take whole (paper Figs. 7-9, DESIGN rules 1-10): HEARTBEAT (the holder heard: watchdog,
 votes, a claim and a rejoin learn it; an older or unproven one answered), LEAVE (the
-handover, rule 7) and CERT (per-robot evidence relayed in a certificate).
+handover, rule 7) and CERT (evidence relayed in a certificate).
 
 `Hearing` is the layer of `Node` on `Episode` (`episode.py`: WARN and CLAIM, from
 suspicion to takeover), which sits on `Signed`, `Views` and `NodeBase`; it calls only
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from swarmd.core import digest, wire
 from swarmd.core import events as ev
-from swarmd.core.belief import level_byte
 from swarmd.core.drops import DropReason
 from swarmd.core.episode import Episode
 from swarmd.core.evidence import cert_says
@@ -41,8 +40,7 @@ class Hearing(Episode):
         if greater(known, entry):
             self._older_beat(f, sender, hb, known, now)
             return
-        if entry != known and self._identity is not None \
-                and not self._ev.is_certified(f, sender, hb.epoch):
+        if entry != known and not self._ev.is_certified(f, sender, hb.epoch):
             self._unproven_beat(f, hb, DropReason.UNCERTIFIED, now)
             return
         # Ours, heard from another robot: the one case below that moves our role.
@@ -51,8 +49,8 @@ class Hearing(Episode):
             self._refute_claim(f, sender, hb.epoch, 0, now)  # if it replaces us, rule 4
         ahead = self._forward(f, entry)
         if ahead != entry:
-            # Per robot: a takeover that the robot it replaced refuted. Its holder is
-            # outranked by that robot's reassertion; show it why.
+            # A takeover that the robot it replaced refuted. Its holder is outranked by
+            # that robot's reassertion; show it why.
             self._learn_reassertion(f, ahead, now)
             self._show(f, now)
             return
@@ -69,9 +67,9 @@ class Hearing(Episode):
     def _digest_heard(self, sender: int, shown: int, now: float) -> None:
         """A heartbeat without a slot shows, in its epoch field, its sender's view of
         the slots it covers (`digest.py`). If it shows the slot we hold at an entry
-        other than ours, one of us is behind: we answer at once with our entry (per
-        robot its proof, `_show`), and an extra heartbeat, whose entry it
-        merges (per robot an anchor: a robot that restarted has lost our chain). So a
+        other than ours, one of us is behind: we answer at once with our proof
+        (`_show`), and an extra heartbeat, whose entry it merges (per robot an anchor:
+        a robot that restarted has lost our chain). So a
         standby that missed a takeover learns it within one standby period rather than
         the unasked relay's RELAY_EVERY T_max (DESIGN, "Convergence"). If the sender
         is ahead, our own heartbeats, every period, are the stale ones it answers
@@ -87,11 +85,10 @@ class Hearing(Episode):
         every = min(self._params.t_max, self._params.standby_heartbeat_interval / 2)
         if not self._ev.answer_due(f, now, every):
             return
-        if self._identity is not None:
-            # The gate above bounds it: a relay of ours to someone else within T_max
-            # before (the unasked one, say) did not reach this robot, or it would not
-            # show an older view.
-            self._show(f, now, 0.0)
+        # The gate above bounds it: a relay of ours to someone else within T_max before
+        # (the unasked one, say) did not reach this robot, or it would not show an older
+        # view.
+        self._show(f, now, 0.0)
         if not self._heartbeat_now(now) and self._chain is not None:
             # Too soon after our last heartbeat for an extra one: the next one, within
             # a heartbeat period, carries our entry, and per robot as an anchor.
@@ -111,44 +108,30 @@ class Hearing(Episode):
             rival = hb.epoch == self._epoch
             self._show(f, now, 2 * self._params.heartbeat_interval if rival else None)
             self._heartbeat_now(now)
-        elif self._identity is not None:
-            # Per-robot mode, a takeover it missed whose new holder may be gone:
-            # whoever certified it shows the stale holder the evidence against it
-            # (it fences itself, or refutes and keeps its slot everywhere).
-            if self._show(f, now) and sender == known.robot \
-                    and self._ev.reasserted(f, sender, known.epoch) is not None:
-                # Its own hold, below the reassertion our view holds: it refuted a
-                # recorded takeover that we took before its word reached us and did not
-                # reassert (DESIGN, "Every proof is bound to its run"). A signed doubt
-                # (no standby counts it) tells it so; on our next relay it reasserts.
-                self._send(wire.Warn(sender, hb.function, known.epoch, 0))
-        elif not self._ears.heard_lately(f, known.robot, known.epoch, now,
-                                         self._params.t_max) \
-                and self._ev.due(f, now):
-            # Unsigned or shared key: a takeover it missed whose new holder is silent
-            # here too. Our warning about that holder carries the entry (DESIGN,
-            # "Convergence"): the stale holder and anyone else that missed it move
-            # forward (`_warned_newer`), the stale holder fences, and the slot's
-            # watchers take it from there. Once per T_max per slot. It says how strongly
-            # we suspect that holder: a standby counts it only as a suspicion (DESIGN
-            # "Detection"), the entry travels either way.
-            level = self._ears.level_now(known.robot, now)
-            self._send(wire.Warn(known.robot, hb.function, known.epoch, level_byte(level)))
+        # Else a takeover it missed whose new holder may be gone: whoever certified it
+        # shows the stale holder the evidence against it (it fences itself, or refutes
+        # and keeps its slot everywhere).
+        elif self._show(f, now) and sender == known.robot \
+                and self._ev.reasserted(f, sender, known.epoch) is not None:
+            # Its own hold, below the reassertion our view holds: it refuted a recorded
+            # takeover that we took before its word reached us and did not reassert
+            # (DESIGN, "Every proof is bound to its run"). A doubt (no standby counts
+            # it) tells it so; on our next relay it reasserts.
+            self._send(wire.Warn(sender, hb.function, known.epoch, 0))
 
     def _unproven_beat(self, f: str | None, hb: wire.Heartbeat, reason: str,
                        now: float) -> None:
-        """Per-robot mode: a heartbeat (naming slot f) that proves nothing here, counted
-        as `reason`: its link is not tied to its sender's chain (`unanchored`,
-        `chain.py`: we lost the chain, or it is forged), or no certificate here backs
-        the hold it names (`uncertified`: a heartbeat is not signed by its sender, so it
-        never moves an epoch or a holder by itself; only the certified new holder's
-        does). It moves nothing, but the answers cost nothing to give. If we hold f, its
-        sender shows another view of our slot: we show it our proof and, to a stale one,
-        an anchored heartbeat (it may have lost our chain too: rule 2 within a frame).
-        Otherwise we show the REFUTEs we hold: it may act on a claim they void. And a
-        robot rejoining f stays a standby rather than resume it: the cautious side of
-        rule 2 across a reboot (the slot's watchers and standbys take it over if nobody
-        really holds it)."""
+        """A heartbeat (naming slot f) that proves nothing here, counted as `reason`: per
+        robot its link is not tied to its sender's chain (`unanchored`, `chain.py`: we
+        lost the chain, or it is forged), or no certificate here backs the hold it names
+        (`uncertified`: a heartbeat is no proof, so it never moves an epoch or a holder
+        by itself; only the certified new holder's does). It moves nothing, but the
+        answers cost nothing to give. If we hold f, its sender shows another view of our
+        slot: we show it our proof and, to a stale one, a heartbeat (per robot an anchor:
+        it may have lost our chain too; rule 2 within a frame). Otherwise we show the
+        REFUTEs we hold: it may act on a claim they void. And a robot rejoining f stays a
+        standby rather than resume it: the cautious side of rule 2 across a reboot (the
+        slot's watchers and standbys take it over if nobody really holds it)."""
         self._drops[reason] += 1
         if f is None:
             return
@@ -168,7 +151,7 @@ class Hearing(Episode):
         watch = state.watches.get(f) if isinstance(state, Active) else None
         if watch is not None:
             suspected = watch.suspecting
-            reasserted = self._identity is not None and epoch > before.epoch \
+            reasserted = epoch > before.epoch \
                 and self._ev.reasserted(f, sender, epoch) is not None
             if watch.heard(now, self._ears.patience(sender)) and suspected \
                     and (epoch <= before.epoch or sender == before.robot or reasserted):
@@ -199,9 +182,8 @@ class Hearing(Episode):
         f = self._slot(lv.function)
         if f is None:
             return
-        if self._identity is not None:
-            # A signed LEAVE from the holder itself is evidence enough for its own slot.
-            self._record_evidence(f, sender, sender, lv.epoch, raw, now)
+        # A LEAVE from the holder itself is evidence enough for its own slot.
+        self._record_evidence(f, sender, sender, lv.epoch, raw, now)
         holder, epoch = self._known[f]
         if (sender, lv.epoch) != (holder, epoch):
             return  # not the current holder: stale
@@ -221,7 +203,7 @@ class Hearing(Episode):
             return
         msg = cert.inner.msg
         if self._outdated(cert.inner.sender, cert.inner.seq, msg, now):
-            # Its signer's own later heartbeat says otherwise: a recorded LEAVE of an
+            # Its sender's own later heartbeat says otherwise: a recorded LEAVE of an
             # earlier run backs nothing (DESIGN, "Every proof is bound to its run"),
             # refused before it is kept as evidence.
             self._drops[DropReason.OUTDATED] += 1

@@ -31,14 +31,12 @@ from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.actions import Action, Broadcast, Release
 from swarmd.core.auth import Identity
-from swarmd.core.belief import level_byte
 from swarmd.core.chain import OwnChain, PeerChains, anchor_every, resync_after
 from swarmd.core.claims import ClaimMemory
 from swarmd.core.drops import DropReason
 from swarmd.core.errors import NodeError
 from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
-from swarmd.core.held import HeldFrame, HeldFrames
 from swarmd.core.limits import check_keys, check_restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
@@ -48,7 +46,6 @@ from swarmd.core.restart import Restart
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.state import Active, Fenced, Standby
 from swarmd.core.votes import VoteCounter
-from swarmd.core.vouch import Vouches
 from swarmd.core.watchdog import WatchState
 from swarmd.core.witness import Ears
 from swarmd.core.words import LatestWords
@@ -67,9 +64,6 @@ _HEARTBEAT, _CERT = wire.MsgType.HEARTBEAT, wire.MsgType.CERT
 class Node(Restart):
     """One robot's protocol state. Its state is private: drivers read `snapshot()` and
     the few read-only properties below."""
-
-    _vouches: Vouches
-    """Suspicions heard, whose suspect's next heartbeat we relay (`vouch.py`)."""
 
     def __init__(self, robot_id: int, plan: SwarmPlan, params: Params, now: float, *,
                  keys: Sequence[bytes] = (), identity: Identity | None = None,
@@ -90,7 +84,6 @@ class Node(Restart):
         self._state = Standby()
         self._votes = {f: VoteCounter.of(params) for f in self._covers}
         self._heard_at = {}
-        self._vouches = Vouches(params.vote_window)
         self._ears = Ears(robot_id, plan, params, now)
         self._claims_seen = ClaimMemory(params)
         self._replay = ReplayFilter(seq_start, now)  # bounded by our own clock
@@ -99,8 +92,8 @@ class Node(Restart):
         self._beat = HeartbeatClock(params, now)
         self._chain = OwnChain(robot_id, self._signer, seq_start) if self._signer else None
         self._chains = PeerChains(1 / params.heartbeat_interval)
-        # What each peer last said of itself, and what waits for it (`held.py`).
-        self._words, self._held, self._shown_newer = LatestWords(), HeldFrames(), set()
+        # What each peer last said of itself (`words.py`).
+        self._words, self._shown_newer = LatestWords(), set()
         self._anchor_every, self._resync_after = anchor_every(params), resync_after(params)
         self._armed = now
         self._stopped = self._started = False
@@ -183,15 +176,13 @@ class Node(Restart):
             frame = wire.decode(data, self._keys, self._verifier)
         except wire.CodecError as exc:
             return self._drop(exc.reason)
-        return self._accept(frame, now, data)
+        return self._accept(frame, now)
 
     def receive_frame(self, frame: wire.Frame, now: float) -> list[Action]:
         """A frame already decoded and verified with this swarm's keys. For simulators
         that deliver one broadcast to many nodes and decode it once; the runtime uses
         `receive`."""
         msg = frame.msg
-        if isinstance(msg, wire.Cert) and self._verifier is None:
-            return self._drop(DropReason.AUTH)
         about = msg.suspect if isinstance(msg, wire.Warn) else \
             msg.failed if isinstance(msg, wire.Claim) else 0
         if self._irrelevant(frame.swarm_id, frame.sender, msg.function, about,
@@ -217,8 +208,8 @@ class Node(Restart):
             return False  # a warning about us (rule 4), or a bad_function drop
         return slot not in self._relevant.slots
 
-    def _accept(self, frame: wire.Frame, now: float, data: bytes = b"") -> list[Action]:
-        """A decoded frame (`data`: the bytes as heard, when the driver has them)."""
+    def _accept(self, frame: wire.Frame, now: float) -> list[Action]:
+        """A decoded frame."""
         sender = frame.sender
         if frame.swarm_id != self._plan.swarm_id:
             return self._drop(DropReason.SWARM)
@@ -226,7 +217,7 @@ class Node(Restart):
             return self._drop(DropReason.UNKNOWN_SENDER)
         if isinstance(frame.msg, wire.Cert):
             # Not through the replay filter: the wrapper is unauthenticated (what it
-            # relays is signed and judged on its own), so it must move no counter.
+            # relays is judged on its own), so it must move no counter.
             self._on_cert(frame.msg, now)
             return self._drain()
         if sender == self._robot_id:
@@ -246,34 +237,12 @@ class Node(Restart):
             # Its own later heartbeat says otherwise: a recording of an earlier run, or
             # a frame reordered behind it (DESIGN, "Every proof is bound to its run").
             return self._drop(DropReason.OUTDATED)
-        if self._hold_back(frame, data, now):
-            return self._drain()
-        self._on_message(frame, now, data)
-        # Nothing held (after the start-up grace, always): no word to look up.
-        word = self._words.seq(sender) if self._held else None
-        if word is not None:
-            # Its word now: what we held of it, numbered below, can be judged.
-            self._judge_held(self._held.waiting(sender, below=word), now)
+        self._on_message(frame, now)
         return self._drain()
 
-    def _judge_held(self, held: list[HeldFrame], now: float) -> None:
-        """Frames held within our start-up grace (`held.py`), judged as if they came now:
-        refused if their sender's later word contradicts them (a recording of an earlier
-        run, DESIGN "Every proof is bound to its run"), else acted on. They stay held
-        while they are judged: a hold of ours they paused (`_paused`) is fenced without
-        a second release, or executed again once none is left."""
-        was_paused = self._paused()
-        for h in held:
-            if self._outdated(h.sender, h.seq, h.frame.msg, now):
-                self._drops[DropReason.OUTDATED] += 1
-            else:
-                self._on_message(h.frame, now, h.data)
-        self._held.forget(held)
-        self._execution_follows(was_paused)
-
-    def _on_message(self, frame: wire.Frame, now: float, data: bytes) -> None:
+    def _on_message(self, frame: wire.Frame, now: float) -> None:
         """A frame through every receive filter: the per-message rules (`hearing.py`,
-        per robot `signed.py`), then what it makes us vouch for (`vouch.py`)."""
+        `episode.py`, `signed.py`)."""
         sender = frame.sender
         self._frames_in += 1
         self._peer_back(sender, now)
@@ -285,27 +254,15 @@ class Node(Restart):
                 # The slot it names, looked up once for the rules below (the plan is
                 # fixed for the node's life).
                 f = self._plan.function_at(hb.function) if hb.function else None
-                # Vouching is for a shared key or unsigned (`_vouch`): per robot no
-                # heartbeat pays for it.
-                vouching = self._verifier is None
-                own = vouching and self._suspecting(sender, hb, f)
                 self._on_heartbeat(sender, hb, now)
                 # Its seq bound to its sender (a swarm key's tag, per robot an anchor,
-                # or unsigned anything): its word, and what we may vouch for.
-                if hb.anchor or self._keys or vouching:
-                    # The top of its sender's run, which no rule moves once the replay
-                    # filter took the frame: asked once for both.
-                    top = self._replay.top(sender)
-                    self._heard_word(sender, frame.seq, hb, f, top)
-                    if vouching:
-                        self._vouch(frame, hb, f, own, top, data, now)
+                # or unsigned anything): its word.
+                if hb.anchor or self._keys or self._verifier is None:
+                    self._heard_word(sender, frame.seq, hb, f, self._replay.top(sender))
             case wire.Warn() as w:
                 self._on_warn(sender, w, now, frame.raw, frame.seq)
-                if w.belief >= level_byte(self._params.suspect_level):
-                    self._suspicion_heard(w.function, w.suspect, w.epoch, now)
             case wire.Claim() as c:
                 self._on_claim(sender, c, now, frame.raw)
-                self._suspicion_heard(c.function, c.failed, c.epoch - 1, now)
             case wire.Leave() as lv:
                 self._on_leave(sender, lv, now, frame.raw)
             case wire.Refute() as rf:
@@ -323,49 +280,6 @@ class Node(Restart):
         if frame.seq < self._seq_start:
             return self._drop(DropReason.REPLAY)
         return self._drop(DropReason.OWN)
-
-    # ------------------------------------------------------------------ vouching
-    # A holder heard alive after a suspicion of it: its heartbeat relayed once (`vouch.py`).
-    def _suspicion_heard(self, slot: int, suspect: int, epoch: int, now: float) -> None:
-        """Only about a slot whose frames this robot hears (DESIGN "What a robot hears"):
-        the frames a driver drops before the node (`_irrelevant`) arm nothing either."""
-        f = self._plan.function_at(slot)
-        if f is not None and self._verifier is None and suspect != self._robot_id \
-                and slot in self._relevant.slots:
-            self._vouches.suspected(f, Holder(suspect, epoch), now)
-
-    def _suspecting(self, sender: int, hb: wire.Heartbeat, f: str | None) -> bool:
-        """Does our own watch of the slot `hb` names (`f`) suspect `sender` at `hb`'s
-        epoch (before `hb`)? Not a new holder that ends a handover: it was suspected by
-        nobody."""
-        if f is None:
-            return False
-        watch = self._watches.get(f)
-        return watch is not None and watch.suspecting \
-            and self._known[f] == Holder(sender, hb.epoch)
-
-    def _vouch(self, frame: wire.Frame, hb: wire.Heartbeat, f: str | None, own: bool,
-               top: int | None, data: bytes, now: float) -> None:
-        """Relay `frame` (`hb` for slot `f`, as heard: `data`; `top`: its sender's
-        established top) if it answers a suspicion heard here of its sender, the slot's
-        holder as we know it. With a shared key or
-        unsigned only (`_on_message` calls it there, and `_suspicion_heard` arms nothing
-        per robot): per robot the holder's REFUTE is what others relay (`signed.py`),
-        and a heartbeat is a link of its sender's chain, not a frame to repeat. Only the
-        top of the sender's run: a frame reordered or played back behind a newer one
-        vouches for nothing now."""
-        # Not while faulty: a faulty robot only leaves (rule 7).
-        if f is None or not self._heartbeating() \
-                or self._known[f] != (frame.sender, hb.epoch) or top != frame.seq:
-            return
-        # The entry built only now: most heartbeats are not the top, or not the holder's.
-        if not self._vouches.due(f, Holder(frame.sender, hb.epoch), now, own=own):
-            return
-        # The bytes heard, or (a driver that decoded the frame for us) the same frame
-        # encoded again: with a swarm key its tag is the same as the sender's.
-        raw = data or wire.encode(frame, self._keys[0] if self._keys else None, None)
-        self._pending.append(Broadcast(raw))
-        self._frames_out += 1
 
     def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat, f: str | None,
                     top: int | None) -> None:
@@ -388,11 +302,7 @@ class Node(Restart):
             return self._drain()
         if not self._started:
             self._start(now)
-        if self._held and now >= self._start_time + self._params.startup_grace:
-            # A sender not heard within the whole grace is dead or cut off: what we
-            # held of it is taken as it would have been.
-            self._judge_held(self._held.waiting(), now)
-        if self._rejoin is not None and now >= self._rejoin_until():
+        if self._rejoin is not None and now >= self._rejoin.until:
             self._finish_rejoin(now)
         if isinstance(self._state, Fenced) and now >= self._state.until:
             self._to(Trigger.FENCE_DONE, Standby())
@@ -483,30 +393,28 @@ class Node(Restart):
             return self._start_time
         # Worked out at the end of every entry point (`_drain`), so once per frame heard:
         # the common case (an active robot's heartbeats and watchdogs, or a standby's
-        # heartbeats, nothing held) reads the role once and builds no list.
+        # heartbeats) reads the role once and builds no list.
         state = self._state
         best = self._beat.next if self._heartbeating() else None
         if isinstance(state, Active):
             for w in state.watches.values():
                 if best is None or w.deadline < best:
                     best = w.deadline
-        if isinstance(state, Active | Standby) and not self._held:
+        if isinstance(state, Active | Standby):
             return best
         return self._rare_deadline(best)
 
     def _rare_deadline(self, best: float | None) -> float | None:
         """`_deadline` beyond heartbeats and watchdogs (`best`, the earliest of those):
-        a claim's wait, a fence, a rejoin's hold, the end of the start-up grace."""
+        a claim's wait, a fence, a rejoin's hold."""
         candidates = [] if best is None else [best]
         if self._claim is not None:
             c = self._claim
-            candidates.append(min(self._after_held(c.function, c.until), c.resend))
+            candidates.append(min(c.until, c.resend))
         if isinstance(self._state, Fenced):
             candidates.append(self._state.until)
         if self._rejoin is not None:
-            candidates.append(self._rejoin_until())
-        if self._held:
-            candidates.append(self._start_time + self._params.startup_grace)
+            candidates.append(self._rejoin.until)
         return min(candidates) if candidates else None
 
     def standing(self) -> Standing:
@@ -536,7 +444,6 @@ class Node(Restart):
                 w.refresh(now)
             self._ears.forget_gaps()  # the gap was ours: no sample of any link
             self._clear_votes()
-            self._vouches.clear()  # what we heard before it vouches for nothing now
             if self._claim is not None:
                 self._claim.until = max(self._claim.until, now + self._params.claim_hold)
             self._beat.next = now
@@ -544,13 +451,12 @@ class Node(Restart):
             self._armed = None  # noticed once; `_drain` arms the next deadline
 
     def _leave(self, f: str, cause: ev.LeaveCause, reason: wire.LeaveReason) -> None:
-        """We leave f, which we hold (rule 7): the event and a LEAVE. Per robot, our own
-        signed LEAVE is evidence for its handover like anyone's (`Hearing._on_leave`):
-        kept here too, so a certificate relayed from us can carry it."""
+        """We leave f, which we hold (rule 7): the event and a LEAVE. Our own LEAVE is
+        evidence for its handover like anyone's (`Hearing._on_leave`): kept here too, so
+        a certificate relayed from us can carry it."""
         self._emit(ev.Leave(function=f, reason=cause))
         data = self._send(wire.Leave(self._plan.slot(f), self._epoch, reason))
-        if self._identity is not None:
-            self._record_evidence(f, self._robot_id, self._robot_id, self._epoch, data)
+        self._record_evidence(f, self._robot_id, self._robot_id, self._epoch, data)
 
     def _drop(self, reason: str) -> list[Action]:
         """Count a refused frame. A drop moves no state, so the deadline `_drain` worked

@@ -4,7 +4,7 @@ the receive-side checks every message shares, and our own heartbeats and their s
 
 `NodeBase` is the bottom layer of `Node` (`node.py`), which stacks one class on the
 next, each calling only methods defined in itself or below: `NodeBase` <- `Views`
-(`views.py`: a slot's view moves forward) <- `Signed` (`signed.py`: per-robot relays and
+(`views.py`: a slot's view moves forward) <- `Signed` (`signed.py`: proofs relayed and
 refutes) <- `Episode` (`episode.py`: the takeover episode, suspicion to takeover) <-
 `Hearing` (`hearing.py`: heartbeats, LEAVE, CERT) <- `Restart` (`restart.py`: what a
 robot starts from) <- `Node` (the entry points). They share the state declared here,
@@ -18,7 +18,7 @@ from collections.abc import Mapping
 
 from swarmd.core import digest, wire
 from swarmd.core import events as ev
-from swarmd.core.actions import Action, Assign, Broadcast, Release
+from swarmd.core.actions import Action, Broadcast
 from swarmd.core.auth import Identity, Signer, Verifier
 from swarmd.core.chain import OwnChain, PeerChains
 from swarmd.core.claims import ClaimMemory, WaitState
@@ -27,7 +27,6 @@ from swarmd.core.errors import TransitionError
 from swarmd.core.events import Event
 from swarmd.core.evidence import EvidenceStore
 from swarmd.core.heartbeat import HeartbeatClock
-from swarmd.core.held import HeldFrames
 from swarmd.core.params import Params
 from swarmd.core.plan import Relevant, SwarmPlan
 from swarmd.core.rejoin import Rejoin
@@ -84,13 +83,10 @@ class NodeBase:
     _words: LatestWords
     """What each peer last said of itself, to refuse its older word that contradicts it
     (`words.py`)."""
-    _held: HeldFrames
-    """Within the start-up grace, frames that would raise a view entry, numbered above
-    their sender's word here, until a later word can judge them (`held.py`)."""
     _shown_newer: set[str]
-    """Per robot: slots we hold of which a live robot's signed warning named us at a
-    newer epoch than ours (it took a recorded takeover that our refute voids: our
-    reassertion must be verifiable, `Episode._record_evidence`)."""
+    """Slots we hold of which a live robot's warning named us at a newer epoch than
+    ours (it took a recorded takeover that our refute voids: our reassertion must be
+    verifiable, `Episode._record_evidence`)."""
     _anchor_every: float
     _resync_after: float
     _armed: float | None
@@ -153,9 +149,9 @@ class NodeBase:
         return data
 
     def _sign_only(self, msg: wire.Message) -> bytes:
-        """A frame signed by this robot, for a certificate, not broadcast by itself."""
-        assert self._signer is not None
-        return self._next_frame(msg, None)
+        """A frame of this robot for a certificate, not broadcast by itself: signed per
+        robot, tagged with a shared key."""
+        return self._next_frame(msg, self._keys[0] if self._keys else None)
 
     def _next_frame(self, msg: wire.Message, key: bytes | None) -> bytes:
         """`msg` as our next frame: every frame we make takes the next seq."""
@@ -187,16 +183,15 @@ class NodeBase:
     def _outdated(self, sender: int, seq: int, msg: wire.Message, now: float) -> bool:
         """`sender`'s frame number `seq` is older than its own later word, heard already,
         that contradicts it (`words.py`: a recording of an earlier run, or a reordered
-        frame). Per robot, its `LEAVE` that it refuted itself, once it heartbeats a
-        reassertion above it, is kept as the void backer it is (`evidence.py`): that
-        reassertion rests on the certificate the `LEAVE` backs, and every robot must
-        verify it alike; so is a `CLAIM` its claimant gave up, below the reassertion of
-        the holder it named."""
-        if isinstance(msg, wire.Leave) and self._identity is not None \
-                and not self._words.knows(sender) \
+        frame). Its `LEAVE` that it refuted itself, once it heartbeats a reassertion
+        above it, is kept as the void backer it is (`evidence.py`): that reassertion
+        rests on the certificate the `LEAVE` backs, and every robot must verify it
+        alike; so is a `CLAIM` its claimant gave up, below the reassertion of the holder
+        it named."""
+        if isinstance(msg, wire.Leave) and not self._words.knows(sender) \
                 and now - self._start_time < self._params.startup_grace:
-            # Per robot, within our start-up grace we may not have heard its anchor yet
-            # (one comes every `anchor_every`, half the grace): its LEAVE cannot be
+            # Within our start-up grace we may not have heard its word yet (per robot an
+            # anchor comes every `anchor_every`, half the grace): its LEAVE cannot be
             # judged, and a recorded takeover it backs, taken here alone, would move the
             # slot's epoch everywhere in the end (the holder's reassertion). After the
             # grace, a robot we never heard is dead or cut off, and its LEAVE (relayed
@@ -204,49 +199,19 @@ class NodeBase:
             return True
         if not self._words.outdated(sender, seq, msg):
             return False
-        if isinstance(msg, wire.Leave) and self._identity is not None \
-                and self._words.above(sender, msg.function, msg.epoch):
+        if isinstance(msg, wire.Leave) and self._words.above(sender, msg.function, msg.epoch):
             # Its signer refuted it and heartbeats a reassertion above it: somewhere the
             # recording was taken, and this LEAVE is the void backer of that reassertion.
             f = self._plan.function_at(msg.function)
             return f is None or self._ev.refuted_up_to(f, sender, msg.epoch, sender) < seq
-        if isinstance(msg, wire.Claim) and self._identity is not None:
+        if isinstance(msg, wire.Claim):
             # The holder it named heartbeats a reassertion above it, or is us and a live
-            # robot's signed warning showed us that it took the claim (`_shown_newer`):
+            # robot's warning showed us that it took the claim (`_shown_newer`):
             # the claim is the void backer of that reassertion, kept to verify it.
             return not (self._words.above(msg.failed, msg.function, msg.epoch)
                         or (msg.failed == self._robot_id
                             and self._plan.function_at(msg.function) in self._shown_newer))
         return True
-
-    def _paused(self) -> bool:
-        """Is our hold's execution paused? We hold a slot, and a frame that would fence
-        that hold is held until it can be judged (`held.py`): we do not execute the slot
-        meanwhile, so that we never execute it beside the holder the frame may show
-        (DESIGN rule 2: never two executors beyond the takeover bound). Derived from the
-        role and the held frames, never stored: nothing to keep in step. The entry is
-        still ours until a frame judged moves it, so we heartbeat it and answer a claim
-        against it as its holder (rule 4)."""
-        f = self._function
-        return f is not None and self._held.about(self._plan.slot(f))
-
-    def _execution_follows(self, was_paused: bool) -> None:
-        """Tell the robot when `_paused` changed while we still hold the slot: release
-        it, as a fence does, or execute it again at the same entry (every frame held
-        about it was judged `outdated`, or pushed out by the bound)."""
-        f = self._function
-        paused = self._paused()
-        if f is not None and paused != was_paused:
-            self._pending.append(Release(f) if paused else Assign(f, self._epoch))
-
-    def _after_held(self, f: str, t: float) -> float:
-        """`t`, or the end of our start-up grace while frames about f are held until then
-        (`held.py`): an act on f's view — a takeover, a rejoin's resume — waits for them,
-        since they may show f held by another robot (rule 2; DESIGN, "Every proof is
-        bound to its run")."""
-        if self._held and self._held.about(self._plan.slot(f)):
-            return max(t, self._start_time + self._params.startup_grace)
-        return t
 
     def _clear_votes(self) -> None:
         for v in self._votes.values():

@@ -1,13 +1,11 @@
 """How a robot starts (DESIGN rule 2 across a reboot): who holds each slot at start, from
 the plan or from what a restarted robot persisted before it went down (its own hold only
-if it is provable, per robot); the hold it resumes only after listening (`rejoin.py`),
-and the first tick's `started`, which a rejoining robot says only once its hold is over;
-and, within the start-up grace, the frames held until they can be judged (`held.py`).
+if it is provable); the hold it resumes only after listening (`rejoin.py`), and the
+first tick's `started`, which a rejoining robot says only once its hold is over.
 
 `Restart` is the layer of `Node` on `Hearing` (and so on `Episode`, `Signed`, `Views`,
 `NodeBase`): it calls only methods defined there or here. `Node`'s constructor calls
-`_views` and `_restore` once; `Node.tick` calls `_start` and `_finish_rejoin`;
-`Node._accept` asks `_hold_back` before it acts on a frame.
+`_views` and `_restore` once; `Node.tick` calls `_start` and `_finish_rejoin`.
 """
 
 from __future__ import annotations
@@ -17,11 +15,10 @@ from swarmd.core import wire
 from swarmd.core.actions import Assign
 from swarmd.core.drops import DropReason
 from swarmd.core.hearing import Hearing
-from swarmd.core.held import HeldFrame
 from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
 from swarmd.core.roles import Role, Trigger
-from swarmd.core.slots import SlotTable, greater
+from swarmd.core.slots import SlotTable
 from swarmd.core.state import Rejoining, Standby
 
 
@@ -56,15 +53,14 @@ class Restart(Hearing):
         held = restored.held
         if held is None or held[0] not in self._known:
             return
-        if self._verifier is not None:
-            f = held[0]
-            held = self._verified_hold(f, held[1], restored)
-            if held is None and self._known[f].robot == self._robot_id:
-                # Our own hold, unproven: the file's view of the slot is no better. The
-                # table is being built (nothing has read it yet), so it starts again
-                # from the plan's entry for f rather than lowering one.
-                self._known = SlotTable((g, self._initial(g) if g == f else e)
-                                        for g, e in self._known.items())
+        f = held[0]
+        held = self._verified_hold(f, held[1], restored)
+        if held is None and self._known[f].robot == self._robot_id:
+            # Our own hold, unproven: the file's view of the slot is no better. The
+            # table is being built (nothing has read it yet), so it starts again from
+            # the plan's entry for f rather than lowering one.
+            self._known = SlotTable((g, self._initial(g) if g == f else e)
+                                    for g, e in self._known.items())
         if held is not None:
             self._state = Rejoining(Rejoin(self._robot_id, *held,
                                            now + self._params.rejoin_hold))
@@ -75,10 +71,10 @@ class Restart(Hearing):
         provable as a received one would be — the plan's own holder at epoch 0, or a
         certificate that verifies and backs it; otherwise None (it rejoins as a standby,
         and the slot's watchers take it over if nobody holds it)."""
-        assert self._verifier is not None
         if epoch == 0:
             return (f, 0) if self._plan.initial_holder(f) == self._robot_id else None
-        if self._ev.restore(f, epoch, tuple(restored.certificate), self._verifier):
+        if self._ev.restore(f, epoch, tuple(restored.certificate), self._keys,
+                            self._verifier):
             self._known.merge(f, Holder(self._robot_id, epoch))
             return (f, epoch)
         return None
@@ -92,57 +88,6 @@ class Restart(Hearing):
         if self._role == Role.ACTIVE and self._function is not None:
             self._pending.append(Assign(self._function, self._epoch))
 
-    # ------------------------------------------------------------------ start-up grace
-    def _hold_back(self, frame: wire.Frame, data: bytes, now: float) -> bool:
-        """Hold `frame` (`held.py`; DESIGN, "Every proof is bound to its run") if, within
-        our start-up grace, it would raise a view entry and is numbered above its
-        sender's word here (or the sender has none): with a shared key or unsigned,
-        nothing else tells a recording of an earlier run from its live word, and the
-        word itself may be a recording played just before it; only a later word,
-        numbered above the frame, can judge it. Per robot nothing is held: a heartbeat
-        moves no entry without its certificate, and within the grace a LEAVE of a
-        sender not heard is refused (`_outdated`)."""
-        if self._verifier is not None or now - self._start_time >= self._params.startup_grace:
-            return False  # every frame after the grace: no word to look up
-        sender = frame.sender
-        word = self._words.seq(sender)
-        if word is not None and frame.seq <= word:
-            return False
-        slot = self._raised(sender, frame.msg)
-        if slot == 0:
-            return False
-        was_paused = self._paused()
-        pushed = self._held.hold(HeldFrame(sender, frame.seq, slot, frame, data))
-        self._drops[DropReason.HELD_OVER] += pushed
-        self._execution_follows(was_paused)
-        return True
-
-    def _raised(self, sender: int, msg: wire.Message) -> int:
-        """The wire slot whose entry `sender`'s `msg` would raise here, or 0: a hold above
-        our view (a fence, rule 2; a takeover we missed), a warning naming a holder above
-        it (`_warned_newer`), or a LEAVE of the entry we know (the handover, rule 7)."""
-        match msg:
-            case wire.Heartbeat(slot, epoch) if slot:
-                entry = Holder(sender, epoch)
-            case wire.Warn(suspect, slot, epoch) if suspect != sender:
-                entry = Holder(suspect, epoch)
-            case wire.Leave(slot, epoch):
-                f = self._plan.function_at(slot)
-                return slot if f is not None and self._known[f] == (sender, epoch) else 0
-            case _:
-                return 0
-        f = self._plan.function_at(slot)
-        return slot if f is not None and greater(entry, self._known[f]) else 0
-
-    def _rejoin_until(self) -> float:
-        """When our rejoin hold ends: not before the frames held about its slot are
-        judged (`_after_held`), so that a takeover made while we were down, which they
-        may show, is known before we resume (rule 2 across a reboot). `rejoin_hold`
-        (0.7 s at `udp()`) is shorter than the grace (2 s)."""
-        rejoin = self._rejoin
-        assert rejoin is not None
-        return self._after_held(rejoin.function, rejoin.until)
-
     # ------------------------------------------------------------------ rejoin (rule 2)
     def _finish_rejoin(self, now: float) -> None:
         rejoin = self._rejoin
@@ -152,10 +97,10 @@ class Restart(Hearing):
             self._emit(ev.Started(role=ev.RoleName.STANDBY, function=None))
             return
         f, epoch = rejoin.function, rejoin.epoch
-        failed = self._ev.replaced(f, self._robot_id, epoch) if self._identity else None
+        failed = self._ev.replaced(f, self._robot_id, epoch)
         if failed is not None:
-            # Per robot, a hold resumed at a takeover's epoch: its signed CLAIM went down
-            # with the robot; signed again, so the proof we show is whole (`_show`).
+            # A hold resumed at a takeover's epoch: its CLAIM went down with the robot;
+            # made again, so the proof we show is whole (`_show`).
             claim = self._sign_only(wire.Claim(failed, self._plan.slot(f), epoch))
             self._ev.keep_claim(f, self._robot_id, epoch, claim)
         self._emit(ev.Started(role=ev.RoleName.ACTIVE, function=f))

@@ -1,11 +1,11 @@
-"""Per-robot mode's part of the node (DESIGN section 2, "Who may say what" and
-"Convergence"): showing the proof of an entry (`_show`, the one way a proof travels),
-signing refutes, undoing a takeover the refutes void. The evidence itself — which claim
+"""Proofs (DESIGN section 2, "Who may say what" and "Convergence"), in every auth mode:
+showing the proof of an entry (`_show`, the one way a proof travels), refuting a
+warning or a claim, outranking a takeover the refutes void. The evidence itself — which claim
 a certificate backs — is `evidence.py`'s; `Signed` turns its answers into frames, events
 and view changes.
 
 `Signed` is the layer of `Node` on `Views` (how a view moves forward) and `NodeBase`;
-it calls only methods defined there or here. Keeping a signed warning as evidence
+it calls only methods defined there or here. Keeping a warning as evidence
 (`Episode._record_evidence`) and acting on a relayed claim are the takeover episode's,
 above it: a certificate completed or relayed is a claim heard.
 """
@@ -25,7 +25,7 @@ _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
 
 RELAY_EVERY = 8
-"""Per-robot mode: a holder that took its slot over relays its certificate at least
+"""A holder that took its slot over relays its certificate at least
 once per this many T_max even unasked (4 s at udp, 16 s at radio), so every robot that
 hears the slot holds the certificate of its holder within that bound."""
 
@@ -33,23 +33,27 @@ hears the slot holds the certificate of its holder within that bound."""
 class Signed(Views):
     def _send_cert(self, f: str, raw: bytes) -> None:
         # It has a seq of its own, but receivers do not replay-filter it: the wrapper is
-        # unauthenticated, what it relays is signed and judged on its own.
+        # unauthenticated, what it relays is judged on its own.
+        if self._verifier is None:
+            # With a shared key the frame is tagged with the key in force now, which
+            # the receivers hold (`wire.retag`); per robot its sender's signature stays.
+            raw = wire.retag(raw, self._keys[0] if self._keys else None)
         self._send(wire.Cert(self._plan.slot(f), _NO_FRAME, raw))
 
     def _forward(self, f: str, new: Holder) -> Holder:
-        """The entry the signed frames held here make of `new`: itself, or, per robot,
-        when the robot it replaced signed a REFUTE of that claim (rule 4,
+        """The entry the frames held here make of `new`: itself, or, when the robot it
+        replaced sent a REFUTE of that claim (rule 4,
         `_refute_claim`), that robot's reassertion at the next epoch
         (`EvidenceStore.voided_by`): a voided takeover is outranked, never undone
         (`slots.py`; DESIGN, "Convergence")."""
-        if self._identity is None or new.epoch >= EPOCH_MAX:
+        if new.epoch >= EPOCH_MAX:
             return new
         failed = self._ev.voided_by(f, new.robot, new.epoch)
         return new if failed is None else Holder(failed, new.epoch + 1)
 
     def _learn_reassertion(self, f: str, new: Holder, now: float) -> None:
         """Our view of f moves forward to a holder's reassertion (`_forward`). Unlike a
-        takeover learnt second-hand, it is a sign of life: the holder signed its refute
+        takeover learnt second-hand, it is a sign of life: the holder sent its refute
         while holding f, so a suspicion of the takeover's holder we watched is moot. It
         ends as a refuted one (rule 4), and the watch runs on for the holder (it fires
         again after T_max if that one is silent)."""
@@ -60,11 +64,11 @@ class Signed(Views):
             self._emit(ev.Refute(subject=new.robot, function=f))
 
     def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
-        """Per robot: we hold f one epoch below a certified claim of it that replaces us,
-        and we are alive, not stalled (rule 4): sign that we refute that claim, once. The
-        signed REFUTE names the claimant and the claim's epoch; with the claim's
+        """We hold f one epoch below a certified claim of it that replaces us, and we are
+        alive, not stalled (rule 4): say that we refute that claim, once. The REFUTE
+        names the claimant and the claim's epoch; with the claim's
         certificate it proves our reassertion (`_forward`) to every robot alike."""
-        if self._identity is None or not self._holds(f) or epoch != self._epoch + 1 \
+        if not self._holds(f) or epoch != self._epoch + 1 \
                 or now - self._stalled_at <= self._params.t_max \
                 or self._ev.replaced(f, claimant, epoch) != self._robot_id \
                 or self._ev.refuted_up_to(f, self._robot_id, epoch, claimant) >= 0:
@@ -74,10 +78,10 @@ class Signed(Views):
 
     def _show(self, f: str, now: float, every: float | None = None, *,
               whole: bool = True) -> bool:
-        """Per robot: a robot's view of f differs from ours (it heartbeats f, warns
+        """A robot's view of f differs from ours (it heartbeats f, warns
         about f's holder or shows a digest at another entry, or acts on a claim against
         ours): relay the proof of our entry (`EvidenceStore.proof`: the takeover's
-        certificate and signed CLAIM, or a reassertion's, and the holder's REFUTEs at
+        certificate and CLAIM, or a reassertion's, and the holder's REFUTEs at
         it), inside CERTs (they may be older than its replay window), at most once per
         `every` (T_max by default). The one way a proof travels (DESIGN,
         "Convergence"): a stale holder fences itself or refutes, a robot that missed a
@@ -89,8 +93,7 @@ class Signed(Views):
         (`EvidenceStore.due`). True if it relayed anything."""
         # The clock asked first: the unasked relay asks at every heartbeat of a holder,
         # and building the proof each time would put that work on the frame path.
-        if self._identity is None \
-                or not self._ev.due(f, now, every, whole=whole, stamp=False):
+        if not self._ev.due(f, now, every, whole=whole, stamp=False):
             return False
         holder, epoch = self._known[f]
         frames = self._ev.proof(f, holder, epoch, whole=whole)
@@ -110,16 +113,16 @@ class Signed(Views):
             self._show(self._function, now, RELAY_EVERY * self._params.t_max)
 
     # ------------------------------------------------------------------ refutes
-    # A holder's signed word that it was alive after a warning voids that warning
+    # A holder's word that it was alive after a warning voids that warning
     # everywhere the word reaches (DESIGN, "Convergence").
 
     def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
         """We hold f at `epoch` and hear `witness`'s warning number `seq` about us (or,
-        `witness` being us, our own LEAVE of that entry): sign and broadcast that we are
+        `witness` being us, our own LEAVE of that entry): broadcast that we are
         alive, holding it, after it. Not out of a buffer read after our own stall: then
         the warning was right (we were silent), and the takeover it backs fences us
         (rule 2)."""
-        if self._identity is None or self._role != Role.ACTIVE or f != self._function \
+        if self._role != Role.ACTIVE or f != self._function \
                 or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
             return
         if witness not in self._ev.may_watch(f, claimants=True):

@@ -1,7 +1,7 @@
 """What a robot does when its view of a slot moves forward without the holder's own
 heartbeat (DESIGN "Convergence", rule 2): the slot table's entry moves, a hold of ours it
-outranks ends (fence) or, per robot, holds on at our reassertion's epoch, a claim of ours
-it supersedes backs off, and a rejoin of that slot gives way.
+outranks ends (fence) or holds on at our reassertion's epoch, a claim of ours it
+supersedes backs off, and a rejoin of that slot gives way.
 
 `Views` is the layer of `Node` on `NodeBase` (state and plumbing); every layer above
 (`signed.py`, `episode.py`, `hearing.py`, `restart.py`) moves a view through it, and it
@@ -58,9 +58,7 @@ class Views(NodeBase):
         f = self._function
         assert f is not None
         self._emit(ev.Fenced(function=f, epoch=epoch))
-        if not self._paused():
-            # Paused, the robot was told to release f already (`_execution_follows`).
-            self._pending.append(Release(f))
+        self._pending.append(Release(f))
         self._to(Trigger.FENCE, Fenced(now + self._params.heartbeat_interval))
 
     # ------------------------------------------------------------------ rejoin (rule 2)

@@ -127,11 +127,11 @@ class Leave:
 
 @dataclass(frozen=True, slots=True)
 class Cert:
-    """One piece of a takeover's certificate (per-robot mode): another robot's signed
-    WARN, LEAVE, REFUTE or CLAIM frame about `function`, relayed verbatim by a claimant,
-    a holder, or a robot showing an older view the takeover it missed. `inner` is that
-    frame decoded and verified with its own sender's key; `raw` its bytes, to relay
-    again."""
+    """One piece of a takeover's certificate: another robot's WARN, LEAVE, REFUTE or
+    CLAIM frame about `function`, relayed verbatim by a claimant, a holder, or a robot
+    showing an older view the takeover it missed. `inner` is that frame decoded and
+    verified as it would be heard from its sender (per robot its own signature, with a
+    shared key the swarm's tag); `raw` its bytes, to relay again."""
 
     function: int
     inner: Frame
@@ -140,7 +140,7 @@ class Cert:
 
 @dataclass(frozen=True, slots=True)
 class Refute:
-    """Per-robot mode: the holder of `function` at `epoch` says, under its own signature,
+    """The holder of `function` at `epoch` says (per robot under its own signature)
     that it was alive after `witness`'s warning number `seq` about it (DESIGN rule 4 made
     portable): that warning and every earlier one of `witness` about this holder at this
     epoch back no takeover, at any robot that has this frame."""
@@ -304,6 +304,20 @@ def encode(frame: Frame, key: bytes | None = None, signer: Signer | None = None)
     return data + tag(key, data) if key else data
 
 
+def retag(data: bytes, key: bytes | None) -> bytes:
+    """A frame of a shared-key or unsigned swarm (`data`, well formed) tagged with `key`
+    instead (untagged if None). A tag proves only that a holder of the swarm key made
+    the frame, so a robot that accepted a frame may vouch for it again under the key in
+    force now: a proof it relays, or kept across a reboot, outlives a rotation of the
+    key (docs/operations.md, "Rotating the swarm key")."""
+    body = data[:-TAG_LEN] if data and data[0] & _SIGNED else data
+    if len(body) < HEADER_LEN:
+        return data  # no frame: `decode` refuses it as it is
+    head = bytes((body[0] & ~_SIGNED | (_SIGNED if key else 0),))
+    body = head + body[1:]
+    return body + tag(key, body) if key else body
+
+
 def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = None,
            *, inner: bool = False) -> Frame:
     """Parse and verify a frame. With `keys`, an unsigned frame or one whose tag matches
@@ -311,8 +325,8 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     With `verifier` (per-robot mode) a WARN, CLAIM, LEAVE or REFUTE must carry its
     sender's own signature, a HEARTBEAT its chain link (an anchor: the signature in
     place of the tag; whether a link is the sender's is the receiver's to check,
-    `chain.py`), and a CERT what it relays, about its slot. Without one a CERT is
-    rejected."""
+    `chain.py`). A CERT relays one such frame about its slot, checked as that frame
+    would be: its sender's signature per robot, else the swarm key's tag, else nothing."""
     if len(data) < HEADER_LEN + 1:
         raise CodecError(DropReason.MALFORMED, f"{len(data)} bytes is shorter than any frame")
     first, swarm_id, sender, seq_bytes = HEADER.unpack_from(data)
@@ -331,7 +345,7 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     slot, slot_len = got_slot
     if mtype == _CERT:
         return _decode_cert(data, swarm_id, sender, seq_bytes, slot, slot_len, signed,
-                            verifier, inner)
+                            keys, verifier, inner)
     linked = verifier is not None and mtype == _HEARTBEAT
     body_len = _FIXED_BODY[mtype] + slot_len + (1 + LINK_LEN if linked else 0)
     strong = verifier is not None and (mtype in STRONG or (
@@ -344,8 +358,10 @@ def decode(data: bytes, keys: Sequence[bytes] = (), verifier: Verifier | None = 
     _verify(data, sender, mtype, signed, keys, verifier if strong else None,
             history=inner and mtype in BACKERS)
     msg = _message(data, mtype, slot, slot_at + slot_len, strong=strong, linked=linked)
+    # The bytes of a frame a certificate may carry (`STRONG`), in every mode: relayed
+    # as heard, they are checked again at each robot as the sender's own.
     return Frame(swarm_id, sender, int.from_bytes(seq_bytes, "big"), msg,
-                 data if strong else b"")
+                 data if strong or mtype in STRONG else b"")
 
 
 def _verify(data: bytes, sender: int, mtype: MsgType, signed: bool, keys: Sequence[bytes],
@@ -391,9 +407,6 @@ def _message(data: bytes, mtype: MsgType, slot: int, after: int, *, strong: bool
             epoch, reason = _HB_TAIL.unpack_from(data, after)
             return Leave(function=slot, epoch=epoch, reason=reason)
         case MsgType.REFUTE:
-            if not strong:
-                # Only its sender's own signature gives it meaning (per-robot mode).
-                raise CodecError(DropReason.AUTH, "REFUTE outside per-robot mode")
             return Refute(witness=_U16.unpack_from(data, HEADER_LEN)[0], function=slot,
                           epoch=_U16.unpack_from(data, after)[0],
                           seq=int.from_bytes(data[after + 2:after + 8], "big"))
@@ -402,18 +415,19 @@ def _message(data: bytes, mtype: MsgType, slot: int, after: int, *, strong: bool
 
 
 def _decode_cert(data: bytes, swarm_id: int, sender: int, seq_bytes: bytes, slot: int,
-                 slot_len: int, signed: bool, verifier: Verifier | None,
-                 inner: bool) -> Frame:
-    if verifier is None:
-        raise CodecError(DropReason.AUTH, "certificate frame but no robot keys configured")
+                 slot_len: int, signed: bool, keys: Sequence[bytes],
+                 verifier: Verifier | None, inner: bool) -> Frame:
     if inner:
         raise CodecError(DropReason.MALFORMED, "a certificate inside a certificate")
     if signed:
         raise CodecError(DropReason.MALFORMED, "a certificate carries no tag of its own")
     raw = data[HEADER_LEN + slot_len:]
-    if len(raw) < _INNER_MIN:
+    if len(raw) < (_INNER_MIN if verifier is not None else HEADER_LEN + 4):
         raise CodecError(DropReason.MALFORMED, f"certificate of {len(data)} bytes is too short")
-    got = decode(raw, (), verifier, inner=True)  # raises CodecError(DropReason.AUTH) if forged
+    # What it relays carries its own sender's signature (per robot) or the swarm key's
+    # tag, checked like any frame heard; unsigned, nothing. Raises
+    # CodecError(DropReason.AUTH) if forged.
+    got = decode(raw, keys, verifier, inner=True)
     if not isinstance(got.msg, (Warn, Leave, Refute, Claim)) or got.msg.function != slot \
             or got.swarm_id != swarm_id:
         raise CodecError(DropReason.MALFORMED,

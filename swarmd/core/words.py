@@ -23,8 +23,8 @@ Which heartbeats may set the word: only those whose sequence number is the sende
 bound by what authenticates the frame — a tag of the swarm key, or, per robot without
 one, an anchor (its signature covers the header). A chain-linked heartbeat binds no
 field (an outsider that heard a fresh link first can repeat it with another seq), so
-it sets nothing here. Unsigned, anyone's frame sets it, as anyone's frame moves
-anything in that mode. The node also requires the frame to be the top of the sender's
+it sets nothing here. Unsigned, anyone's frame sets it: anyone can make any frame in
+that mode. The node also requires the frame to be the top of the sender's
 own run as the replay filter tells it (`Node._heard_word`).
 """
 
@@ -84,11 +84,6 @@ class LatestWords:
     def knows(self, sender: int) -> bool:
         """Has `sender` said anything of itself here yet (an authenticated heartbeat)?"""
         return sender in self._heard
-
-    def seq(self, sender: int) -> int | None:
-        """The seq of `sender`'s word, if it said anything of itself that set it."""
-        last = self._last.get(sender)
-        return None if last is None else last.seq
 
     def above(self, sender: int, slot: int, epoch: int) -> bool:
         """Has `sender` heartbeat holding `slot` at an epoch above `epoch`?"""

@@ -27,16 +27,16 @@ The receive filter is the daemons' (`swarmd.core.replay`): a sliding window per 
 and sequence numbers bounded by the monitor's own clock (`listen` starts it from the wall
 clock), so one bit-flipped or forged frame far ahead is a `seq_jump` drop, not a robot
 muted for good that shows `silent` with false alerts. What the monitor cannot verify it
-shows as such: in per-robot mode a heartbeat is signed by no robot (the swarm key, or
-nothing), so a heartbeat at a newer epoch (or of another robot at the plan's epoch 0) is
-believed only from the robot whose CLAIM for that slot and epoch was heard *with its
-certificate*, judged exactly as a daemon judges it (`swarmd.daemon.monitor_claims`: a signed
-CLAIM alone, which any insider can make for a slot it covers, vouches for nothing).
+shows as such: a heartbeat is no proof (per robot it is signed by no robot), so a
+heartbeat at a newer epoch (or of another robot at the plan's epoch 0) is believed only
+from the robot whose CLAIM for that slot and epoch was heard *with its certificate*,
+judged exactly as a daemon judges it in every auth mode (`swarmd.daemon.monitor_claims`:
+a CLAIM alone, which any insider can make for a slot it covers, vouches for nothing).
 Any other is shown with the status `unverified` and moves nobody: no `superseded`, no
 split brain. A monitor started after a takeover has not heard its claim, so the new
 holder shows `unverified` until it overhears the claim again with its certificate (the
-new holder relays both to any robot that still shows an older view). Shared-key and
-unsigned swarms have nothing more to check: what the daemons take, the monitor shows.
+new holder relays both to any robot that still shows an older view). What the daemons
+take, the monitor shows.
 """
 
 from __future__ import annotations
@@ -118,8 +118,8 @@ class MonitorState:
         """function -> (claimant, epoch, time) of the last CLAIM heard."""
         self.newest: dict[str, tuple[int, int]] = {}
         """function -> (epoch, robot) of the newest-epoch ACTIVE heartbeat heard for it."""
-        self.certified = MonitorClaims(plan, params) if verifier is not None else None
-        """Per-robot mode: the takeovers a daemon would believe (`monitor_claims`)."""
+        self.certified = MonitorClaims(plan, params)
+        """The takeovers a daemon would believe (`monitor_claims`)."""
         self.chains = PeerChains(1 / params.heartbeat_interval)
         """Per-robot mode: each robot's heartbeat chain (`swarmd.core.chain`)."""
         self.replay = ReplayFilter()
@@ -132,12 +132,10 @@ class MonitorState:
 
     def _believed(self, function: str, epoch: int, robot: int) -> bool:
         """Whether a heartbeat of `robot` holding `function` at `epoch` is vouched for
-        (module docstring): always without robot keys."""
-        if self.verifier is None:
-            return True
+        (module docstring)."""
         if epoch == 0 and self.plan.initial_holder(function) == robot:
             return True
-        return self.certified is not None and self.certified.believed(function, epoch, robot)
+        return self.certified.believed(function, epoch, robot)
 
     def _drop(self, reason: DropReason | MonitorDrop) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
@@ -154,8 +152,7 @@ class MonitorState:
         seen.last_seq = frame.seq
         seen.last_heard = now
         seen.frames += 1
-        if self.certified is not None:  # evidence, refutes and claims, as a daemon
-            self.certified.frame(frame, now)
+        self.certified.frame(frame, now)  # evidence, refutes and claims, as a daemon
         match frame.msg:
             case wire.Heartbeat(function, epoch, role, health):
                 self._on_heartbeat(seen, frame.sender, function, epoch, role, health)
@@ -192,10 +189,9 @@ class MonitorState:
             self._drop(DropReason.UNKNOWN_SENDER)
             return None
         if isinstance(frame.msg, wire.Cert):
-            # Relays a signed frame: no replay filter, as in the daemons; a piece of a
-            # certificate, perhaps (`monitor_claims`).
-            if self.certified is not None:
-                self.certified.frame(frame, now)
+            # Relays a frame judged on its own: no replay filter, as in the daemons; a
+            # piece of a certificate, perhaps (`monitor_claims`).
+            self.certified.frame(frame, now)
             return None
         msg = frame.msg
         if isinstance(msg, wire.Heartbeat) and self.verifier is not None \

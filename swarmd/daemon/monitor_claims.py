@@ -1,9 +1,9 @@
-"""Which takeovers the monitor believes, per-robot mode: exactly the ones a daemon would
-(DESIGN section 2, "Takeovers backed by evidence"): a signed CLAIM counts only with its
-certificate (the suspect's own signed LEAVE, or unrefuted signed WARNs of a quorum of
-distinct witnesses), judged by the daemons' own `EvidenceStore`, fed the same signed
-frames (heard directly, or relayed in CERTs). A signed CLAIM alone, from an insider
-with its own key, supersedes nobody on the monitor either.
+"""Which takeovers the monitor believes: exactly the ones a daemon would (DESIGN section
+2, "Takeovers backed by evidence"), in every auth mode: a CLAIM counts only with its
+certificate (the suspect's own LEAVE, or unrefuted WARNs of a quorum of distinct
+witnesses), judged by the daemons' own `EvidenceStore`, fed the same frames (heard
+directly, or relayed in CERTs). A CLAIM alone, from an insider, supersedes nobody on the
+monitor either.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ class MonitorClaims:
             self.claim(frame.sender, msg, frame.raw, now)
 
     def claim(self, claimant: int, c: wire.Claim, raw: bytes, now: float) -> bool:
-        """A signed CLAIM: believed (True) if the evidence here certifies it, else kept
+        """A CLAIM: believed (True) if the evidence here certifies it, else kept
         a while in case its certificate comes later (a channel that reorders)."""
         f = self.plan.function_at(c.function)
         if f is None:

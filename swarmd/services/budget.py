@@ -132,22 +132,24 @@ class Budget:
     airtime_share: float | None
     """Fraction of the 250 kbps channel used in steady state (None for UDP)."""
     peak_frames_per_s: float
-    """Originated frames per second during a failover (heartbeats + WARNs + CLAIM)."""
+    """Originated frames per second during a failover (heartbeats + WARNs + CLAIM and
+    the CERTs that carry its certificate)."""
     peak_airtime_share: float | None
     heartbeat_bytes: int
     max_payload: int
     heartbeat_fits: bool
     warnings: tuple[str, ...]
     per_robot: bool = False
-    """WARN, CLAIM and LEAVE signed with each robot's own key (certificates on claims)."""
+    """WARN, CLAIM and LEAVE signed with each robot's own key (otherwise tagged with the
+    swarm key, or nothing)."""
     warn_bytes: int = 0
     """Bytes of a WARN (a CLAIM, one byte less, is counted as large)."""
     cert_bytes: int = 0
-    """Bytes of one CERT frame (per-robot mode; 0 otherwise)."""
+    """Bytes of one CERT frame (a claim's certificate, relayed: every mode)."""
     warn_fragments: int = 1
     """Transmissions a WARN or CLAIM takes (>1: split, fragment.py; 0: cannot be sent)."""
     cert_fragments: int = 0
-    """Transmissions a CERT frame takes (per-robot mode; 0 otherwise or if it cannot)."""
+    """Transmissions a CERT frame takes (0 if it cannot be sent)."""
     anchor_bytes: int = 0
     """Bytes of an anchor heartbeat (per-robot mode, `core/chain.py`; 0 otherwise)."""
     anchor_fragments: int = 0
@@ -181,9 +183,11 @@ class Budget:
                        + _in_fragments(self.warn_fragments)
                        + f", certificate frame {self.cert_bytes} B"
                        + _in_fragments(self.cert_fragments))
-        elif self.warn_fragments > 1:
+        elif self.warn_fragments > 1 or self.cert_fragments > 1:
             out.append(f"  warning/claim {self.warn_bytes} B"
-                       + _in_fragments(self.warn_fragments))
+                       + _in_fragments(self.warn_fragments)
+                       + f", certificate frame {self.cert_bytes} B"
+                       + _in_fragments(self.cert_fragments))
         out += [f"  WARNING: {w}" for w in self.warnings]
         return out
 
@@ -217,9 +221,10 @@ def warn_size(signed: bool, slot_bytes: int = 1, *, per_robot: bool = False) -> 
     return HEADER_LEN + WARN_BODY + slot_bytes + auth
 
 
-def cert_size(slot_bytes: int = 1) -> int:
-    """Bytes of a CERT frame: a header, the slot, and the signed WARN it relays."""
-    return HEADER_LEN + slot_bytes + warn_size(False, slot_bytes, per_robot=True)
+def cert_size(slot_bytes: int = 1, signed: bool = True, *, per_robot: bool = True) -> int:
+    """Bytes of a CERT frame: a header, the slot, and the WARN it relays (signed per
+    robot, tagged with a swarm key, or neither)."""
+    return HEADER_LEN + slot_bytes + warn_size(signed, slot_bytes, per_robot=per_robot)
 
 
 def budget_for(
@@ -245,8 +250,7 @@ def budget_for(
     peak_rate = rates.heartbeats + rates.warns + rates.claims * (1 + rates.backers)
     bytes_per_s = (link_rate * (hb + overhead) + rates.anchors * sum(
         n + overhead for n in _transmissions(medium, anchor))) * copies
-    airtime_share, peak_share = _airtime_shares(medium, sizes, rates, copies,
-                                                per_robot=per_robot)
+    airtime_share, peak_share = _airtime_shares(medium, sizes, rates, copies)
     max_payload = MAX_PAYLOAD[medium]
     warnings = _size_warnings(medium, hb, warn, cert, anchor, per_robot=per_robot)
     warnings += _rate_warnings(medium, robots, rates.heartbeats, airtime_share, peak_share)
@@ -257,7 +261,7 @@ def budget_for(
         max_payload=max_payload, heartbeat_fits=hb <= max_payload, warnings=tuple(warnings),
         per_robot=per_robot, warn_bytes=warn, cert_bytes=cert,
         warn_fragments=fragments(medium, warn),
-        cert_fragments=fragments(medium, cert) if per_robot else 0,
+        cert_fragments=fragments(medium, cert),
         anchor_bytes=anchor if per_robot else 0,
         anchor_fragments=fragments(medium, anchor) if per_robot else 0,
         anchors_per_s=rates.anchors,
@@ -271,7 +275,6 @@ class _Sizes(NamedTuple):
     anchor: int
     warn: int
     cert: int
-    """0 unless signed per robot."""
 
 
 def _frame_sizes(signed: bool, slot_bytes: int, *, per_robot: bool) -> _Sizes:
@@ -279,7 +282,7 @@ def _frame_sizes(signed: bool, slot_bytes: int, *, per_robot: bool) -> _Sizes:
         heartbeat_size(signed, slot_bytes, per_robot=per_robot),
         heartbeat_size(signed, slot_bytes, per_robot=True, anchor=True),
         warn_size(signed, slot_bytes, per_robot=per_robot),
-        cert_size(slot_bytes) if per_robot else 0,
+        cert_size(slot_bytes, signed, per_robot=per_robot),
     )
 
 
@@ -292,12 +295,12 @@ class _Rates(NamedTuple):
     warns: float
     claims: float
     backers: int
-    """Frames that back a CLAIM in per-robot mode."""
+    """Frames that back a CLAIM, relayed with it in CERTs."""
 
 
 def _frame_rates(active: int, standby: int, max_watchers: int, params: Params, *,
                  per_robot: bool) -> _Rates:
-    backers = max_watchers + 1 if per_robot else 0  # the witnesses and rule 9's own ears
+    backers = max_watchers + 1  # the witnesses and rule 9's own ears
     hb_rate = active / params.heartbeat_interval + standby / params.standby_heartbeat_interval
     anchor_rate = min(hb_rate, anchor_rates(active, standby, params)) if per_robot else 0.0
     warn_rate = max_watchers / params.warn_interval
@@ -305,8 +308,8 @@ def _frame_rates(active: int, standby: int, max_watchers: int, params: Params, *
     return _Rates(hb_rate, anchor_rate, warn_rate, claim_rate, backers)
 
 
-def _airtime_shares(medium: str, sizes: _Sizes, rates: _Rates, copies: int, *,
-                    per_robot: bool) -> tuple[float | None, float | None]:
+def _airtime_shares(medium: str, sizes: _Sizes, rates: _Rates,
+                    copies: int) -> tuple[float | None, float | None]:
     """The share of the channel's time heartbeats take, and a failover at its peak
     (None for UDP, which has no airtime to share)."""
     if medium == "udp":
@@ -317,8 +320,7 @@ def _airtime_shares(medium: str, sizes: _Sizes, rates: _Rates, copies: int, *,
     peak_share = (
         beats
         + (rates.warns + rates.claims) * frame_airtime(medium, sizes.warn)
-        + (rates.claims * rates.backers * frame_airtime(medium, sizes.cert)
-           if per_robot else 0.0)
+        + rates.claims * rates.backers * frame_airtime(medium, sizes.cert)
     ) * copies
     return beats * copies, peak_share
 
@@ -332,8 +334,8 @@ def _size_warnings(medium: str, hb: int, warn: int, cert: int, anchor: int, *,
     if hb > max_payload:
         warnings.append(f"a {hb} B heartbeat does not fit the {max_payload} B payload limit")
     warn_parts = fragments(medium, warn)
-    cert_parts = fragments(medium, cert) if per_robot else 0
-    if warn_parts == 0 or (per_robot and (cert_parts == 0 or fragments(medium, anchor) == 0)):
+    cert_parts = fragments(medium, cert)
+    if warn_parts == 0 or cert_parts == 0 or (per_robot and fragments(medium, anchor) == 0):
         warnings.append(
             f"a {max(warn, cert, anchor if per_robot else 0)} B frame needs more than "
             f"{fragment.MAX_FRAGMENTS} "
