@@ -101,12 +101,13 @@ class Hearing(Episode):
         # A stale holder (e.g. back from a pause): if it is our slot, answer at once
         # so it hears the newer epoch and fences itself (rule 2) within a frame.
         if self._holds(f):
-            # A rival holding it at our epoch (the race won on each side of a
-            # partition) lacks only our CLAIM, most likely (its own evidence backs
-            # ours): every other heartbeat period rather than every T_max, so a
-            # lossy channel does not keep two robots executing one slot (rule 2).
-            rival = hb.epoch == self._epoch
-            self._show(f, now, 2 * self._params.heartbeat_interval if rival else None)
+            # Two robots execute our slot until the proof reaches it: a rival at our
+            # epoch (the race won on each side of a partition) lacks only our CLAIM,
+            # most likely; a holder back from a pause lacks the whole takeover, and
+            # once its stall is T_max behind it, it would refute the warnings in it
+            # instead of fencing itself. Every other heartbeat period, not every T_max,
+            # so a lossy channel does not keep two executors past the bound (rule 2).
+            self._show(f, now, 2 * self._params.heartbeat_interval)
             self._heartbeat_now(now)
         # Else a takeover it missed whose new holder may be gone: whoever certified it
         # shows the stale holder the evidence against it (it fences itself, or refutes
