@@ -535,7 +535,7 @@ def test_per_robot_a_heartbeat_that_proves_nothing_gets_the_refutes_that_void_it
 
 
 def test_per_robot_a_proof_is_shown_once_per_t_max_whoever_asks(paper: Paper) -> None:
-    """A holder shows the proof of its entry one way (`Signed._show`): to the old
+    """A holder shows the proof of its entry one way (`Proofs._show`): to the old
     holder's stale heartbeat, its certificate and its own signed CLAIM, inside CERTs; a
     watcher's warning about the old holder within T_max gets nothing more (one gate a
     slot, whoever asked), and after T_max the whole proof again."""

@@ -289,7 +289,7 @@ def test_a_standby_alone_ahead_of_a_stale_holder_whose_new_holder_died_converges
     executes on; 5 takes f2 over at epoch 1, but its heartbeats reach neither watcher
     (1 and 3) before it crashes at 5 s: standby 6 alone holds (5, 1), the watchers
     and 2 hold (2, 0), and nobody warns about 5. After the heal only 6 can carry the
-    entry, with its proof (`Signed._show`, DESIGN "Convergence"), in every mode; the
+    entry, with its proof (`Proofs._show`, DESIGN "Convergence"), in every mode; the
     digest alone only makes 2 heartbeat its older entry at 6. Without that proof, 6's
     view stays (5, 1) against (2, 0) for good."""
     _, params = paper

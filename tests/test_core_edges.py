@@ -42,7 +42,7 @@ def assigns(actions: Sequence[Action]) -> list[Assign]:
 
 def proof_of(plan: SwarmPlan, holder: int, epoch: int, failed: int) -> list[bytes]:
     """The proof of `holder`'s takeover of f2 at `epoch` from `failed`, as a robot
-    that holds it shows it (`Signed._show`): the warnings of f2's witnesses 1 and 3
+    that holds it shows it (`Proofs._show`): the warnings of f2's witnesses 1 and 3
     about `failed` at the epoch before, then `holder`'s CLAIM, each inside a CERT."""
     slot = plan.slot("f2")
     warn = wire.Warn(failed, slot, epoch - 1)

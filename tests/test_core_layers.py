@@ -55,7 +55,7 @@ def stubs(top: type) -> list[str]:
 
 def test_node_is_a_stack_of_layers_one_on_the_next() -> None:
     names = [c.__name__ for c in layers(Node)]
-    assert names == ["Node", "Restart", "Hearing", "Episode", "Signed", "Views",
+    assert names == ["Node", "Restart", "Hearing", "Episode", "Proofs", "Views",
                      "NodeBase"]
     assert all(len(c.__bases__) == 1 for c in layers(Node))
 

@@ -1,7 +1,7 @@
 """A holder heard alive after a suspicion of it keeps its slot even where its witnesses
 and its standby cannot hear it (DESIGN "Detection"; rule 4 through a third robot's ears):
 it answers each warning and claim with a REFUTE, which robots that hear it relay with
-the proof of the slot (`signed.py`), so the claim it voids ends. Every check runs in
+the proof of the slot (`proofs.py`), so the claim it voids ends. Every check runs in
 every auth mode."""
 
 from __future__ import annotations

@@ -17,8 +17,6 @@ import pytest
 from sim.xbee_emu import Medium
 from sim.xbee_emu.radio import EmulatedRadio, Transmit
 from sim.xbee_emu.swarm import RadioSwarm, paper_plan
-from swarmd.core import wire
-from swarmd.core.drops import DropReason
 from swarmd.core.params import radio
 from swarmd.daemon.monitor import MonitorState, listen
 from swarmd.transport.base import Transport

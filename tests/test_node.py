@@ -45,7 +45,7 @@ def sent(actions: Sequence[Action]) -> list[wire.Message]:
 
 
 def relayed(actions: Sequence[Action]) -> list[wire.Message]:
-    """What the CERTs among `actions` relay: the proof shown (`Signed._show`)."""
+    """What the CERTs among `actions` relay: the proof shown (`Proofs._show`)."""
     return [m.inner.msg for m in sent(actions) if isinstance(m, wire.Cert)]
 
 

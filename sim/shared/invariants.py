@@ -76,7 +76,7 @@ from swarmd.core.events import Fault as EventFault
 from swarmd.core.events import name_of
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.signed import RELAY_EVERY
+from swarmd.core.proofs import RELAY_EVERY
 
 _STOPPING_FAULTS = (FaultKind.CRASH, FaultKind.COLLIDE, FaultKind.LEAVE, FaultKind.UNHEALTHY,
                     FaultKind.MOTOR)

@@ -9,7 +9,7 @@ wait state; DESIGN rules 2-4, 9, 10 and "One failover, crash to takeover"):
    heard directly or relayed with their certificate, make it back off or are refuted;
 5. take over: the hold ends, the claimant executes the slot at a new epoch (rule 2).
 
-`Episode` is the layer of `Node` on `Signed` (proofs relayed and refutes, on `Views`
+`Episode` is the layer of `Node` on `Proofs` (proofs relayed and refutes, on `Views`
 and `NodeBase`): it calls only methods defined there or here. `hearing.py`,
 above it, hands it the other messages' parts of the episode (a LEAVE's handover, a
 CERT's evidence and relayed claims).
@@ -25,16 +25,16 @@ from swarmd.core.claims import WaitState
 from swarmd.core.drops import DropReason
 from swarmd.core.evidence import seq_of
 from swarmd.core.limits import EPOCH_MAX
+from swarmd.core.proofs import Proofs
 from swarmd.core.records import Holder
 from swarmd.core.roles import Role, Trigger
-from swarmd.core.signed import Signed
 from swarmd.core.slots import greater
 from swarmd.core.state import Active, Claiming, Standby
 from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import witnesses
 
 
-class Episode(Signed):
+class Episode(Proofs):
     # ------------------------------------------------------------------ 1. suspect
     def _watch_neighbours(self, now: float) -> None:
         state = self._state

@@ -4,7 +4,7 @@ votes, a claim and a rejoin learn it; an older or unproven one answered), LEAVE 
 handover, rule 7) and CERT (evidence relayed in a certificate).
 
 `Hearing` is the layer of `Node` on `Episode` (`episode.py`: WARN and CLAIM, from
-suspicion to takeover), which sits on `Signed`, `Views` and `NodeBase`; it calls only
+suspicion to takeover), which sits on `Proofs`, `Views` and `NodeBase`; it calls only
 methods defined there or here. Every method changes the node's state and queues
 actions; none does I/O.
 """

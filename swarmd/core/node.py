@@ -7,7 +7,7 @@ be called next. Nothing here does I/O, reads a clock or draws a random number.
 What happens where:
 - `receive`: decode and filter a frame (peer garbage becomes a counted drop, never an
   exception), then the per-message rules (`hearing.py`; WARN and CLAIM `episode.py`;
-  REFUTE `signed.py`).
+  REFUTE `proofs.py`).
 - `tick`: deadlines — own heartbeat (`nodebase.py`), watchdogs (Fig. 7) and claim hold
   (the wait state; `episode.py`), fence hold, rejoin hold (`restart.py`).
 - `robot_health`: the robot's single input (Fig. 4); FAULTY sends LEAVE (rule 7).
@@ -17,7 +17,7 @@ What happens where:
 
 Roles and transitions are the table in `roles.py`; every change of role goes through
 `NodeBase._to()`, which enforces it. The state is declared in `nodebase.py`. `Node` is
-the top layer: it sits on `Restart`, `Hearing`, `Episode`, `Signed`, `Views` and
+the top layer: it sits on `Restart`, `Hearing`, `Episode`, `Proofs`, `Views` and
 `NodeBase`, each on the next, each calling only itself and what is below it.
 """
 
@@ -242,7 +242,7 @@ class Node(Restart):
 
     def _on_message(self, frame: wire.Frame, now: float) -> None:
         """A frame through every receive filter: the per-message rules (`hearing.py`,
-        `episode.py`, `signed.py`)."""
+        `episode.py`, `proofs.py`)."""
         sender = frame.sender
         self._frames_in += 1
         self._peer_back(sender, now)

@@ -4,7 +4,7 @@ the receive-side checks every message shares, and our own heartbeats and their s
 
 `NodeBase` is the bottom layer of `Node` (`node.py`), which stacks one class on the
 next, each calling only methods defined in itself or below: `NodeBase` <- `Views`
-(`views.py`: a slot's view moves forward) <- `Signed` (`signed.py`: proofs relayed and
+(`views.py`: a slot's view moves forward) <- `Proofs` (`proofs.py`: proofs relayed and
 refutes) <- `Episode` (`episode.py`: the takeover episode, suspicion to takeover) <-
 `Hearing` (`hearing.py`: heartbeats, LEAVE, CERT) <- `Restart` (`restart.py`: what a
 robot starts from) <- `Node` (the entry points). They share the state declared here,

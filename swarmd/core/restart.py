@@ -3,7 +3,7 @@ the plan or from what a restarted robot persisted before it went down (its own h
 if it is provable); the hold it resumes only after listening (`rejoin.py`), and the
 first tick's `started`, which a rejoining robot says only once its hold is over.
 
-`Restart` is the layer of `Node` on `Hearing` (and so on `Episode`, `Signed`, `Views`,
+`Restart` is the layer of `Node` on `Hearing` (and so on `Episode`, `Proofs`, `Views`,
 `NodeBase`): it calls only methods defined there or here. `Node`'s constructor calls
 `_views` and `_restore` once; `Node.tick` calls `_start` and `_finish_rejoin`.
 """

@@ -4,7 +4,7 @@ outranks ends (fence) or holds on at our reassertion's epoch, a claim of ours it
 supersedes backs off, and a rejoin of that slot gives way.
 
 `Views` is the layer of `Node` on `NodeBase` (state and plumbing); every layer above
-(`signed.py`, `episode.py`, `hearing.py`, `restart.py`) moves a view through it, and it
+(`proofs.py`, `episode.py`, `hearing.py`, `restart.py`) moves a view through it, and it
 calls nothing above itself.
 """
 
@@ -21,7 +21,8 @@ from swarmd.core.state import Active, Fenced, Standby
 class Views(NodeBase):
     def _learn_holder(self, f: str, new: Holder, now: float) -> None:
         """Our view of f moves forward to `new`, a takeover we learn of without hearing
-        its holder (`_warned_newer`, or a proof another robot showed, `Signed._show`).
+        its holder (a proof another robot showed, `Proofs._show`, or a claim relayed
+        with its certificate).
         Not a sign of life: the watch treats it as a CLAIM heard (the new holder gets
         `claim_hold + t_max` to heartbeat; rule 10, once an episode), then suspects it.
         A hold of ours it outranks ends (rule 2); a claim of ours it supersedes backs

@@ -1,10 +1,10 @@
 """Proofs (DESIGN section 2, "Who may say what" and "Convergence"), in every auth mode:
 showing the proof of an entry (`_show`, the one way a proof travels), refuting a
 warning or a claim, outranking a takeover the refutes void. The evidence itself — which claim
-a certificate backs — is `evidence.py`'s; `Signed` turns its answers into frames, events
+a certificate backs — is `evidence.py`'s; `Proofs` turns its answers into frames, events
 and view changes.
 
-`Signed` is the layer of `Node` on `Views` (how a view moves forward) and `NodeBase`;
+`Proofs` is the layer of `Node` on `Views` (how a view moves forward) and `NodeBase`;
 it calls only methods defined there or here. Keeping a warning as evidence
 (`Episode._record_evidence`) and acting on a relayed claim are the takeover episode's,
 above it: a certificate completed or relayed is a claim heard.
@@ -30,7 +30,7 @@ once per this many T_max even unasked (4 s at udp, 16 s at radio), so every robo
 hears the slot holds the certificate of its holder within that bound."""
 
 
-class Signed(Views):
+class Proofs(Views):
     def _send_cert(self, f: str, raw: bytes) -> None:
         # It has a seq of its own, but receivers do not replay-filter it: the wrapper is
         # unauthenticated, what it relays is judged on its own.
@@ -168,4 +168,4 @@ class Signed(Views):
                 self._learn_reassertion(f, mine, now)
 
 
-__all__ = ["RELAY_EVERY", "Signed"]
+__all__ = ["RELAY_EVERY", "Proofs"]
