@@ -343,6 +343,31 @@ def test_older_epoch_does_not_fence_but_gets_an_answer(
     assert node.snapshot().role is Role.ACTIVE
 
 
+def test_a_stale_holder_of_our_slot_is_shown_the_proof_every_other_heartbeat_period(
+        paper_plan: SwarmPlan, udp_params: Params) -> None:
+    """Two robots execute f2 until the old holder has the proof of the takeover: the
+    new holder shows it again every other heartbeat period, not once per T_max, so a
+    lossy channel does not keep them both executing (rule 2), and the old holder, back
+    from a pause, gets it before its stall is T_max behind it (then it would refute the
+    warnings in it instead of fencing itself)."""
+    node, _ = started(paper_plan, udp_params, 6)
+    t = past_grace(node, udp_params)
+    node.receive(frame(paper_plan, 2, wire.Leave(2, 0, 0)), t + 0.1)
+    node.tick(t + 0.1 + udp_params.claim_hold)
+    assert node.snapshot().function == "f2"
+    every = 2 * udp_params.heartbeat_interval
+    assert every < udp_params.t_max
+    shown = []
+    for k in range(3):
+        at = t + 0.6 + k * (every + 0.01)
+        shown.append(relayed(node.receive(frame(paper_plan, 2, hb(paper_plan, "f2")), at)))
+    proof = [wire.Leave(2, 0, 0), wire.Claim(2, paper_plan.slot("f2"), 1)]
+    assert shown == [proof, proof, proof]
+    # Not more often than that: a heartbeat within the period gets the heartbeat only.
+    soon = t + 0.6 + 2 * (every + 0.01) + every / 2
+    assert relayed(node.receive(frame(paper_plan, 2, hb(paper_plan, "f2")), soon)) == []
+
+
 def _restored(plan: SwarmPlan) -> Restored:
     return Restored(known={f: (plan.initial_holder(f) or 0, 0) for f in plan.functions},
                     held=("f2", 0))
