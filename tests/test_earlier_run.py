@@ -411,6 +411,33 @@ def test_a_holder_restarted_without_its_state_file_is_one_of_two_executors_for_m
 
 
 @pytest.mark.parametrize("auth", MODES)
+def test_a_holder_that_left_and_restarted_without_its_state_file_refutes_its_leave_at_once(
+        paper: Paper, auth: str) -> None:
+    """2 reports a fault (its LEAVE of f2 at epoch 0) and 6 takes f2 over on it; 2 then
+    restarts without its state file: the plan makes it f2's holder at epoch 0, and 6's
+    proof rests on 2's own LEAVE, from before this start. 2 cannot tell it from a
+    recording of an earlier run, so it refutes it as one (`Episode._record_evidence`),
+    at once: its own LEAVE is no word of another robot to wait a start-up grace for.
+    Two executors for a few ms, not the grace (2.1 s before), then 2 alone, and every
+    view of f2 the same."""
+    params = paper[1]
+    ids = fake_identities(paper[0].robots) if auth == "per-robot" else None
+    n = swarm(paper, auth, RUN_B, ids)
+    n.run_until(3.0)
+    n.inject(2, n.nodes[2].robot_health(Health.FAULTY, n.now))
+    n.run_until(5.0)
+    assert [(e["robot"], e["epoch"]) for e in n.named("takeover")] == [(6, 1)]
+    n.crash(2)
+    restart = n.now
+    n.boot(2, seq_start=RUN_B + 10**6)
+    both = both_execute_f2(n, restart + params.startup_grace + 6 * params.t_max)
+    assert both <= params.heartbeat_interval, both
+    assert [r for r, f in n.executing().items() if f == "f2"] == [2]
+    assert [e["robot"] for e in n.named("fenced")] == [6]
+    assert views_of_f2(n) == {(2, 2)}
+
+
+@pytest.mark.parametrize("auth", MODES)
 def test_a_restarted_old_holder_learns_the_takeover_within_its_grace_and_never_resumes(
         paper: Paper, auth: str) -> None:
     """2 crashes, 6 takes f2 over at epoch 1, and 2 restarts on its state file (its

@@ -188,14 +188,18 @@ class NodeBase:
         rests on the certificate the `LEAVE` backs, and every robot must verify it
         alike; so is a `CLAIM` its claimant gave up, below the reassertion of the holder
         it named."""
-        if isinstance(msg, wire.Leave) and not self._words.knows(sender) \
+        if isinstance(msg, wire.Leave) and sender != self._robot_id \
+                and not self._words.knows(sender) \
                 and now - self._start_time < self._params.startup_grace:
             # Within our start-up grace we may not have heard its word yet (per robot an
             # anchor comes every `anchor_every`, half the grace): its LEAVE cannot be
             # judged, and a recorded takeover it backs, taken here alone, would move the
             # slot's epoch everywhere in the end (the holder's reassertion). After the
             # grace, a robot we never heard is dead or cut off, and its LEAVE (relayed
-            # with the takeover it backs) counts.
+            # with the takeover it backs) counts. Our own LEAVE is no word to wait for:
+            # from before this start, it is refuted at once if we hold its entry
+            # (`Episode._record_evidence`), rather than held off for the grace while
+            # the takeover it backs executes beside us.
             return True
         if not self._words.outdated(sender, seq, msg):
             return False
