@@ -93,10 +93,11 @@ class Episode(Proofs):
             # it (DESIGN, "Every proof is bound to its run"): ours must be provable.
             self._shown_newer.add(f)
         # A warning below the suspicion level is a watcher's doubt (DESIGN "Detection"):
-        # the suspect answers it (rule 4), views move on it, but it is nobody's evidence
-        # and no standby counts it (Fig. 9 counts accusations).
+        # the suspect answers it (rule 4), a robot with a newer view shows the warner
+        # its proof, but it is nobody's evidence and no standby counts it (Fig. 9
+        # counts accusations).
         strong = byte_level(w.belief) >= self._params.suspect_level
-        self._views_from_warn(f, sender, w, raw, now, evidence=strong)
+        self._warning_evidence(f, sender, w, raw, now, evidence=strong)
         holder, epoch = self._known[f]
         if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
             return
@@ -128,8 +129,8 @@ class Episode(Proofs):
                 if self._robot_id in self._votes[f].witnesses else frozenset()
             self._start_claim(f, w.suspect, w.epoch, now, lost=lost)
 
-    def _views_from_warn(self, f: str, sender: int, w: wire.Warn, raw: bytes,
-                         now: float, *, evidence: bool = True) -> None:
+    def _warning_evidence(self, f: str, sender: int, w: wire.Warn, raw: bytes,
+                          now: float, *, evidence: bool = True) -> None:
         """A warning about f's holder, before any standby counts it: its evidence is kept
         (a suspicion's, not a doubt's), and a robot whose view of f is newer than the
         warning's shows the warner its certificate (DESIGN, "Convergence")."""

@@ -1,18 +1,22 @@
-"""Takeover certificates of one robot, per-robot mode (DESIGN section 2, "Who may say what").
+"""Takeover certificates of one robot, in every auth mode (DESIGN section 2, "Who may say
+what").
 
-In per-robot mode every WARN, CLAIM, LEAVE and REFUTE is signed by its own sender, so a
-robot can prove what others said. A *certificate* is the set of signed frames that back
-a takeover of slot f from `suspect` at `epoch`: the suspect's own signed LEAVE, or the
-signed WARNs of at least a quorum of distinct witnesses (rule 3: the robots that may
-hold a slot watching f, plus the claimant's own ears once, rule 9; never the suspect)
-that the suspect has not refuted. An epoch rises only for a CLAIM whose certificate
-this robot verified, so one liar alone — whatever it signs — never moves a slot; and
-the new holder relays its certificate to whoever missed it.
+Every WARN, CLAIM, LEAVE and REFUTE carries what authenticates its sender in the swarm's
+mode — per robot its own signature, with a shared key the swarm key's tag, unsigned
+nothing — so a robot can show what others said, and each receiver checks it as if it
+had heard it first-hand. A *certificate* is the set of frames that back a takeover of
+slot f from `suspect` at `epoch`: the suspect's own LEAVE, or the WARNs of at least a
+quorum of distinct witnesses (rule 3: the robots that may hold a slot watching f, plus
+the claimant's own ears once, rule 9; never the suspect) that the suspect has not
+refuted. An epoch rises only for a CLAIM whose certificate this robot verified, so one
+liar alone — whatever it signs — never moves a slot (per robot; with a shared key an
+insider can make frames in any name); and the new holder relays its certificate to
+whoever missed it.
 
 *One answer everywhere* (DESIGN, "Convergence"): whether a claim is certified is a
-function of signed frames only — the warnings, the suspect's LEAVE, the suspect's
-REFUTEs — never of when this robot happened to hear what. A suspect alive after a
-witness's warning says so in a signed REFUTE naming that warning's seq; it voids that
+function of frames only — the warnings, the suspect's LEAVE, the suspect's REFUTEs —
+never of when this robot happened to hear what. A suspect alive after a witness's
+warning says so in a REFUTE naming that warning's seq; it voids that
 warning and every earlier one of that witness, at every robot that has the REFUTE,
 which the frames' holders relay to whoever still acts on a voided claim. Robots that
 hold the same frames therefore hold the same view of every slot.
@@ -56,7 +60,7 @@ from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
 EVIDENCE_REMEMBERED = 16
-"""(suspect, epoch) episodes of signed evidence kept per slot (per-robot mode); a flood
+"""(suspect, epoch) episodes of evidence kept per slot; a flood
 of warnings about invented epochs pushes out the oldest, it cannot grow the node."""
 
 

@@ -87,7 +87,7 @@ class Node(Restart):
         self._ears = Ears(robot_id, plan, params, now)
         self._claims_seen = ClaimMemory(params)
         self._replay = ReplayFilter(seq_start, now)  # bounded by our own clock
-        self._ev = EvidenceStore(robot_id, plan, params)  # per-robot mode, `evidence.py`
+        self._ev = EvidenceStore(robot_id, plan, params)  # certificates, `evidence.py`
         self._start_time, self._stalled_at = now, -1e18
         self._beat = HeartbeatClock(params, now)
         self._chain = OwnChain(robot_id, self._signer, seq_start) if self._signer else None

@@ -43,7 +43,7 @@ class Restored:
     """robot -> highest sequence number accepted from it (`Snapshot.peer_seq`): frames
     at or below it, captured before the restart, stay old (replays) after it."""
     certificate: tuple[bytes, ...] = ()
-    """The signed frames that certify `held` (`Snapshot.certificate`), per-robot mode.
+    """The frames that certify `held` (`Snapshot.certificate`), in every auth mode.
     Verified again on restore; a frame that does not verify is left out."""
 
 
@@ -75,7 +75,7 @@ class Snapshot:
     sent before its restart (a dead robot's captured heartbeats cannot delay its
     takeover)."""
     certificate: tuple[bytes, ...] = ()
-    """Per-robot mode: the signed WARN or LEAVE frames (raw bytes) that certify this
+    """The WARN or LEAVE frames (raw bytes, in every auth mode) that certify this
     robot's hold of `function`, if it took it over. Persist it with `held` and hand it
     back as `Restored.certificate`, so that after a restart it can still prove its hold
     to a robot that missed the takeover (an old holder back from a partition)."""

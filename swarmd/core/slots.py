@@ -13,7 +13,7 @@ views converge once the entries have spread (DESIGN, "Convergence").
 Every act that changes who holds a slot produces a strictly greater entry: a takeover
 or a handover after LEAVE is the next epoch (`epoch + 1`), and a holder that learns a
 greater entry for its own slot stops executing it (it is fenced). Nothing here judges
-whether an entry may be believed; that is the node's (per robot: a certificate).
+whether an entry may be believed; that is the node's (a certificate).
 
 Pure data, no rules beyond the order.
 """

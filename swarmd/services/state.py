@@ -85,8 +85,8 @@ class PersistedState:
     peer_seq: Mapping[int, int] = field(default_factory=dict)
     """Peers' highest accepted seq: frames captured before a restart stay replays."""
     certificate: tuple[bytes, ...] = ()
-    """The signed frames that certify `held` (per-robot mode); the core verifies them
-    again on restore."""
+    """The frames that certify `held` (every auth mode); the core verifies them again
+    on restore."""
 
     def restored(self) -> Restored:
         """The core's view of it (`Node(..., restored=...)`)."""
