@@ -1,7 +1,7 @@
 """Proofs (DESIGN section 2, "Who may say what" and "Convergence"), in every auth mode:
-showing the proof of an entry (`_show`, the one way a proof travels), refuting a
-warning or a claim, outranking a takeover the refutes void. The evidence itself — which claim
-a certificate backs — is `evidence.py`'s; `Proofs` turns its answers into frames, events
+showing the proof of an entry (`_show`, the one way a proof travels), refuting a warning
+or a claim, outranking a takeover the refutes void. The evidence itself — which claim a
+certificate backs — is `evidence.py`'s; `Proofs` turns its answers into frames, events
 and view changes.
 
 `Proofs` is the layer of `Node` on `Views` (how a view moves forward) and `NodeBase`;
@@ -25,9 +25,9 @@ _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
 """The `inner` of a CERT this robot sends: only its `raw` bytes go on the wire."""
 
 RELAY_EVERY = 8
-"""A holder that took its slot over relays its certificate at least
-once per this many T_max even unasked (4 s at udp, 16 s at radio), so every robot that
-hears the slot holds the certificate of its holder within that bound."""
+"""A holder that took its slot over relays its certificate at least once per this many
+T_max even unasked (4 s at udp, 16 s at radio), so every robot that hears the slot holds
+the certificate of its holder within that bound."""
 
 
 class Proofs(Views):
@@ -42,10 +42,9 @@ class Proofs(Views):
 
     def _forward(self, f: str, new: Holder) -> Holder:
         """The entry the frames held here make of `new`: itself, or, when the robot it
-        replaced sent a REFUTE of that claim (rule 4,
-        `_refute_claim`), that robot's reassertion at the next epoch
-        (`EvidenceStore.voided_by`): a voided takeover is outranked, never undone
-        (`slots.py`; DESIGN, "Convergence")."""
+        replaced sent a REFUTE of that claim (rule 4, `_refute_claim`), that robot's
+        reassertion at the next epoch (`EvidenceStore.voided_by`): a voided takeover is
+        outranked, never undone (`slots.py`; DESIGN, "Convergence")."""
         if new.epoch >= EPOCH_MAX:
             return new
         failed = self._ev.voided_by(f, new.robot, new.epoch)
@@ -66,8 +65,8 @@ class Proofs(Views):
     def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
         """We hold f one epoch below a certified claim of it that replaces us, and we are
         alive, not stalled (rule 4): say that we refute that claim, once. The REFUTE
-        names the claimant and the claim's epoch; with the claim's
-        certificate it proves our reassertion (`_forward`) to every robot alike."""
+        names the claimant and the claim's epoch; with the claim's certificate it proves
+        our reassertion (`_forward`) to every robot alike."""
         if not self._holds(f) or epoch != self._epoch + 1 \
                 or now - self._stalled_at <= self._params.t_max \
                 or self._ev.replaced(f, claimant, epoch) != self._robot_id \
@@ -78,12 +77,12 @@ class Proofs(Views):
 
     def _show(self, f: str, now: float, every: float | None = None, *,
               whole: bool = True) -> bool:
-        """A robot's view of f differs from ours (it heartbeats f, warns
-        about f's holder or shows a digest at another entry, or acts on a claim against
-        ours): relay the proof of our entry (`EvidenceStore.proof`: the takeover's
-        certificate and CLAIM, or a reassertion's, and the holder's REFUTEs at
-        it), inside CERTs (they may be older than its replay window), at most once per
-        `every` (T_max by default). The one way a proof travels (DESIGN,
+        """A robot's view of f differs from ours (it heartbeats f, warns about f's
+        holder or shows a digest at another entry, or acts on a claim against ours):
+        relay the proof of our entry (`EvidenceStore.proof`: the takeover's certificate
+        and CLAIM, or a reassertion's, and the holder's REFUTEs at it), inside CERTs
+        (they may be older than its replay window), at most once per `every` (T_max by
+        default). The one way a proof travels (DESIGN,
         "Convergence"): a stale holder fences itself or refutes, a robot that missed a
         takeover certifies it and moves forward, one that acts on a voided claim drops
         it. Without it, a robot that missed a takeover whose new holder died before it
@@ -113,15 +112,15 @@ class Proofs(Views):
             self._show(self._function, now, RELAY_EVERY * self._params.t_max)
 
     # ------------------------------------------------------------------ refutes
-    # A holder's word that it was alive after a warning voids that warning
-    # everywhere the word reaches (DESIGN, "Convergence").
+    # A holder's word that it was alive after a warning voids that warning everywhere
+    # the word reaches (DESIGN, "Convergence").
 
     def _refute(self, f: str, witness: int, epoch: int, seq: int, now: float) -> None:
         """We hold f at `epoch` and hear `witness`'s warning number `seq` about us (or,
-        `witness` being us, our own LEAVE of that entry): broadcast that we are
-        alive, holding it, after it. Not out of a buffer read after our own stall: then
-        the warning was right (we were silent), and the takeover it backs fences us
-        (rule 2)."""
+        `witness` being us, our own LEAVE of that entry): broadcast that we are alive,
+        holding it, after it. Not out of a buffer read after our own stall: then the
+        warning was right (we were silent), and the takeover it backs fences us (rule
+        2)."""
         if self._role != Role.ACTIVE or f != self._function \
                 or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
             return
