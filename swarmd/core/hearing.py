@@ -68,12 +68,11 @@ class Hearing(Episode):
         """A heartbeat without a slot shows, in its epoch field, its sender's view of
         the slots it covers (`digest.py`). If it shows the slot we hold at an entry
         other than ours, one of us is behind: we answer at once with our proof
-        (`_show`), and an extra heartbeat, whose entry it merges (per robot an anchor:
-        a robot that restarted has lost our chain). So a
-        standby that missed a takeover learns it within one standby period rather than
-        the unasked relay's RELAY_EVERY T_max (DESIGN, "Convergence"). If the sender
-        is ahead, our own heartbeats, every period, are the stale ones it answers
-        (`_older_beat`).
+        (`_show`), and an extra heartbeat, whose entry it merges (per robot an anchor: a
+        robot that restarted has lost our chain). So a standby that missed a takeover
+        learns it within one standby period rather than the unasked relay's RELAY_EVERY
+        T_max (DESIGN, "Convergence"). If the sender is ahead, our own heartbeats, every
+        period, are the stale ones it answers (`_older_beat`).
 
         At most once per T_max per slot, or per half a standby period where that is
         shorter: a standby shows a new digest once a standby period, so the gate never
