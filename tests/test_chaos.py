@@ -227,7 +227,7 @@ clean since, in every mode (`test_wide_seeds_fixed_run_clean_in_every_mode`).
   f22), then hears it again without logging an answer: `warning_unresolved`."""
 
 WIDE_SMALL: tuple[int, ...] = (5, 50, 84, 99, 136, 144, 147, 172, 182, 195, 279, 321, 365,
-                                383, 1713, 73506, 94471, 97376, 104525)
+                                383, 1713, 73506, 94471, 97376, 101757, 104525)
 """Wide seeds on swarms of up to 12 robots (`python bench/bench_chaos.py --seed N --wide
 --max-robots 12 --verbose`) that broke an invariant per robot on the slot-table core as
 first merged, each a shape the table's proofs had to cover; clean in every mode since
@@ -262,6 +262,12 @@ first merged, each a shape the table's proofs had to cover; clean in every mode 
   the takeover suspected it at its old epoch and, once it resumed, heard it at the new
   one, which ended their suspicion without a word in the log (a newer epoch was taken
   for another robot's takeover): the suspect itself heard at any epoch is now refuted.
+- 101757 (with a shared key and unsigned, once they took the per-robot proof path): a
+  holder stopped for 4 s, whose slot its standby took over meanwhile, missed the new
+  holder's proof (lost in a 40 % burst) and, once its stall was T_max behind it,
+  refuted the warnings in it instead of fencing itself: two executors for 1.31 s
+  (bound 1.20 s). A holder now shows its proof to any stale holder of its slot every
+  other heartbeat period, not only to a rival at its own epoch.
 - 104525: a standby that took a slot over restarted and resumed it; the old holder, back
   from a partition, dropped the CLAIM in the new holder's proof as `outdated` (older than
   its standby heartbeats during the rejoin) and executed on beside it: the CLAIM
