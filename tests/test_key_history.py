@@ -38,8 +38,8 @@ from swarmd.core.auth import Identity
 from swarmd.core.node import Restored
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
-from swarmd.core.records import Snapshot
 from swarmd.core.proofs import RELAY_EVERY
+from swarmd.core.records import Snapshot
 from swarmd.daemon.daemon import Daemon, run_daemon
 from swarmd.link.none import NoneLink
 from swarmd.services.revocation import EXIT_REVOKED
