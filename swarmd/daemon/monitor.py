@@ -91,7 +91,8 @@ class Heard:
     leave_at: float | None = None
     leave_function: str | None = None
     unverified: bool = False
-    """Its last heartbeat named a holder nothing signed vouches for (module docstring)."""
+    """Its last heartbeat named a holder no certificate heard here backs (module
+    docstring)."""
 
 
 def _name(enum: type[Role] | type[Health], value: int) -> str:
@@ -259,7 +260,7 @@ class MonitorState:
 
     def status(self, seen: Heard, now: float) -> str:
         """`live`, `silent`, `superseded`, `superseded, silent` or `left`; `unverified`
-        first when its heartbeat names a holder nothing signed vouches for."""
+        first when its heartbeat names a holder no certificate heard here backs."""
         if seen.leave_at is not None and seen.last_heard <= seen.leave_at:
             return "left"  # nothing heard since its LEAVE
         parts = ["unverified"] if seen.unverified else []
