@@ -93,13 +93,6 @@ class Ears:
             return self._unmeasured_level(silence)
         return link.level(silence)
 
-    def level_now(self, robot: int, now: float) -> float:
-        """`level` for `robot`'s silence since its last slot heartbeat we heard."""
-        link = self._links.get(robot)
-        if link is None or link.last is None:
-            return LEVEL_MAX
-        return self.level(robot, now - link.last)
-
     def _unmeasured_level(self, silence: float) -> float:
         """The level of a silence on a link not measured yet: rising with each heartbeat
         missed, to `suspect_level` at `t_max_bursty` (its patience), so the doubts sent
