@@ -203,8 +203,8 @@ class Episode(Proofs):
             if not mine:
                 # Its own "warning" is a frame of its own, so the certificate can carry it.
                 self._record_evidence(f, self._robot_id, w.suspect, w.epoch,
-                                      self._sign_only(wire.Warn(w.suspect, w.function,
-                                                                w.epoch)))
+                                      self._next_frame(wire.Warn(w.suspect, w.function,
+                                                                 w.epoch)))
             count = votes.add(self._robot_id, w.suspect, w.epoch, now)
             if not mine:
                 self._emit(ev.Vote(subject=w.suspect, function=f, from_=self._robot_id,

@@ -404,7 +404,7 @@ class EvidenceStore:
             if failed is None:
                 failed = said[1]
             if said[1] == failed:
-                self.record(f, said[0], said[1], said[2], bytes(raw), 0)
+                self.record(f, said[0], said[1], said[2], raw, 0)
         if failed is None or f not in self._plan.functions or epoch < 1:
             return False
         self.took_over(f, failed, epoch - 1, epoch)

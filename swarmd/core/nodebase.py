@@ -143,21 +143,18 @@ class NodeBase:
 
     # ------------------------------------------------------------------ plumbing
     def _send(self, msg: wire.Message) -> bytes:
-        data = self._next_frame(msg, self._keys[0] if self._keys else None)
+        data = self._next_frame(msg)
         self._pending.append(Broadcast(data))
         self._frames_out += 1
         return data
 
-    def _sign_only(self, msg: wire.Message) -> bytes:
-        """A frame of this robot for a certificate, not broadcast by itself: signed per
+    def _next_frame(self, msg: wire.Message) -> bytes:
+        """`msg` as our next frame, not broadcast by itself (`_send` broadcasts it; a
+        certificate may carry it): every frame we make takes the next seq. Signed per
         robot, tagged with a shared key."""
-        return self._next_frame(msg, self._keys[0] if self._keys else None)
-
-    def _next_frame(self, msg: wire.Message, key: bytes | None) -> bytes:
-        """`msg` as our next frame: every frame we make takes the next seq."""
         self._seq = min(self._seq + 1, wire.SEQ_MAX)
         frame = wire.Frame(self._plan.swarm_id, self._robot_id, self._seq, msg)
-        return wire.encode(frame, key, self._signer)
+        return wire.encode(frame, self._keys[0] if self._keys else None, self._signer)
 
     def _emit(self, event: Event) -> None:
         self._pending.append(event)

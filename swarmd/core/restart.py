@@ -101,7 +101,7 @@ class Restart(Hearing):
         if failed is not None:
             # A hold resumed at a takeover's epoch: its CLAIM went down with the robot;
             # made again, so the proof we show is whole (`_show`).
-            claim = self._sign_only(wire.Claim(failed, self._plan.slot(f), epoch))
+            claim = self._next_frame(wire.Claim(failed, self._plan.slot(f), epoch))
             self._ev.keep_claim(f, self._robot_id, epoch, claim)
         self._emit(ev.Started(role=ev.RoleName.ACTIVE, function=f))
         self._become_holder(Trigger.REJOIN, f, epoch, now)

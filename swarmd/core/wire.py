@@ -224,8 +224,9 @@ class Frame:
     seq: int
     msg: Message
     raw: bytes = field(default=b"", compare=False, repr=False)
-    """The bytes it was decoded from, for a frame signed with its sender's own key
-    (a takeover's certificate relays them); empty otherwise."""
+    """The bytes it was decoded from, for a WARN, CLAIM, LEAVE or REFUTE (`STRONG`, in
+    every auth mode: a takeover's certificate relays them) and a signed anchor; empty
+    otherwise."""
 
 
 def _type_of(msg: Message) -> MsgType:
