@@ -96,7 +96,9 @@ class Hearing(Episode):
     def _older_beat(self, f: str, sender: int, hb: wire.Heartbeat, known: Holder,
                     now: float) -> None:
         """A heartbeat for f older than our view of it (`known`): its sender missed a
-        takeover, or lost a race at the same epoch; show it what it missed."""
+        takeover, or lost a race at the same epoch; show it what it missed. If it is the
+        robot our view names, behind on its own entry, it is alive all the same: heard
+        as f's holder."""
         # A stale holder (e.g. back from a pause): if it is our slot, answer at once
         # so it hears the newer epoch and fences itself (rule 2) within a frame.
         if self._holds(f):
@@ -111,13 +113,22 @@ class Hearing(Episode):
         # Else a takeover it missed whose new holder may be gone: whoever certified it
         # shows the stale holder the evidence against it (it fences itself, or refutes
         # and keeps its slot everywhere).
-        elif self._show(f, now) and sender == known.robot \
-                and self._ev.reasserted(f, sender, known.epoch) is not None:
-            # Its own hold, below the reassertion our view holds: it refuted a recorded
-            # takeover that we took before its word reached us and did not reassert
-            # (DESIGN, "Every proof is bound to its run"). A doubt (no standby counts
-            # it) tells it so; on our next relay it reasserts.
-            self._send(wire.Warn(sender, hb.function, known.epoch, 0))
+        else:
+            if sender == known.robot:
+                # Its own hold below the entry naming it here (its reassertion, made of
+                # its refutes, which reached us before it learnt it): it executes f and
+                # is alive, so its watchdog is fed as by a heartbeat at the entry (rule
+                # 4). A watchdog watches the robot the entry names, at whatever epoch it
+                # heartbeats; otherwise its watchers would suspect a live holder T_max
+                # later, the very time our next relay below brings it forward.
+                self._holder_heard(f, sender, hb.epoch, known, now)
+            if self._show(f, now) and sender == known.robot \
+                    and self._ev.reasserted(f, sender, known.epoch) is not None:
+                # Its own hold, below the reassertion our view holds: it refuted a
+                # recorded takeover that we took before its word reached us and did not
+                # reassert (DESIGN, "Every proof is bound to its run"). A doubt (no
+                # standby counts it) tells it so; on our next relay it reasserts.
+                self._send(wire.Warn(sender, hb.function, known.epoch, 0))
 
     def _unproven_beat(self, f: str | None, hb: wire.Heartbeat, reason: str,
                        now: float) -> None:

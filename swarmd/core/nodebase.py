@@ -187,13 +187,21 @@ class NodeBase:
         it named."""
         if isinstance(msg, wire.Leave) and sender != self._robot_id \
                 and not self._words.knows(sender) \
-                and now - self._start_time < self._params.startup_grace:
+                and now - self._start_time < self._params.startup_grace \
+                and not self._words.slot_above(msg.function, msg.epoch):
             # Within our start-up grace we may not have heard its word yet (per robot an
             # anchor comes every `anchor_every`, half the grace): its LEAVE cannot be
             # judged, and a recorded takeover it backs, taken here alone, would move the
             # slot's epoch everywhere in the end (the holder's reassertion). After the
             # grace, a robot we never heard is dead or cut off, and its LEAVE (relayed
-            # with the takeover it backs) counts. Our own LEAVE is no word to wait for:
+            # with the takeover it backs) counts. So it does within the grace once a
+            # robot's own word (authenticated, `words.py`) holds the slot above the
+            # LEAVE's entry: epochs start from 0 in every run, so this run is past that
+            # entry already and the LEAVE moves it nowhere it has not been. That is a
+            # robot restarted without its state file as the plan's holder of a slot
+            # handed over twice since: the new holder's proof rests on the LEAVE of a
+            # robot gone, and waiting the grace for that robot's word would leave two
+            # executors for the whole grace. Our own LEAVE is no word to wait for:
             # from before this start, it is refuted at once if we hold its entry
             # (`Episode._record_evidence`), rather than held off for the grace while
             # the takeover it backs executes beside us.

@@ -89,6 +89,10 @@ class LatestWords:
         """Has `sender` heartbeat holding `slot` at an epoch above `epoch`?"""
         return self._top.get((sender, slot), -1) > epoch
 
+    def slot_above(self, slot: int, epoch: int) -> bool:
+        """Has any robot heartbeat holding `slot` at an epoch above `epoch`?"""
+        return any(s == slot and e > epoch for (_, s), e in self._top.items())
+
     def forget(self, senders: Iterable[int]) -> None:
         """These robots' word is no longer believed (revoked: `Node.revoke`)."""
         gone = set(senders)
