@@ -107,14 +107,16 @@ def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
     """The swarm and schedule of one seed. `dense`: 4-8 faults within 1.5 s, mostly on
     neighbours (clustered failures). `wide` (1, or True): the same draw, then one or two
     compound link faults (`WIDE_KINDS`, `_draw_compound`) on top; 2 (`--wider`): drawn
-    from `WIDER_KINDS`; 3 (`--widest`): from `WIDEST_KINDS`. A seed drawn without it
-    replays exactly as it always did, and a wide (wider) seed as it did before the wider
-    (widest) draw existed."""
+    from `WIDER_KINDS`; 3 (`--widest`): from `WIDEST_KINDS`; 4 (`--wiped`): a wiped
+    restart (`WIPED_KIND`) and up to one of `WIDEST_KINDS`. A seed drawn without it
+    replays exactly as it always did, and a wide (wider, widest) seed as it did before
+    the wider (widest, wiped) draw existed."""
     case = _draw_classic(seed, max_robots, dense)
     if not wide:
         return case
     kinds = (WIDE_KINDS, WIDER_KINDS, WIDEST_KINDS)[min(wide, 3) - 1]
-    return _widen(case, random.Random(f"wide-{seed}"), kinds)
+    return _widen(case, random.Random(f"wide-{seed}"), kinds,
+                  WIPED_KIND if wide >= 4 else None)
 
 
 def _draw_classic(seed: int, max_robots: int, dense: bool) -> Case:
@@ -206,13 +208,24 @@ WIDEST_KINDS = (*WIDER_KINDS, "flapping", "handover-while-cut", "pause-while-cut
   file, its certificate and its claim signed again, while the old one may come back)."""
 
 
-def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS) -> Case:
-    """`case` with one or two compound faults of `kinds` drawn by `rng` on top."""
+WIPED_KIND = "wiped-restart"
+"""`--wiped`: every case holds one, with up to one of the widest kinds beside it:
+- `wiped-restart`: a robot (a holder, seven times in ten) crashes, leaves, turns
+  unhealthy or is paused, and comes back 0.2-6 s later without its state file
+  (`restart:R@T:wiped`: a wiped or replaced companion computer, as at a first start);
+  three times in ten it is restarted wiped once more 0.2-2 s after that."""
+
+
+def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS,
+           always: str | None = None) -> Case:
+    """`case` with one or two compound faults of `kinds` drawn by `rng` on top (with
+    `always`: that kind, and none or one of `kinds` beside it)."""
     plan, ids = case.plan, sorted(case.plan.robots)
     faults = list(case.faults)
     loss, model, burst = case.loss, case.loss_model, case.burst_len
     base = min(f.at for f in faults)
-    drawn = tuple(rng.sample(kinds, rng.randint(1, 2)))
+    drawn = tuple(rng.sample(kinds, rng.randint(1, 2))) if always is None else \
+        (always, *rng.sample(kinds, rng.randint(0, 1)))
     for kind in drawn:
         at = round(base + rng.uniform(0.0, 2.0), 3)
         if kind == "burst-40":
@@ -260,6 +273,8 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
         return _holder_inside_a_cut(rng, plan, ids, kind, at, length)
     if kind in ("pause-claimant", "restart-new-holder"):
         return _standby_after_a_failure(rng, plan, ids, kind, at)
+    if kind == WIPED_KIND:
+        return _wiped_restart(rng, plan, ids, at)
     if kind == "fade-restart":
         r = rng.choice(ids)
         back = round(at + rng.uniform(0.1, 1.5), 3)
@@ -359,6 +374,23 @@ def _standby_after_a_failure(rng: random.Random, plan: SwarmPlan, ids: list[int]
     return [fail, Fault(FaultKind.RESTART, back, (standby,))]
 
 
+def _wiped_restart(rng: random.Random, plan: SwarmPlan, ids: list[int],
+                   at: float) -> list[Fault]:
+    """`wiped-restart` (`WIPED_KIND`) from `at`."""
+    actives = [r for r in ids if plan.robots[r].function is not None]
+    r = rng.choice(actives) if rng.random() < 0.7 else rng.choice(ids)
+    how = rng.choice((FaultKind.CRASH, FaultKind.LEAVE, FaultKind.UNHEALTHY,
+                      FaultKind.PAUSE))
+    fail = Fault(how, at, (r,), round(rng.uniform(0.5, 4.0), 2)) \
+        if how is FaultKind.PAUSE else Fault(how, at, (r,))
+    back = round(at + rng.uniform(0.2, 6.0), 3)
+    out = [fail, Fault(FaultKind.RESTART, back, (r,), wiped=True)]
+    if rng.random() < 0.3:
+        out.append(Fault(FaultKind.RESTART, round(back + rng.uniform(0.2, 2.0), 3), (r,),
+                         wiped=True))
+    return out
+
+
 def _deaf_takeover(rng: random.Random, plan: SwarmPlan, ids: list[int], at: float,
                    length: float) -> list[Fault]:
     """A holder crashes at `at`; from just before, its standby is deaf to its watchers,
@@ -422,6 +454,8 @@ def wide_kinds(case: Case) -> list[str]:
     if any(b.robots[0] in by and bound <= b.at - t <= bound + 1.5
            for b in restarts for by, t in failed):
         out.append("restart-new-holder")
+    if any(f.wiped for f in case.faults):
+        out.append(WIPED_KIND)
     return out
 
 
@@ -456,7 +490,7 @@ def run_case(case: Case, auth: str | None = None) -> VirtualResult:
                        loss_model=case.loss_model, burst_len=case.burst_len)
 
 
-WIDE_FLAGS = ("", " --wide", " --wider", " --widest")
+WIDE_FLAGS = ("", " --wide", " --wider", " --widest", " --wiped")
 """The flag of each `wide` level, for the replay command a violation prints."""
 
 DRAWN: collections.Counter[str] = collections.Counter()
@@ -592,6 +626,10 @@ def main() -> None:
                     help="--wider, and a robot's link flapping, a holder leaving or "
                          "turning unhealthy inside a cut, a holder paused while it cannot "
                          "hear some neighbours (a --wider seed replays as before)")
+    ap.add_argument("--wiped", action="store_const", const=4, dest="wide",
+                    help="a robot restarted without its state file in every case (after "
+                         "a crash, a leave, a fault or a pause; at times twice), and up "
+                         "to one of the --widest kinds beside it")
     a = ap.parse_args()
     global AUTH
     AUTH = a.auth

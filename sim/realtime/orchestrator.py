@@ -94,6 +94,7 @@ from sim.realtime.robotfiles import (
     robot_ids,
     sign_for_run,
     start_medium,
+    state_dir,
     write_robot_file,
 )
 from sim.realtime.schedule import FaultSchedule
@@ -378,6 +379,8 @@ class Orchestrator:
                 if proc is not None:
                     self._kill_proc(proc)  # a restart of a live robot is a crash first
                     self.retired.append(proc)
+                if fault.wiped:  # its state directory emptied: it starts as at first
+                    shutil.rmtree(state_dir(self.run_dir, fault.robot), ignore_errors=True)
                 self.procs[fault.robot] = self._spawn(fault.robot, self.t0)
             case FaultKind.LEAVE | FaultKind.UNHEALTHY | FaultKind.LIAR | FaultKind.MOTOR:
                 if proc is not None and proc.alive:

@@ -52,6 +52,12 @@ def robot_ids(swarm_path: Path) -> tuple[int, ...]:
     return tuple(sorted(int(r.id) for r in cfg.robots))
 
 
+def state_dir(run_dir: Path, robot: int) -> Path:
+    """Where robot `robot` of a run keeps its state file (`restart:R@T:wiped` empties
+    it)."""
+    return run_dir / "state" / str(robot)
+
+
 def write_robot_file(
     run_dir: Path, swarm_path: Path, robot: int, *, group: str, port: int,
     interface: str = DEFAULT_INTERFACE, transport: dict[str, Any] | None = None,
@@ -68,7 +74,7 @@ def write_robot_file(
                                    "loopback": True},
         "link": link or {"kind": "none"},
         "event_log": None,
-        "state_dir": str(run_dir / "state" / str(robot)),
+        "state_dir": str(state_dir(run_dir, robot)),
         "handover_on_stop": True,
     }
     if identity_file is not None:

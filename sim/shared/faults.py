@@ -51,6 +51,8 @@ KINDS: tuple[str, ...] = tuple(k.value for k in FaultKind)
 """The kinds' words, in the order `--help` and the docs list them."""
 ATTACKS = ("epoch", "seq", "ahead", "claim", "warn", "replay")
 """What a `forge` fault sends (module docstring)."""
+WIPED = "wiped"
+"""What follows a restart's time when the robot comes back without its state file."""
 _DURATION_KINDS = {FaultKind.PAUSE, FaultKind.PARTITION, FaultKind.FADE, FaultKind.DEAF}
 LINK_KINDS = (FaultKind.PARTITION, FaultKind.FADE, FaultKind.DEAF)
 """Faults that lose frames on links rather than stop robots: the checker judges the
@@ -76,6 +78,9 @@ class Fault:
     the second; the other way works."""
     attack: str = ""
     """For `forge`: one of `ATTACKS`."""
+    wiped: bool = False
+    """For `restart` (`restart:R@T:wiped`): the robot comes back without its state file,
+    as at a first start (it knows nothing of the swarm's past, not even its own hold)."""
     origin: str | None = field(default=None, compare=False)
     """For one part of a fault on several robots (`split`): the SPEC the user gave."""
 
@@ -132,6 +137,8 @@ class Fault:
         tail = f"+{_num(self.duration)}" if self.duration is not None else ""
         if self.attack:
             tail += f":{self.attack}"
+        if self.wiped:
+            tail += f":{WIPED}"
         who = ",".join(map(str, self.robots))
         return f"{self.kind}:{who}@{_num(self.at)}{tail}"
 
@@ -172,7 +179,7 @@ _ROBOT = re.compile(r"[0-9]+")
 
 _FORMS = {
     "crash": "crash:R@T or crash:R1,R2@T",
-    "restart": "restart:R@T or restart:R1,R2@T",
+    "restart": "restart:R@T or restart:R1,R2@T or restart:R@T:wiped",
     "pause": "pause:R@T+D or pause:R1,R2@T+D",
     "partition": "partition:1,2|3,4@T+D or partition:1,2>3,4@T+D",
     "fade": "fade:R@T+D or fade:R1,R2@T+D",
@@ -188,7 +195,8 @@ _FORMS = {
 WHAT = {
     "crash": "robot R dies at T (real time: SIGKILL of its process)",
     "restart": "robot R comes back at T: a new process (node) on its persisted state, "
-               "usually after a crash",
+               "usually after a crash; with ':wiped', without its state file (a wiped "
+               "or replaced companion computer), as at a first start",
     "pause": "robot R freezes at T for D seconds (SIGSTOP, then SIGCONT)",
     "partition": "the groups stop hearing each other from T for D seconds; robots named "
                  "nowhere stay in the first group; with '>' (partition:1,2>3,4) one way "
@@ -264,6 +272,8 @@ def parse_fault(spec: str) -> Fault:
     if not at_sign:
         raise bad("no '@T' (the time the fault starts)")
     when, attack = _split_attack(kind, when, bad)
+    wiped = attack == WIPED
+    attack = "" if wiped else attack
     senders: tuple[int, ...] = ()
     if kind is FaultKind.DEAF:
         target, colon3, heard = who.partition(":")
@@ -274,7 +284,8 @@ def parse_fault(spec: str) -> Fault:
     at, dur = _times(kind, when, bad)
     if kind is FaultKind.PARTITION:
         return _partition(who, at, dur, bad)
-    return _targeted(kind, who, at, dur, senders, attack, bad)
+    fault = _targeted(kind, who, at, dur, senders, attack, bad)
+    return replace(fault, wiped=True) if wiped else fault
 
 
 def _kind_of(word: str, shown: str) -> FaultKind:
@@ -289,14 +300,19 @@ def _kind_of(word: str, shown: str) -> FaultKind:
 
 
 def _split_attack(kind: FaultKind, when: str, bad: _Bad) -> tuple[str, str]:
-    """The part after '@' without a forge's `:ATTACK`, and that attack ("" for the
-    other kinds, which take no ':' after their time)."""
+    """The part after '@' without a forge's `:ATTACK` or a restart's `:wiped`, and
+    that word ("" for the other kinds, which take no ':' after their time)."""
     attack = ""
     if kind is FaultKind.FORGE:
         when, colon2, attack = when.partition(":")
         attack = attack.strip()
         if not colon2 or attack not in ATTACKS:
             raise bad(f"unknown or missing attack {attack!r}")
+    elif kind is FaultKind.RESTART and ":" in when:
+        when, _, attack = when.partition(":")
+        attack = attack.strip()
+        if attack != WIPED:
+            raise bad(f"a restart takes only ':{WIPED}' after its time, got {attack!r}")
     elif ":" in when:
         raise bad(f"a {kind} takes no ':' after its time")
     return when, attack

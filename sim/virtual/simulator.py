@@ -476,10 +476,13 @@ class VirtualSwarm:
                 self._kill(r)
             case FaultKind.RESTART, _:
                 r.alive, r.paused, r.buffered = True, False, []
+                # Wiped: no state file, as at a first start (the daemon passes no
+                # `restored`); its seq still starts above the old run's, as the real
+                # daemon's does from the wall clock ("Sequence numbers").
+                restored = None if fault.wiped else (r.persisted or Restored())
                 r.node = Node(rid, self.plan, self.params, t, keys=self.keys,
                               identity=self.identities.get(rid),
-                              seq_start=r.seq_high + 1_000_000,
-                              restored=r.persisted or Restored())
+                              seq_start=r.seq_high + 1_000_000, restored=restored)
                 r.timer_at = None
                 self._arm(rid)
             case FaultKind.PAUSE, "begin":
