@@ -222,12 +222,15 @@ class EvidenceStore:
         """The holder whose signed word voids the certified takeover (claimant, epoch) of
         f, or None: the robot it replaced, which signed a REFUTE of that very claim
         (`REFUTE(claimant, f, epoch, seq)`, the claim's own epoch: it was holding f, and
-        not stalled, when the claim reached it; rule 4). One signed frame decides it, so
-        every robot that holds that frame and the certificate judges alike, whichever
-        warnings each happens to hold. A takeover backed by the holder's own LEAVE is
-        void only by the holder's REFUTE of that LEAVE (module doc: a recording of
-        another run), never by a refute of the claim: a holder that left and came back
-        to its old entry (a restart) does not get its slot back by refuting."""
+        not stalled, when the claim reached it; rule 4), or, for a takeover its own
+        LEAVE backs, its REFUTE of that LEAVE (module doc: a recording of another run).
+        One signed frame decides it, so every robot that holds that frame and the
+        certificate judges alike, whichever backers each happens to hold: the refute of
+        the claim voids it whether or not a robot holds the LEAVE too. Only a robot that
+        holds the entry the LEAVE left refutes the claim, and within one run a robot
+        never holds that entry again: it came back without its state file, as the
+        plan's holder (a robot restarted on its state file after a LEAVE holds nothing,
+        and rejoins nothing)."""
         return None if self._voiding(f, claimant, epoch) is None else \
             self._certified[f][(claimant, epoch)][0]
 
@@ -239,11 +242,13 @@ class EvidenceStore:
             return None
         failed, backers = entry
         refutes = self._refutes.get(f, {})
+        got = refutes.get((failed, epoch), {}).get(claimant)
+        if got is not None:
+            return got[1]
         if failed in backers:  # backed by its LEAVE, which only failed itself refutes
             got = refutes.get((failed, epoch - 1), {}).get(failed)
             return got[1] if got is not None and got[0] >= backers[failed] else None
-        got = refutes.get((failed, epoch), {}).get(claimant)
-        return got[1] if got is not None else None
+        return None
 
     def reasserted(self, f: str, holder: int, epoch: int) -> int | None:
         """Is (holder, epoch) of f the reassertion of `holder`'s hold at `epoch - 2` over a

@@ -114,14 +114,19 @@ class Hearing(Episode):
         # shows the stale holder the evidence against it (it fences itself, or refutes
         # and keeps its slot everywhere).
         else:
-            if sender == known.robot:
+            watch = self._watches.get(f)
+            if sender == known.robot and watch is not None \
+                    and watch.heard(now, self._ears.patience(sender)):
                 # Its own hold below the entry naming it here (its reassertion, made of
                 # its refutes, which reached us before it learnt it): it executes f and
-                # is alive, so its watchdog is fed as by a heartbeat at the entry (rule
+                # is alive, so the watchdog is fed as by a heartbeat at the entry (rule
                 # 4). A watchdog watches the robot the entry names, at whatever epoch it
-                # heartbeats; otherwise its watchers would suspect a live holder T_max
-                # later, the very time our next relay below brings it forward.
-                self._holder_heard(f, sender, hb.epoch, known, now)
+                # heartbeats; otherwise we would suspect a live holder T_max later, the
+                # very time our next relay below brings it forward. Nothing else moves:
+                # a claim against the entry already went out with its certificate, and
+                # a holder behind its entry refutes no warning about it. A suspicion it
+                # ends is logged as refuted, as `_holder_heard` logs one.
+                self._emit(ev.Refute(subject=sender, function=f))
             if self._show(f, now) and sender == known.robot \
                     and self._ev.reasserted(f, sender, known.epoch) is not None:
                 # Its own hold, below the reassertion our view holds: it refuted a
