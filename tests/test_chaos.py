@@ -103,10 +103,12 @@ def test_the_classic_draw_is_unchanged_so_old_seeds_replay() -> None:
     assert _draw_digest(60) == CLASSIC_FINGERPRINT
 
 
-WIDE_FINGERPRINTS = {1: "23e2479c8b33b945", 2: "73818875aab18f0d", 3: "54584970f6e9d071"}
-"""Digests of the `--wide`, `--wider` and `--widest` draws (seeds 0-99 of up to 12
-robots, plain and `--dense`): the wide and wider ones as they were before `--widest`
-existed, the widest one as docs/sim.md's figures were measured. A seed run once replays."""
+WIDE_FINGERPRINTS = {1: "23e2479c8b33b945", 2: "73818875aab18f0d", 3: "54584970f6e9d071",
+                     4: "b667ba492153dd6a"}
+"""Digests of the `--wide`, `--wider`, `--widest` and `--wiped` draws (seeds 0-99 of up
+to 12 robots, plain and `--dense`): the wide and wider ones as they were before
+`--widest` existed, the widest and wiped ones as docs/sim.md's figures were measured. A
+seed run once replays."""
 
 
 @pytest.mark.parametrize("wide", sorted(WIDE_FINGERPRINTS))
@@ -217,6 +219,33 @@ def test_the_widest_draw_flaps_links_and_fails_holders_inside_cuts() -> None:
     assert alone == set(bench.WIDEST_KINDS) - set(bench.WIDER_KINDS)  # each shape checked
 
 
+def test_the_wiped_draw_restarts_a_robot_without_its_state_file() -> None:
+    """`--wiped`: every case holds a robot that crashes, leaves, turns faulty or is paused
+    and comes back without its state file (`restart:R@T:wiped`), at times twice, beside
+    up to one of the widest kinds; the classic draw of the seed stays under it."""
+    bench = _bench()
+    hows: set[str] = set()
+    twice = 0
+    for seed in range(80):
+        case = bench.draw_case(seed, 12, wide=4)
+        assert case == bench.draw_case(seed, 12, wide=4)
+        assert case.compound[0] == bench.WIPED_KIND and len(case.compound) <= 2
+        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
+        classic = bench.draw_case(seed, 12)
+        assert case.faults[:len(classic.faults)] == classic.faults
+        for f in case.faults:
+            assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
+        wiped = [f for f in case.faults if f.wiped]
+        assert wiped and all(f.kind == "restart" for f in wiped)
+        robot = wiped[0].robots[0]
+        assert all(f.robots == (robot,) for f in wiped)
+        fail = next(f for f in case.faults[len(classic.faults):] if f.robots == (robot,))
+        assert fail.kind in ("crash", "leave", "unhealthy", "pause") and fail.at < wiped[0].at
+        hows.add(fail.kind)
+        twice += len(wiped) == 2
+    assert hows == {"crash", "leave", "unhealthy", "pause"} and twice >= 10
+
+
 WIDE_FIXED: tuple[int, ...] = (21,)
 """Wide seeds (`python bench/bench_chaos.py --seed N --wide --verbose`, 3-60 robots) that
 broke an invariant on the core before the slot table (swarmd/core/slots.py) and run
@@ -288,6 +317,33 @@ def test_wide_seeds_fixed_run_clean_in_every_mode(auth: str) -> None:
 def test_wide_small_seeds_run_clean_in_every_mode(auth: str) -> None:
     bench = _bench()
     found = bench.chaos(WIDE_SMALL, max_robots=12, verbose=False, auth=auth, wide=True)
+    assert_clean(found)
+
+
+WIPED: tuple[int, ...] = (810005, 810087, 810135, 810373, 810463)
+"""Seeds of the `--wiped` draw (`python bench/bench_chaos.py --seed N --wiped --max-robots
+12 --verbose`) that broke an invariant per robot on the core before it, one a shape of
+a robot back without its state file as the plan's holder of a slot taken over meanwhile;
+clean in every mode since (`test_wiped_seeds_run_clean_in_every_mode`):
+- 810005: its REFUTE of its own recorded `LEAVE` made the others move to its reassertion
+  before it learnt it; it heartbeat its hold below that entry, its watchers heard no
+  heartbeat at the entry, suspected it T_max later and a claim fenced it with nobody to
+  take over (`fenced_without_takeover`). The heartbeat of the robot an entry names now
+  feeds its watchdog at whatever epoch it names;
+- 810087, 810373: the slot was handed over twice while it was gone, and the new holder's
+  proof rests on the `LEAVE` of a robot it never heard, which it refused for its whole
+  start-up grace: two executors for 2.1 s and 2.0 s (bounds 1.2 s and 1.7 s). Within the
+  grace such a `LEAVE` now counts once a robot's own word holds the slot above it;
+- 810135, 810463: it refuted the takeover's claim, which voided it where robots held
+  only the warnings behind it, while robots that also held its old `LEAVE` judged the
+  takeover by the `LEAVE` alone (not refuted): two executors to the end of the run (8 s,
+  9.2 s). The REFUTE of the claim now voids it whatever else backs it."""
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_wiped_seeds_run_clean_in_every_mode(auth: str) -> None:
+    bench = _bench()
+    found = bench.chaos(WIPED, max_robots=12, verbose=False, auth=auth, wide=4)
     assert_clean(found)
 
 

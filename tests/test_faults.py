@@ -30,6 +30,8 @@ PAPER_IDS = {1, 2, 3, 4, 5, 6}
 @pytest.mark.parametrize(("spec", "fault"), [
     ("crash:2@3", Fault(FaultKind.CRASH, 3.0, (2,))),
     ("restart:2@7.5", Fault(FaultKind.RESTART, 7.5, (2,))),
+    ("restart:2@7.5:wiped", Fault(FaultKind.RESTART, 7.5, (2,), wiped=True)),
+    ("restart:2,3@1: wiped", Fault(FaultKind.RESTART, 1.0, (2, 3), wiped=True)),
     ("pause:3@2+1.5", Fault(FaultKind.PAUSE, 2.0, (3,), 1.5)),
     ("partition:1,2|3,4@2+3",
      Fault(FaultKind.PARTITION, 2.0, (1, 2, 3, 4), 3.0, ((1, 2), (3, 4)))),
@@ -103,6 +105,9 @@ def test_parse_fault_ignores_blanks_around_parts(spec: str) -> None:
     ("partition:1,,2|3@2+3", "robot id is missing"),
     ("partition:1,2|@1+1", "robot id is missing"),
     ("partition:1|1@2+3", "robot 1 is named twice"),
+    ("restart:2@3:wipe", "a restart takes only ':wiped' after its time"),
+    ("crash:2@3:wiped", "a crash takes no ':' after its time"),
+    ("restart:2@3+1:wiped", "takes no duration"),
 ])
 def test_parse_fault_names_what_is_wrong(spec: str, what: str) -> None:
     with pytest.raises(FaultSpecError) as info:
@@ -185,7 +190,8 @@ def _faults(draw: st.DrawFn) -> Fault:
     n = draw(st.integers(2 if kind == "collide" else 1, 4))
     attack = draw(st.sampled_from(ATTACKS)) if kind == "forge" else ""
     robots = tuple(draw(st.lists(_ids, min_size=n, max_size=n, unique=True)))
-    return Fault(FaultKind(kind), at, robots, dur, attack=attack)
+    wiped = kind == "restart" and draw(st.booleans())
+    return Fault(FaultKind(kind), at, robots, dur, attack=attack, wiped=wiped)
 
 
 @given(_faults())
@@ -289,3 +295,25 @@ def test_link_faults_cut_one_way(spec: str, senders: set[int],
 def test_bad_link_faults_say_what_is_wrong(spec: str, what: str) -> None:
     with pytest.raises(FaultSpecError, match=re.escape(what)):
         parse_fault(spec)
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_virtual_wiped_restart_starts_without_the_state_file(
+        paper: tuple[SwarmPlan, Params], auth: str) -> None:
+    """`restart:2@T:wiped`: robot 2 comes back as at a first start, the plan's holder of
+    f2 at epoch 0, and the takeover of its slot (by 6, after its crash) is refuted by
+    its live hold (DESIGN "Every proof is bound to its run"): 2 executes f2 again at the
+    reassertion's epoch, 6 is fenced, and the run breaks no invariant. Restarted on its
+    state file instead, it rejoins and stays a standby beside 6."""
+    plan, params = paper
+    crash = parse_fault("crash:2@3")
+    wiped = run_virtual(plan, params, duration=10, auth=auth,
+                        faults=[crash, parse_fault("restart:2@6:wiped")])
+    kept = run_virtual(plan, params, duration=10, auth=auth,
+                       faults=[crash, parse_fault("restart:2@6")])
+    assert wiped.violations == [] and kept.violations == []
+    assert [e["spec"] for e in wiped.events if e["event"] == "fault"] == [
+        "crash:2@3", "restart:2@6:wiped"]
+    assert wiped.holders()["f2"] == [2] and wiped.final[2] == ("active", "f2", 2)
+    assert [e["robot"] for e in wiped.events if e["event"] == "fenced"] == [6]
+    assert kept.holders()["f2"] == [6] and kept.final[2][0] == "standby"

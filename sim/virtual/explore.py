@@ -183,6 +183,12 @@ def fault_sets(plan: SwarmPlan, params: Params) -> Iterator[tuple[str, tuple[Fau
     yield "restart", (Fault(FaultKind.RESTART, AT, (1,)),)
     yield "crash-restart", (Fault(FaultKind.CRASH, AT, (1,)),
                             Fault(FaultKind.RESTART, AT + tb + 0.5, (1,)))
+    # Back without its state file (`restart:1@T:wiped`), as the plan's holder of f1,
+    # after its slot was taken over: on its crash's warnings, or on its own LEAVE.
+    yield "crash-wiped", (Fault(FaultKind.CRASH, AT, (1,)),
+                          Fault(FaultKind.RESTART, AT + tb + 0.5, (1,), wiped=True))
+    yield "leave-wiped", (Fault(FaultKind.LEAVE, AT, (1,)),
+                          Fault(FaultKind.RESTART, AT + tb + 0.5, (1,), wiped=True))
     yield "no-standby-left", (Fault(FaultKind.CRASH, AT, (1, sb)),)  # rule 8: an alert
     yield "fade", (Fault(FaultKind.FADE, AT, (1,), tb + 0.5),)
     yield "oneway", (Fault(FaultKind.PARTITION, AT, (1, *rest), tb + 0.5, ((1,), rest),

@@ -292,8 +292,10 @@ class World:
         if fault.kind is FaultKind.RESTART:
             restored, seq = self.persisted.get(rid, (Restored(), 0))
             # Above what it sent before, as the daemon's state file keeps it (the
-            # replay window of DESIGN section 2, "Sequence numbers").
-            self.nodes[rid] = self._node(rid, now, restored, seq + 1_000_000)
+            # replay window of DESIGN section 2, "Sequence numbers"); wiped, as at a
+            # first start, its seq from the wall clock is above it all the same.
+            self.nodes[rid] = self._node(rid, now, None if fault.wiped else restored,
+                                         seq + 1_000_000)
             for key in [k for k in self._views if k[0] == rid]:
                 del self._views[key]  # a new node: its file's views are judged on restore
 
