@@ -97,8 +97,8 @@ class Hearing(Episode):
                     now: float) -> None:
         """A heartbeat for f older than our view of it (`known`): its sender missed a
         takeover, or lost a race at the same epoch; show it what it missed. If it is the
-        robot our view names, behind on its own entry, it is alive all the same: heard
-        as f's holder."""
+        robot our view names, behind on its own entry, it is alive all the same: its
+        watchdog is fed."""
         # A stale holder (e.g. back from a pause): if it is our slot, answer at once
         # so it hears the newer epoch and fences itself (rule 2) within a frame.
         if self._holds(f):
