@@ -379,7 +379,7 @@ class Orchestrator:
                 if proc is not None:
                     self._kill_proc(proc)  # a restart of a live robot is a crash first
                     self.retired.append(proc)
-                if fault.wiped:  # its state directory emptied: it starts as at first
+                if fault.wiped:  # its state directory emptied: as at a first start
                     shutil.rmtree(state_dir(self.run_dir, fault.robot), ignore_errors=True)
                 self.procs[fault.robot] = self._spawn(fault.robot, self.t0)
             case FaultKind.LEAVE | FaultKind.UNHEALTHY | FaultKind.LIAR | FaultKind.MOTOR:
