@@ -13,6 +13,7 @@ import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -116,6 +117,18 @@ def test_the_wide_draws_are_unchanged_so_their_seeds_replay(wide: int) -> None:
     assert _draw_digest(12, wide) == WIDE_FINGERPRINTS[wide]
 
 
+def _wide_case(bench: ModuleType, seed: int, wide: int) -> Any:
+    """The case `seed` draws at `wide` level (up to 12 robots), with what every wide draw
+    promises: it replays, each compound kind it names has the shape `wide_kinds`
+    recognises, and each fault reads back from its SPEC and names robots of the swarm."""
+    case = bench.draw_case(seed, 12, wide=wide)
+    assert case == bench.draw_case(seed, 12, wide=wide)  # a wide seed replays
+    assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
+    for f in case.faults:
+        assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
+    return case
+
+
 def test_the_wide_draw_draws_every_compound_link_fault() -> None:
     """`--wide` adds overlapping one-way cuts, a robot muted while a group is cut, fades
     during restarts, deafness during a takeover and bursty loss up to 40 %, on top of
@@ -123,14 +136,11 @@ def test_the_wide_draw_draws_every_compound_link_fault() -> None:
     bench = _bench()
     drawn: set[str] = set()
     for seed in range(60):
-        case = bench.draw_case(seed, 12, wide=True)
-        assert case == bench.draw_case(seed, 12, wide=True)  # a wide seed replays
+        case = _wide_case(bench, seed, 1)
+        assert case == bench.draw_case(seed, 12, wide=True)  # `True` is level 1
         classic = bench.draw_case(seed, 12)
         assert case.faults[:len(classic.faults)] == classic.faults
         assert 1 <= len(case.compound) <= 2 and 0.0 <= case.loss <= 0.4
-        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
-        for f in case.faults:
-            assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
         assert sum(f.kind == "partition" and not f.oneway for f in case.faults) <= 1
         drawn.update(case.compound)
     assert drawn == set(bench.WIDE_KINDS)
@@ -144,10 +154,8 @@ def test_the_wider_draw_splits_the_swarm_in_groups_cut_both_ways() -> None:
     drawn: set[str] = set()
     alone = 0
     for seed in range(60):
-        case = bench.draw_case(seed, 12, wide=2)
-        assert case == bench.draw_case(seed, 12, wide=2)
+        case = _wide_case(bench, seed, 2)
         assert bench.draw_case(seed, 12, wide=1) == bench.draw_case(seed, 12, wide=True)
-        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
         drawn.update(case.compound)
         if case.compound != ("split-groups",):
             continue  # alone, so that its cuts are the only one-way cuts added
@@ -178,11 +186,7 @@ def test_the_widest_draw_flaps_links_and_fails_holders_inside_cuts() -> None:
     drawn: set[str] = set()
     alone: set[str] = set()
     for seed in range(120):
-        case = bench.draw_case(seed, 12, wide=3)
-        assert case == bench.draw_case(seed, 12, wide=3)
-        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
-        for f in case.faults:
-            assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
+        case = _wide_case(bench, seed, 3)
         drawn.update(case.compound)
         if len(case.compound) != 1 or case.compound[0] in bench.WIDER_KINDS:
             continue
@@ -227,14 +231,10 @@ def test_the_wiped_draw_restarts_a_robot_without_its_state_file() -> None:
     hows: set[str] = set()
     twice = 0
     for seed in range(80):
-        case = bench.draw_case(seed, 12, wide=4)
-        assert case == bench.draw_case(seed, 12, wide=4)
+        case = _wide_case(bench, seed, 4)
         assert case.compound[0] == bench.WIPED_KIND and len(case.compound) <= 2
-        assert set(case.compound) <= set(bench.wide_kinds(case)), case.describe()
         classic = bench.draw_case(seed, 12)
         assert case.faults[:len(classic.faults)] == classic.faults
-        for f in case.faults:
-            assert parse_fault(f.spec()) == f and set(f.robots) <= set(case.plan.robots)
         wiped = [f for f in case.faults if f.wiped]
         assert wiped and all(f.kind == "restart" for f in wiped)
         robot = wiped[0].robots[0]
