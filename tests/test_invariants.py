@@ -186,6 +186,43 @@ def test_two_liars_are_a_quorum_one_is_not(paper: tuple[SwarmPlan, Params]) -> N
     assert kinds(one) == [("false_takeover", 6)] and len(one.false_takeovers) == 1
 
 
+def test_a_claims_own_epoch_fences_without_a_takeover_only_with_two_liars(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Standby 6 claims f2 at epoch 1 on warnings about live robot 2, 2 is fenced on it,
+    # and 6 gives the claim up: f2 is orphaned until 2's watchers suspect 6. With 1 and
+    # 3 (f2's watchers) both lying, the claim's certificate is two insiders' quorum,
+    # which DESIGN does not claim to stop: excused as their false takeover is. With one
+    # liar it is the forged epoch invariant 6 names.
+    events = [{"t": 4.4, "robot": 6, "event": "claim", "subject": 2, "function": "f2",
+               "epoch": 1},
+              {"t": 4.5, "robot": 2, "event": "fenced", "function": "f2", "epoch": 1}]
+    assert kinds(judge(paper, ["liar:1@3", "liar:3@3"], events)) == []
+    assert kinds(judge(paper, ["liar:1@3"], events)) == [("fenced_without_takeover", 2)]
+    # Two liars excuse the claim's own epoch, not one that no claim named.
+    beyond = [events[0], {**events[1], "epoch": 3}]
+    assert kinds(judge(paper, ["liar:1@3", "liar:3@3"], beyond)) == [
+        ("fenced_without_takeover", 2)]
+
+
+def test_a_watcher_restarted_on_its_hold_judges_the_failure_on_a_new_link(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Robot 1 (f1, a watcher of f2) restarts at 3.0 s and rejoins f1, logging `started`
+    # only when its rejoin hold ends, after robot 2 crashed at 3.2 s. Its link to 2 is
+    # new, so its patience may be `t_max_bursty` (DESIGN "Detection"): the faded bound
+    # holds, and without the restart the configured one.
+    _, params = paper
+    rejoined = {"t": 3.0 + params.rejoin_hold, "robot": 1, "event": "started",
+                "role": "active", "function": "f1"}
+    checker = judge(paper, ["restart:1@3", "crash:2@3.2"], [rejoined])
+    assert checker.bounds.takeover_faded > checker.bounds.takeover + 0.3
+    took = takeover(3.2 + checker.bounds.takeover + 0.3, 6, "f2", 2)
+    assert kinds(judge(paper, ["restart:1@3", "crash:2@3.2"], [rejoined, took])) == []
+    assert kinds(judge(paper, ["crash:2@3.2"], [took])) == [("no_takeover", 2)]
+    late = takeover(3.2 + checker.bounds.takeover_faded + 0.1, 6, "f2", 2)
+    assert kinds(judge(paper, ["restart:1@3", "crash:2@3.2"], [rejoined, late])) == [
+        ("no_takeover_correlated", 2)]
+
+
 def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace(
         paper: tuple[SwarmPlan, Params]) -> None:
     # Standby 6 restarted at 2.9 s (logged `started` again at 3.0 s); robot 2 crashes at

@@ -52,7 +52,10 @@ Invariants (each violation names the time, robot and what went wrong):
    produced (`fenced_without_takeover`) was fenced by a forged or invented epoch, and
    its slot is orphaned (every robot now believes a holder that executes nothing); one
    epoch above a takeover or a claim is allowed: the reassertion of the holder it
-   replaces, whose refute voided it (DESIGN "Convergence");
+   replaces, whose refute voided it (DESIGN "Convergence"); so is a claim's own epoch
+   once two liars were at work, whose warnings certify it (the two-insider case of
+   invariant 3: the claim fences the holder, and if its claimant gives it up the slot
+   waits for its watchers to suspect that claimant);
 7. nobody is muted (`muted`, virtual simulator: `VirtualSwarm` judges it from the
    nodes, see `sim.virtual.simulator`): a live, healthy robot whose current frames some
    robot that should hear them has not accepted for ten heartbeat periods;
@@ -207,9 +210,10 @@ class Checker:
     false_suspicions: int = 0
     """`suspect` events about a healthy, reachable robot: loss, or a late machine."""
     started: set[int] = field(default_factory=set)
-    started_at: dict[int, list[float]] = field(default_factory=dict)
-    """robot -> the times its node logged `started` (a restart adds one)."""
     """Robots whose node has logged `started` (since their last crash or restart)."""
+    started_at: dict[int, list[float]] = field(default_factory=dict)
+    """robot -> the times its node logged `started`, and the times it was restarted (its
+    node listens from then on, before a rejoin's `started`)."""
     epochs: set[tuple[str, int]] = field(default_factory=set)
     """(function, epoch) pairs some takeover produced (invariant 6)."""
     claimed: set[tuple[str, int]] = field(default_factory=set)
@@ -289,7 +293,10 @@ class Checker:
         elif fault.kind is FaultKind.RESTART and phase == "begin":
             # A restart kills the process first (both simulators): the robot executes
             # nothing until its new node logs `started` (at once in --virtual, after a
-            # process start in real time, during which the slot may be taken over).
+            # process start in real time, during which the slot may be taken over). Its
+            # links are new from here on (`_measuring`), also while it rejoins its hold,
+            # which logs `started` only at the hold's end.
+            self.started_at.setdefault(r, []).append(t)
             self._close_watcher(r)
             self.dead.discard(r)
             self.started.discard(r)
@@ -366,11 +373,16 @@ class Checker:
             del self.episodes[key]
         self.replaced_at[(f, r)] = t
         if epoch and (f, epoch) not in self.epochs and (f, epoch - 1) not in self.epochs \
-                and (f, epoch - 1) not in self.claimed:
+                and (f, epoch - 1) not in self.claimed \
+                and not ((f, epoch) in self.claimed and len(self._liars_by(t)) > 1):
             # (One epoch above a takeover, or above a claim, is the reassertion of the
             # holder it would replace, whose refute voided it, DESIGN "Convergence";
             # robots other than that holder may derive it, and be fenced by it, before
-            # the holder logs its `refute`. Any other epoch no takeover made is forged.)
+            # the holder logs its `refute`. A claim's own epoch, certified by two
+            # liars' warnings, is DESIGN's two-insider case, excused as invariant 3
+            # excuses their false takeover: their quorum is as good as a real one, and
+            # the slot, its claimant given up, is taken over again once its watchers
+            # suspect that claimant. Any other epoch no takeover made is forged.)
             self.violations.append(Violation(
                 t, "fenced_without_takeover", r,
                 f"robot {r} fenced on {f} at epoch {epoch}, which no takeover produced: "
@@ -490,7 +502,7 @@ class Checker:
         if replaced == r or not self._healthy_and_reachable(replaced, t):
             return  # (a robot taking back its own slot, which it had left, replaces nobody)
         self.false_takeovers.append(rec)
-        liars = {fl.robot for ft, fl in self.faults if fl.kind is FaultKind.LIAR and ft <= t}
+        liars = self._liars_by(t)
         if len(liars) > 1:
             return  # two insiders' warnings: a quorum (rule 3 above)
         liar = bool(liars)
@@ -498,6 +510,10 @@ class Checker:
             what = "a liar got" if liar else "false takeover without loss:"
             self.violations.append(Violation(
                 t, "false_takeover", r, f"{what} healthy robot {replaced} replaced on {f}"))
+
+    def _liars_by(self, t: float) -> set[int]:
+        """The robots lying (a `liar` fault) at `t` or before."""
+        return {fl.robot for ft, fl in self.faults if fl.kind is FaultKind.LIAR and ft <= t}
 
     def _healthy_and_reachable(self, robot: int, t: float) -> bool:
         if robot in self.dead or robot in self.unhealthy or robot in self.paused:
@@ -589,9 +605,15 @@ class Checker:
         than a start-up grace when it failed? A link is acted on only once heard for a
         start-up grace's worth of heartbeats (`witness.Ears.patience`): from the start of
         the run, of the holder's hold (a takeover), or of a watcher's or standby's node
-        (a restart); `t_max` more for its first heartbeat to be heard."""
+        (a restart); `t_max` more for its first heartbeat to be heard. A watcher
+        restarted on its hold rejoins it (`rejoin_hold`) before it watches again: not
+        among the failure's watchers yet, it judges the holder on a new link all the
+        same."""
         since = [s for r in (e.robot, *e.watchers, *e.standbys)
                  for s in self.started_at.get(r, ()) if s <= e.t]
+        near = set(self.plan.watched_by(e.function))
+        since += [x.start for x in self.failures if x.kind is FaultKind.RESTART
+                  and x.function in near and x.start <= e.t]
         since += [tk["t"] for tk in self.takeovers
                   if tk["robot"] == e.robot and tk["function"] == e.function
                   and tk["t"] <= e.t]
