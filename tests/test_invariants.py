@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
+from swarms import two_standbys
 
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import Checker, check_events
@@ -221,6 +222,38 @@ def test_a_watcher_restarted_on_its_hold_judges_the_failure_on_a_new_link(
     late = takeover(3.2 + checker.bounds.takeover_faded + 0.1, 6, "f2", 2)
     assert kinds(judge(paper, ["restart:1@3", "crash:2@3.2"], [rejoined, late])) == [
         ("no_takeover_correlated", 2)]
+
+
+def test_the_plan_holder_back_without_its_state_file_answers_a_failure_of_its_slot(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Standbys 5 and 6 both cover f2. Robot 2 hands f2 over (6 takes it), 6 crashes, and
+    # 2 comes back without its state file: the plan's holder, it executes f2 again, as
+    # a takeover by 5 would have. Fenced there before the deadline it answers nothing.
+    pair = (two_standbys(), paper[1])
+    leave = {"t": 3.0, "robot": 2, "event": "leave", "function": "f2", "reason": "shutdown"}
+    back = {"t": 4.5, "robot": 2, "event": "started", "role": "active", "function": "f2"}
+    faults = ["leave:2@3", "crash:6@4", "restart:2@4.5:wiped"]
+    events = [leave, takeover(3.2, 6, "f2", 2), back]
+    assert kinds(judge(pair, faults, events)) == []
+    fenced = {"t": 4.6, "robot": 2, "event": "fenced", "function": "f2", "epoch": 1}
+    assert kinds(judge(pair, faults, [*events, fenced])) == [("no_takeover_correlated", 6)]
+    assert kinds(judge(pair, faults, events[:2])) == [("no_takeover_correlated", 6)]
+
+
+def test_a_paused_holder_back_by_the_deadline_answers_its_own_failure(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Robot 2 stops from 2.0 s for 3.5 s (long enough to be replaced: twice the bound);
+    # its links are not measured yet then (the run's first seconds), so the bound is
+    # the faded one, 3.2 s. Its watcher 1 crashes while it is stopped (5 takes f1 over),
+    # which restarts the clock: crashed at 2.5 s, the deadline is 5.7 s and 2, back at
+    # 5.5 s, executes f2 again in time; crashed at 2.2 s, it is 5.4 s, and 2 is back
+    # too late.
+    f1 = [takeover(4.0, 5, "f1", 1)]
+    in_time = judge(paper, ["pause:2@2+3.5", "crash:1@2.5"], f1)
+    assert kinds(in_time) == []
+    late = judge(paper, ["pause:2@2+3.5", "crash:1@2.2"], f1)
+    assert kinds(late) == [("no_takeover_correlated", 2)]
+    assert "no takeover by 5.40 s" in late.violations[0].detail
 
 
 def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace(

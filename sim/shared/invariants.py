@@ -15,7 +15,10 @@ Invariants (each violation names the time, robot and what went wrong):
    "Detection"), whatever else fails at the same time, whenever
    its slot keeps a live covering standby and (for a silent failure: crash, collide,
    pause) at least one live watcher. "Live" means not failed at any
-   moment between the failure and the deadline. Not a violation:
+   moment between the failure and the deadline. A robot back on the slot by the
+   deadline answers the failure as a takeover does, unless it is fenced there by then:
+   the plan's holder restarted without its state file, a holder that rejoined it, the
+   paused holder itself. Not a violation:
    - every standby that could have come was consumed by another failure (it took over
      another slot by the deadline, or failed itself): a standby takes one slot, the
      other slot is rightly left to an alert (rule 8);
@@ -156,6 +159,10 @@ class _Expect:
     """Robots executing a slot that watches `function`, alive at the failure."""
     done: float | None = None
     """When the slot was taken over (judged at the end: a late takeover is a miss)."""
+    backs: list[tuple[float, int]] = field(default_factory=list)
+    """(when, robot): a robot back on the slot without a takeover (the plan's holder
+    restarted without its state file, a holder that rejoined it or came back from its
+    pause); it answers the failure if it is not fenced on the slot before the deadline."""
 
 
 @dataclass(slots=True)
@@ -214,6 +221,9 @@ class Checker:
     started_at: dict[int, list[float]] = field(default_factory=dict)
     """robot -> the times its node logged `started`, and the times it was restarted (its
     node listens from then on, before a rejoin's `started`)."""
+    fenced_on: dict[tuple[str, int], list[float]] = field(default_factory=dict)
+    """(function, robot) -> the times the robot was fenced on it (invariant 1: a robot
+    back on a slot answers its failure only if it stays)."""
     epochs: set[tuple[str, int]] = field(default_factory=set)
     """(function, epoch) pairs some takeover produced (invariant 6)."""
     claimed: set[tuple[str, int]] = field(default_factory=set)
@@ -312,6 +322,9 @@ class Checker:
                     self._expect_takeover(t, r, f, FaultKind.PAUSE)
             else:
                 self.paused.discard(r)
+                f = self.executing.get(r)
+                if f is not None:
+                    self._back_on(t, r, f)  # the holder itself, back from its pause
 
     def raised(self, t: float, robot: int, exc: BaseException) -> None:
         self.violations.append(Violation(t, "raised", robot,
@@ -350,6 +363,9 @@ class Checker:
                 if self.replaced_at.get(key, -1.0) > self.held_since.get(key, -1.0):
                     self.superseded.add(key)
                 self.held_since[key] = t
+                # A robot back on the slot: its plan holder restarted without its state
+                # file, or a holder that rejoined it.
+                self._back_on(t, r, key[0])
         elif name == "suspect":
             if self._healthy_and_reachable(int(rec["subject"]), t):
                 self.false_suspicions += 1
@@ -372,6 +388,7 @@ class Checker:
         for key in [k for k, v in self.episodes.items() if k[1] == f and v[1] == r]:
             del self.episodes[key]
         self.replaced_at[(f, r)] = t
+        self.fenced_on.setdefault((f, r), []).append(t)
         if epoch and (f, epoch) not in self.epochs and (f, epoch - 1) not in self.epochs \
                 and (f, epoch - 1) not in self.claimed \
                 and not ((f, epoch) in self.claimed and len(self._liars_by(t)) > 1):
@@ -511,6 +528,13 @@ class Checker:
             self.violations.append(Violation(
                 t, "false_takeover", r, f"{what} healthy robot {replaced} replaced on {f}"))
 
+    def _back_on(self, t: float, r: int, f: str) -> None:
+        """Robot r executes f again from `t` without a takeover: a candidate answer to
+        the failures of f not answered yet (invariant 1; `_Expect.backs`)."""
+        for e in self.expects:
+            if e.function == f and t >= e.t and e.done is None:
+                e.backs.append((t, r))
+
     def _liars_by(self, t: float) -> set[int]:
         """The robots lying (a `liar` fault) at `t` or before."""
         return {fl.robot for ft, fl in self.faults if fl.kind is FaultKind.LIAR and ft <= t}
@@ -624,6 +648,10 @@ class Checker:
         """Whether the slot was taken over in time, or the miss is no violation."""
         if e.done is not None and e.done <= deadline:
             return True
+        for t, r in e.backs:
+            fences = self.fenced_on.get((e.function, r), ())
+            if t <= deadline and not any(t <= tf <= deadline for tf in fences):
+                return True  # a robot back on the slot executes it (not fenced by then)
         if duration < deadline:
             return True  # the run ended too soon to tell
         if any(s <= deadline and h >= e.t for s, h in self.partitions):
