@@ -27,7 +27,7 @@ from swarmd.core.evidence import seq_of
 from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.proofs import Proofs
 from swarmd.core.records import Holder
-from swarmd.core.roles import Role, Trigger
+from swarmd.core.roles import Trigger
 from swarmd.core.slots import greater
 from swarmd.core.state import Active, Claiming, Standby
 from swarmd.core.watchdog import SlotWatch
@@ -175,7 +175,7 @@ class Episode(Proofs):
         it, a takeover recorded in another run): the warning is right, and as a robot
         that covers the slot we may take it over like any standby — True, count it
         (DESIGN, "Convergence": a slot has a holder while a live robot covers it)."""
-        if self._role == Role.ACTIVE and f == self._function:
+        if self._holds(f):
             self._warned_about_us(f, sender, w.epoch, seq, now)
             return False
         return not greater(self._known[f], Holder(self._robot_id, w.epoch))
@@ -260,7 +260,7 @@ class Episode(Proofs):
             if c.epoch > mine or (c.epoch == mine and sender < self._robot_id):
                 self._back_off(sender, Trigger.BACKOFF)
             return
-        if self._role == Role.ACTIVE and f == self._function:
+        if self._holds(f):
             if c.failed == self._robot_id and c.epoch > self._epoch:
                 self._refute_claim(f, sender, c.epoch, seq_of(raw) if raw else 0, now)
                 if self._heartbeat_now(now):

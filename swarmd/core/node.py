@@ -43,7 +43,7 @@ from swarmd.core.plan import SwarmPlan
 from swarmd.core.records import Holder, Restored, Snapshot, Standing
 from swarmd.core.replay import ReplayFilter, header_seq
 from swarmd.core.restart import Restart
-from swarmd.core.roles import Health, Role, Trigger
+from swarmd.core.roles import Health, Trigger
 from swarmd.core.state import Active, Fenced, Standby
 from swarmd.core.votes import VoteCounter
 from swarmd.core.watchdog import WatchState
@@ -324,7 +324,7 @@ class Node(Restart):
         was_faulty = self._health == Health.FAULTY
         self._health = health
         if health == Health.FAULTY:
-            if self._role == Role.ACTIVE and self._function is not None:
+            if self._function is not None:
                 f = self._function
                 self._leave(f, ev.LeaveCause.FAULT, wire.LeaveReason.FAULT)
                 self._pending.append(Release(f))
@@ -344,7 +344,7 @@ class Node(Restart):
         self._advance(now)
         if self._stopped:
             return self._drain()
-        if self._role == Role.ACTIVE and self._function is not None:
+        if self._function is not None:
             if handover:
                 self._leave(self._function, ev.LeaveCause.SHUTDOWN, wire.LeaveReason.SHUTDOWN)
             self._pending.append(Release(self._function))

@@ -16,7 +16,7 @@ from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.records import Holder
-from swarmd.core.roles import Role, Trigger
+from swarmd.core.roles import Trigger
 from swarmd.core.slots import greater
 from swarmd.core.state import Standby
 from swarmd.core.views import Views
@@ -108,7 +108,7 @@ class Proofs(Views):
         even unasked, so a robot that restarted, or missed the takeover (or its undoing)
         and heard nothing since that would make us show it, learns it within that bound
         (DESIGN, "Convergence")."""
-        if self._role == Role.ACTIVE and self._function is not None:
+        if self._function is not None:
             self._show(self._function, now, RELAY_EVERY * self._params.t_max)
 
     # ------------------------------------------------------------------ refutes
@@ -121,8 +121,8 @@ class Proofs(Views):
         holding it, after it. Not out of a buffer read after our own stall: then the
         warning was right (we were silent), and the takeover it backs fences us (rule
         2)."""
-        if self._role != Role.ACTIVE or f != self._function \
-                or epoch != self._epoch or now - self._stalled_at <= self._params.t_max:
+        if not self._holds(f) or epoch != self._epoch \
+                or now - self._stalled_at <= self._params.t_max:
             return
         if witness not in self._ev.may_watch(f, claimants=True):
             return

@@ -17,7 +17,7 @@ from swarmd.core.drops import DropReason
 from swarmd.core.hearing import Hearing
 from swarmd.core.records import Holder, Restored
 from swarmd.core.rejoin import Rejoin
-from swarmd.core.roles import Role, Trigger
+from swarmd.core.roles import Trigger
 from swarmd.core.slots import SlotTable
 from swarmd.core.state import Rejoining, Standby
 
@@ -85,7 +85,7 @@ class Restart(Hearing):
         if self._rejoin is not None:
             return  # `started` tells the outcome once the rejoin hold is over
         self._emit(ev.Started(role=ev.RoleName.of(self._role), function=self._function))
-        if self._role == Role.ACTIVE and self._function is not None:
+        if self._function is not None:
             self._pending.append(Assign(self._function, self._epoch))
 
     # ------------------------------------------------------------------ rejoin (rule 2)
