@@ -29,7 +29,7 @@ from swarmd.core.proofs import Proofs
 from swarmd.core.records import Holder
 from swarmd.core.roles import Trigger
 from swarmd.core.slots import greater
-from swarmd.core.state import Active, Claiming, Standby
+from swarmd.core.state import Active, Claiming
 from swarmd.core.watchdog import SlotWatch
 from swarmd.core.witness import witnesses
 
@@ -98,13 +98,12 @@ class Episode(Proofs):
         # counts accusations).
         strong = byte_level(w.belief) >= self._params.suspect_level
         self._warning_evidence(f, sender, w, raw, now, evidence=strong)
-        holder, epoch = self._known[f]
         if w.suspect == self._robot_id and not self._ours_unheld(f, sender, w, seq, now):
             return
         self._rejoin_superseded(f, w.epoch)
         if not strong or f not in self._covers or not self._standing_by():
             return
-        if greater(Holder(holder, epoch), Holder(w.suspect, w.epoch)):
+        if greater(self._known[f], Holder(w.suspect, w.epoch)):
             return  # about an older holder: stale
         # A warning at a newer epoch than we know means we missed a takeover (we were
         # partitioned, or lost its heartbeats) and the new holder may be dead already:
@@ -262,7 +261,7 @@ class Episode(Proofs):
             return
         if self._holds(f):
             if c.failed == self._robot_id and c.epoch > self._epoch:
-                self._refute_claim(f, sender, c.epoch, seq_of(raw) if raw else 0, now)
+                self._refute_claim(f, sender, c.epoch, seq_of(raw), now)
                 if self._heartbeat_now(now):
                     self._emit(ev.Refute(subject=self._robot_id, function=f))
             return
@@ -278,7 +277,7 @@ class Episode(Proofs):
                          now: float) -> bool:
         """Does this CLAIM (bytes `raw`) act here? Only with a certificate this robot
         verified; its bytes are kept for `_show`."""
-        if (sender, c.epoch) == tuple(self._known[f]):
+        if (sender, c.epoch) == self._known[f]:
             # The holder's own proof shown (`_show`), or another proof resting on it:
             # certified here too (a restarted robot's view of it came from
             # its state file, with no evidence), and its claim kept.
@@ -331,20 +330,16 @@ class Episode(Proofs):
         if not self._ev.certify(
                 c.function, self._robot_id,
                 wire.Claim(c.failed, self._plan.slot(c.function), c.epoch),
-                self._known[c.function].epoch, refutes=True):
+                self._known[c.function].epoch, refutes=True) \
+                or self._ears.heard_again(c.lost, c.until - self._params.claim_hold):
             # Its certificate was refuted during the hold (or never complete): a takeover
             # no other robot would believe is none (DESIGN, "Convergence").
-            self._emit(ev.Refute(subject=c.failed, function=c.function))
-            self._to(Trigger.REFUTED, Standby())
-            return
-        if self._ears.heard_again(c.lost, c.until - self._params.claim_hold):
-            # Rule 9's premise failed during the hold: a watcher we took for lost with
+            # Or rule 9's premise failed during the hold: a watcher we took for lost with
             # the suspect heartbeats, so it was our link to it that faded, and our
             # silence is one robot's word. If the suspect is dead, its live watchers go
             # on warning, and the claim comes again from them (a new holder of a watcher
             # slot, after a takeover of its own, is not such a watcher).
-            self._emit(ev.Refute(subject=c.failed, function=c.function))
-            self._to(Trigger.REFUTED, Standby())
+            self._claim_refuted()
             return
         if greater(self._known[c.function], Holder(self._robot_id, c.epoch)):
             # The slot moved past our claim during the hold: a greater entry is never

@@ -19,7 +19,7 @@ from swarmd.core.evidence import cert_says
 from swarmd.core.records import Holder
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.slots import greater
-from swarmd.core.state import Active, Claiming, Standby
+from swarmd.core.state import Active, Claiming
 
 
 class Hearing(Episode):
@@ -187,8 +187,7 @@ class Hearing(Episode):
             if epoch >= state.wait.epoch:
                 self._back_off(sender)
             elif sender == state.wait.failed:
-                self._emit(ev.Refute(subject=sender, function=f))
-                self._to(Trigger.REFUTED, Standby())
+                self._claim_refuted()
         if sender != self._robot_id:
             self._rejoin_superseded(f, self._known[f].epoch)
 
@@ -199,8 +198,7 @@ class Hearing(Episode):
             return
         # A LEAVE from the holder itself is evidence enough for its own slot.
         self._record_evidence(f, sender, sender, lv.epoch, raw, now)
-        holder, epoch = self._known[f]
-        if (sender, lv.epoch) != (holder, epoch):
+        if (sender, lv.epoch) != self._known[f]:
             return  # not the current holder: stale
         watch = self._watches.get(f)
         if watch is not None:
@@ -209,7 +207,7 @@ class Hearing(Episode):
                 watch.mark_alerted()
                 self._emit(ev.Alert(function=f, reason=ev.AlertCause.NO_STANDBY))
         if f in self._covers and self._standing_by():
-            self._start_claim(f, sender, epoch, now, trigger=Trigger.LEAVE_HEARD)
+            self._start_claim(f, sender, lv.epoch, now, trigger=Trigger.LEAVE_HEARD)
 
     # ------------------------------------------------------------------ CERT
     def _on_cert(self, cert: wire.Cert, now: float) -> None:

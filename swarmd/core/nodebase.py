@@ -141,6 +141,15 @@ class NodeBase:
         self._emit(ev.Backoff(subject=c.failed, function=c.function, winner=winner))
         self._to(trigger, Standby())
 
+    def _claim_refuted(self) -> None:
+        """Our claim ends in the wait state, refuted: its suspect is alive (rule 4), or
+        the certificate behind it no longer holds. The log says `refute` about the
+        suspect."""
+        c = self._claim
+        assert c is not None
+        self._emit(ev.Refute(subject=c.failed, function=c.function))
+        self._to(Trigger.REFUTED, Standby())
+
     # ------------------------------------------------------------------ plumbing
     def _send(self, msg: wire.Message) -> bytes:
         data = self._next_frame(msg)

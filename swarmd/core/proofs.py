@@ -16,9 +16,7 @@ from swarmd.core import events as ev
 from swarmd.core import wire
 from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.records import Holder
-from swarmd.core.roles import Trigger
 from swarmd.core.slots import greater
-from swarmd.core.state import Standby
 from swarmd.core.views import Views
 
 _NO_FRAME = wire.Frame(0, 0, 0, wire.Heartbeat(0, 0, 0, 0))
@@ -149,8 +147,7 @@ class Proofs(Views):
         if c is not None and c.function == f and not self._ev.certify(
                 f, self._robot_id, wire.Claim(c.failed, self._plan.slot(f), c.epoch), 0,
                 refutes=True):
-            self._emit(ev.Refute(subject=c.failed, function=f))
-            self._to(Trigger.REFUTED, Standby())
+            self._claim_refuted()
         known = self._known[f]
         ahead = self._forward(f, known)
         if ahead != known:
