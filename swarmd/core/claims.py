@@ -37,7 +37,7 @@ class ClaimMemory:
     __slots__ = ("_horizon", "_seen")
 
     def __init__(self, params: Params) -> None:
-        self._horizon = params.claim_hold + params.t_max
+        self._horizon = params.claim_horizon
         self._seen: dict[str, dict[tuple[int, int], float]] = {}
 
     def believed(self, f: str, claimant: int, epoch: int, now: float) -> bool:

@@ -23,10 +23,10 @@ from swarmd.core.actions import Assign
 from swarmd.core.belief import LEVEL_MAX, byte_level, level_byte
 from swarmd.core.claims import WaitState
 from swarmd.core.drops import DropReason
-from swarmd.core.evidence import seq_of
 from swarmd.core.limits import EPOCH_MAX
 from swarmd.core.proofs import Proofs
 from swarmd.core.records import Holder
+from swarmd.core.replay import header_seq
 from swarmd.core.roles import Trigger
 from swarmd.core.slots import greater
 from swarmd.core.state import Active, Claiming
@@ -149,7 +149,7 @@ class Episode(Proofs):
             # LEAVE of the very entry we hold is a recording, of an earlier run or of a
             # hold we resumed after a restart (`evidence.py`): refuted alike, so that it
             # backs no takeover of the slot we execute.
-            self._refute(f, witness, epoch, seq_of(raw), now)
+            self._refute(f, witness, epoch, header_seq(raw), now)
             if witness == suspect and self._holds(f) and epoch == self._epoch \
                     and f not in self._shown_newer:
                 # Our own LEAVE of the entry we hold backs nothing here either: unless
@@ -261,7 +261,7 @@ class Episode(Proofs):
             return
         if self._holds(f):
             if c.failed == self._robot_id and c.epoch > self._epoch:
-                self._refute_claim(f, sender, c.epoch, seq_of(raw), now)
+                self._refute_claim(f, sender, c.epoch, header_seq(raw), now)
                 if self._heartbeat_now(now):
                     self._emit(ev.Refute(subject=self._robot_id, function=f))
             return
@@ -352,12 +352,15 @@ class Episode(Proofs):
 
     def _become_holder(self, trigger: Trigger, f: str, epoch: int, now: float) -> None:
         """Execute f at `epoch` from now: the entry (us, epoch) in the table, tell the
-        robot, watch f's neighbours, heartbeat."""
+        robot, watch f's neighbours, heartbeat now and every heartbeat_interval from now
+        on."""
         self._to(trigger, Active(f, epoch))
         self._known.merge(f, Holder(self._robot_id, epoch))
         self._pending.append(Assign(f, epoch))
         self._watch_neighbours(now)
-        self._restart_heartbeats(now)
+        if self._heartbeating():
+            self._send_heartbeat(now)
+            self._beat.restart(now)
 
 
 __all__ = ["Episode"]

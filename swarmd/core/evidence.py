@@ -58,15 +58,11 @@ from swarmd.core.auth import Verifier
 from swarmd.core.claims import CLAIMS_REMEMBERED
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
+from swarmd.core.replay import header_seq
 
 EVIDENCE_REMEMBERED = 16
 """(suspect, epoch) episodes of evidence kept per slot; a flood
 of warnings about invented epochs pushes out the oldest, it cannot grow the node."""
-
-
-def seq_of(raw: bytes) -> int:
-    """The sequence number in a signed frame's header (bytes 5..10)."""
-    return int.from_bytes(raw[5:11], "big")
 
 
 class EvidenceStore:
@@ -104,7 +100,7 @@ class EvidenceStore:
             return []
         # A warning the suspect refuted, or its own LEAVE it refuted (a recording:
         # module doc).
-        refuted = self.refuted_up_to(f, suspect, epoch, witness) >= seq_of(raw)
+        refuted = self.refuted_up_to(f, suspect, epoch, witness) >= header_seq(raw)
         episodes = self._evidence.setdefault(f, {})
         got = episodes.get((suspect, epoch))
         if got is None:
@@ -112,7 +108,7 @@ class EvidenceStore:
                 del episodes[next(iter(episodes))]
             got = episodes[(suspect, epoch)] = {}
         old = got.get(witness)
-        if old is None or seq_of(old) < seq_of(raw):
+        if old is None or header_seq(old) < header_seq(raw):
             got[witness] = raw  # the latest: the least likely to be refuted
         if refuted:
             # The suspect said, signed, that it was alive after this warning (rule 4): no
@@ -148,13 +144,13 @@ class EvidenceStore:
         leave = got.get(suspect)
         if leave is not None and (
                 not refutes
-                or seq_of(leave) > self.refuted_up_to(f, suspect, epoch, suspect)):
-            return {suspect: seq_of(leave)}
+                or header_seq(leave) > self.refuted_up_to(f, suspect, epoch, suspect)):
+            return {suspect: header_seq(leave)}
         may = self.may_watch(f)
         out: dict[int, int] = {}
         for w, raw in got.items():
             if w != suspect and (w == claimant or w in may):
-                seq = seq_of(raw)
+                seq = header_seq(raw)
                 if not refutes or seq > self.refuted_up_to(f, suspect, epoch, w):
                     out[w] = seq
         return out
@@ -284,7 +280,7 @@ class EvidenceStore:
             return
         kept = self._claims.setdefault(f, {})
         old = kept.get((claimant, epoch))
-        if old is not None and seq_of(old) >= seq_of(raw):
+        if old is not None and header_seq(old) >= header_seq(raw):
             return
         if old is None and len(kept) >= CLAIMS_REMEMBERED:
             del kept[min(kept, key=lambda k: k[1])]
@@ -403,7 +399,7 @@ class EvidenceStore:
                 got = wire.decode(raw, keys, verifier, inner=True)
             except wire.CodecError:
                 continue
-            said = _says(got)
+            said = says(got)
             if said is None or said[2] != epoch - 1 or got.msg.function != self._plan.slot(f):
                 continue
             if failed is None:
@@ -443,9 +439,10 @@ class EvidenceStore:
         return True
 
 
-def _says(frame: wire.Frame) -> tuple[int, int, int] | None:
-    """(witness, suspect, epoch) that a signed frame says, if it is evidence: a WARN
-    about its suspect, or a LEAVE, its sender's own."""
+def says(frame: wire.Frame) -> tuple[int, int, int] | None:
+    """(witness, suspect, epoch) that a signed frame (a CERT's relayed `inner`, or one
+    restored from a state file) says, if it is evidence: a WARN about its suspect, or a
+    LEAVE, its sender's own."""
     msg = frame.msg
     if isinstance(msg, wire.Warn):
         return frame.sender, msg.suspect, msg.epoch
@@ -454,10 +451,4 @@ def _says(frame: wire.Frame) -> tuple[int, int, int] | None:
     return None
 
 
-def cert_says(cert: wire.Cert) -> tuple[int, int, int] | None:
-    """(witness, suspect, epoch) that a CERT's relayed frame says, if it is evidence: a
-    WARN about its suspect, or a LEAVE, its sender's own."""
-    return _says(cert.inner)
-
-
-__all__ = ["CLAIMS_REMEMBERED", "EVIDENCE_REMEMBERED", "EvidenceStore", "cert_says", "seq_of"]
+__all__ = ["CLAIMS_REMEMBERED", "EVIDENCE_REMEMBERED", "EvidenceStore", "says"]

@@ -15,7 +15,7 @@ from swarmd.core import digest, wire
 from swarmd.core import events as ev
 from swarmd.core.drops import DropReason
 from swarmd.core.episode import Episode
-from swarmd.core.evidence import cert_says
+from swarmd.core.evidence import says
 from swarmd.core.records import Holder
 from swarmd.core.roles import Health, Role, Trigger
 from swarmd.core.slots import greater
@@ -227,7 +227,7 @@ class Hearing(Episode):
         if isinstance(msg, wire.Claim):
             self._on_relayed_claim(f, cert.inner.sender, msg, cert.raw, now)
             return
-        said = cert_says(cert)
+        said = says(cert.inner)
         if said is not None:
             self._record_evidence(f, *said, cert.raw, now)
 

@@ -221,7 +221,7 @@ class Node(Restart):
             self._on_cert(frame.msg, now)
             return self._drain()
         if sender == self._robot_id:
-            return self._own_frame(frame, now)
+            return self._own_frame(frame)
         msg = frame.msg
         if isinstance(msg, wire.Heartbeat) and self._verifier is not None \
                 and not self._chains.check(sender, msg.n, msg.link, now, anchor=msg.anchor):
@@ -268,7 +268,7 @@ class Node(Restart):
             case wire.Refute() as rf:
                 self._on_refute(sender, rf, now, frame.raw)
 
-    def _own_frame(self, frame: wire.Frame, now: float) -> list[Action]:
+    def _own_frame(self, frame: wire.Frame) -> list[Action]:
         """A verified frame sent as this robot. Multicast loopback echoes our own frames
         (`own`; the runtime tells a second daemon with our id by frames it did not send).
         One from before this node started is a replay, not a duplicate robot
@@ -277,9 +277,7 @@ class Node(Restart):
         (a forger, a second daemon with our id) cannot push our counter past what the
         receivers accept (DESIGN section 2, "Sequence numbers"); the receivers' filter
         keeps hearing our next frames even if it took the forged one (`replay.py`)."""
-        if frame.seq < self._seq_start:
-            return self._drop(DropReason.REPLAY)
-        return self._drop(DropReason.OWN)
+        return self._drop(DropReason.REPLAY if frame.seq < self._seq_start else DropReason.OWN)
 
     def _heard_word(self, sender: int, seq: int, hb: wire.Heartbeat, f: str | None,
                     top: int | None) -> None:
@@ -301,7 +299,7 @@ class Node(Restart):
         if self._stopped:
             return self._drain()
         if not self._started:
-            self._start(now)
+            self._start()
         if self._rejoin is not None and now >= self._rejoin.until:
             self._finish_rejoin(now)
         if isinstance(self._state, Fenced) and now >= self._state.until:

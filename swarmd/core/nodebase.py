@@ -253,9 +253,11 @@ class NodeBase:
         slot = self._plan.slot(self._function) if self._function is not None else 0
         # A rejoining robot is a standby to the others until it resumes (rule 6).
         role = Role.STANDBY if self._role == Role.REJOINING else self._role
-        # Without a slot, the epoch field carries our view's digest (`digest.py`).
-        epoch = self._epoch if slot else self._digest()
-        hb = wire.Heartbeat(slot, epoch, int(role), int(self._health))
+        # Without a slot, the epoch field carries our view of the slots we cover: whoever
+        # holds a greater entry for one of them sees it differs and sends it (`digest.py`).
+        epoch = self._epoch if slot else digest.make(self._plan.covered(self._robot_id),
+                                                     self._known)
+        n, link, anchor = 0, b"", False  # a shared key or unsigned: no chain
         if self._chain is not None:
             # Per-robot mode: the next link of our chain; an anchor (signed) where a
             # receiver may have lost it (`chain.py`). A change of digest is no change of
@@ -263,20 +265,8 @@ class NodeBase:
             # anchor of its own.
             said = (slot, epoch if slot else 0, int(role))
             n, link, anchor = self._chain.next(now, said, self._anchor_every, extra=extra)
-            hb = wire.Heartbeat(slot, epoch, int(role), int(self._health), n, link, anchor)
-        self._send(hb)
+        self._send(wire.Heartbeat(slot, epoch, int(role), int(self._health), n, link, anchor))
         self._beat.sent(now)
-
-    def _digest(self) -> int:
-        """Our view of the slots we cover, for a heartbeat without a slot: whoever holds
-        a greater entry for one of them sees it differs and sends it (`digest.py`)."""
-        return digest.make(self._plan.covered(self._robot_id), self._known)
-
-    def _restart_heartbeats(self, now: float) -> None:
-        """Became ACTIVE: heartbeat now and every heartbeat_interval from now on."""
-        if self._heartbeating():
-            self._send_heartbeat(now)
-            self._beat.restart(now)
 
     def _heartbeat_now(self, now: float) -> bool:
         """An extra heartbeat out of schedule (refutation, fencing a stale holder),

@@ -79,7 +79,9 @@ this many holes busy, between two frames of the sender, makes one be forgotten."
 
 def header_seq(data: bytes) -> int:
     """The sequence number in a frame's header (bytes 5-10, `wire.HEADER`), unverified:
-    for `ReplayFilter.stale` before the frame is decoded (`wire.peek` checked its size)."""
+    for `ReplayFilter.stale` before the frame is decoded (`wire.peek` checked its size),
+    and the seq of a signed frame kept as evidence or relayed (`evidence.py`); 0 for no
+    bytes (a message made here, never heard)."""
     return int.from_bytes(data[5:11], "big")
 
 

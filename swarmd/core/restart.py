@@ -80,7 +80,7 @@ class Restart(Hearing):
         return None
 
     # ------------------------------------------------------------------ start
-    def _start(self, now: float) -> None:
+    def _start(self) -> None:
         self._started = True
         if self._rejoin is not None:
             return  # `started` tells the outcome once the rejoin hold is over

@@ -9,7 +9,7 @@ monitor either.
 from __future__ import annotations
 
 from swarmd.core import wire
-from swarmd.core.evidence import EvidenceStore, cert_says
+from swarmd.core.evidence import EvidenceStore, says
 from swarmd.core.params import Params
 from swarmd.core.plan import SwarmPlan
 
@@ -65,7 +65,7 @@ class MonitorClaims:
             if f is not None:
                 self.store.add_refute(f, inner.sender, inner.msg, cert.raw)
             return
-        said = cert_says(cert)
+        said = says(inner)
         if said is not None:
             self._evidence(cert.function, *said, cert.raw, now)
 
