@@ -79,7 +79,7 @@ class Node(Restart):
         self._drops = Counter()
         self._frames_in = self._frames_out = 0
         self._known = self._views(restored)
-        self._covers = frozenset(f for f in plan.functions if robot_id in plan.covered_by(f))
+        self._covers = frozenset(plan.covered(robot_id))
         self._relevant = plan.relevant(robot_id)
         self._state = Standby()
         self._votes = {f: VoteCounter.of(params) for f in self._covers}

@@ -173,9 +173,8 @@ class SwarmPlan:
         the witnesses whose warnings count, rule 3). Standbys: the robots that cover any
         of those slots, whose liveness heartbeats tell rules 6 and 8 whether anyone is
         left to take a watched slot over."""
-        mine = [f for f in self.functions if robot_id in self._covers[f]]
         near: set[str] = set()
-        for c in mine:
+        for c in self.covered(robot_id):
             near.add(c)
             near.update(self.watched(c))
             near.update(self._watchers[c])

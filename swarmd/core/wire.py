@@ -229,28 +229,17 @@ class Frame:
     otherwise."""
 
 
-def _type_of(msg: Message) -> MsgType:
-    match msg:
-        case Heartbeat():
-            return MsgType.HEARTBEAT
-        case Warn():
-            return MsgType.WARN
-        case Claim():
-            return MsgType.CLAIM
-        case Leave():
-            return MsgType.LEAVE
-        case Cert():
-            return MsgType.CERT
-        case Refute():
-            return MsgType.REFUTE
-    raise TypeError(f"not a message: {msg!r}")  # pragma: no cover - exhaustive above
+_TYPE_OF: dict[type[Message], MsgType] = {
+    Heartbeat: MsgType.HEARTBEAT, Warn: MsgType.WARN, Claim: MsgType.CLAIM,
+    Leave: MsgType.LEAVE, Cert: MsgType.CERT, Refute: MsgType.REFUTE}
+"""Each message class's type on the wire (`encode`)."""
 
 
 def _body(msg: Message) -> bytes:
     match msg:
         case Heartbeat(function, epoch, role, health):
-            return encode_slot(function) + struct.pack(
-                ">HB", epoch, (role & 0x0F) | ((health & 0x0F) << 4))
+            return encode_slot(function) + _HB_TAIL.pack(
+                epoch, (role & 0x0F) | ((health & 0x0F) << 4))
         case Warn(suspect, function, epoch, belief):
             if not 0 <= belief <= 0xFF:
                 raise ValueError(f"belief {belief} does not fit 8 bits")
@@ -259,7 +248,7 @@ def _body(msg: Message) -> bytes:
         case Claim(failed, function, epoch):
             return _U16.pack(failed) + encode_slot(function) + _U16.pack(epoch)
         case Leave(function, epoch, reason):
-            return encode_slot(function) + struct.pack(">HB", epoch, reason)
+            return encode_slot(function) + _HB_TAIL.pack(epoch, reason)
         case Cert(function, _, raw):
             return encode_slot(function) + raw
         case Refute(witness, function, epoch, seq):
@@ -282,7 +271,7 @@ def encode(frame: Frame, key: bytes | None = None, signer: Signer | None = None)
     fields (that is misuse by our own code, never peer input)."""
     if not 0 <= frame.seq <= SEQ_MAX:
         raise ValueError(f"seq {frame.seq} does not fit 48 bits")
-    mtype = _type_of(frame.msg)
+    mtype = _TYPE_OF[type(frame.msg)]
     if mtype == MsgType.CERT:
         key = None
     msg = frame.msg
