@@ -167,22 +167,24 @@ class Episode(Proofs):
             self._on_claim(claimant, claim, now, raw_claim)
 
     def _ours_unheld(self, f: str, sender: int, w: wire.Warn, seq: int, now: float) -> bool:
-        """A warning about ourselves. Holding the slot, we answer it (rule 4). Not
-        holding it while the warner's view names us at an entry no older than ours (we
-        left it, or were faulty, and nobody took it over; or the others learnt a hold of
-        ours we cannot prove any more, or never had: a restart that could not verify
-        it, a takeover recorded in another run): the warning is right, and as a robot
-        that covers the slot we may take it over like any standby — True, count it
-        (DESIGN, "Convergence": a slot has a holder while a live robot covers it)."""
+        """A warning about ourselves. Holding the slot, we answer it (rule 4): a REFUTE,
+        and a heartbeat at once (`_answer_alive`). Not holding it while the warner's view
+        names us at an entry no older than ours (we left it, or were faulty, and nobody
+        took it over; or the others learnt a hold of ours we cannot prove any more, or
+        never had: a restart that could not verify it, a takeover recorded in another
+        run): the warning is right, and as a robot that covers the slot we may take it
+        over like any standby — True, count it (DESIGN, "Convergence": a slot has a
+        holder while a live robot covers it)."""
         if self._holds(f):
-            self._warned_about_us(f, sender, w.epoch, seq, now)
+            self._refute(f, sender, w.epoch, seq, now)
+            self._answer_alive(f, now)
             return False
         return not greater(self._known[f], Holder(self._robot_id, w.epoch))
 
-    def _warned_about_us(self, f: str, sender: int, epoch: int, seq: int, now: float) -> None:
-        """Rule 4: a warning about ourselves is answered with a heartbeat at once and a
-        REFUTE."""
-        self._refute(f, sender, epoch, seq, now)
+    def _answer_alive(self, f: str, now: float) -> None:
+        """Rule 4: a warning or a claim about ourselves, who hold f, is answered with a
+        heartbeat at once (beside the REFUTE); if it went out, the suspicion of us ends
+        refuted in our log."""
         if self._heartbeat_now(now):
             self._emit(ev.Refute(subject=self._robot_id, function=f))
 
@@ -262,8 +264,7 @@ class Episode(Proofs):
         if self._holds(f):
             if c.failed == self._robot_id and c.epoch > self._epoch:
                 self._refute_claim(f, sender, c.epoch, header_seq(raw), now)
-                if self._heartbeat_now(now):
-                    self._emit(ev.Refute(subject=self._robot_id, function=f))
+                self._answer_alive(f, now)
             return
         watch = self._watches.get(f)
         if watch is not None and c.epoch > self._known[f].epoch:
