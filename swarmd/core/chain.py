@@ -253,8 +253,7 @@ class PeerChains:
             # reach any more without an anchor make room first, then the oldest.
             heads.sort(key=lambda h: not self._open(h, now))
             del heads[HEADS - 1:]
-            head = _Head(n, link, now)
-            heads.insert(0, head)
+            heads.insert(0, _Head(n, link, now))
             return
         if head is None:
             return  # `check` said no: nothing to record

@@ -415,10 +415,7 @@ class EvidenceStore:
     def refuted_up_to(self, f: str, holder: int, epoch: int, witness: int) -> int:
         """The highest seq of `witness`'s warnings about `holder` at `epoch` that the
         holder refuted (-1: none)."""
-        got = self._refutes.get(f, {}).get((holder, epoch))
-        if not got:
-            return -1
-        entry = got.get(witness)
+        entry = self._refutes.get(f, {}).get((holder, epoch), {}).get(witness)
         return entry[0] if entry is not None else -1
 
     def add_refute(self, f: str, holder: int, r: wire.Refute, raw: bytes) -> bool:

@@ -200,8 +200,7 @@ class _Sender:
         """The established top of the stretch that took the latest frame."""
         if not self.holes:  # a sender nobody flooded in its name: every heartbeat asks
             return self.main.established()
-        latest = max([self.main, *self.holes], key=lambda h: h.stamp)
-        return latest.established()
+        return max([self.main, *self.holes], key=lambda h: h.stamp).established()
 
 
 class ReplayFilter:
@@ -223,9 +222,9 @@ class ReplayFilter:
             return None
         return self.origin + int(RATE * max(0.0, now - self.since))
 
-    def limit(self, now: float | None) -> int | None:
+    def limit(self, now: float) -> int | None:
         """The highest seq any sender may have at `now` (None: unbounded)."""
-        c = None if now is None else self.clock(now)
+        c = self.clock(now)
         return None if c is None else c + AHEAD
 
     def _beyond(self, seq: int, now: float) -> bool:
