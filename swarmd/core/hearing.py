@@ -43,8 +43,9 @@ class Hearing(Episode):
         if entry != known and not self._ev.is_certified(f, sender, hb.epoch):
             self._unproven_beat(f, hb, DropReason.UNCERTIFIED, now)
             return
-        # Ours, heard from another robot: the one case below that moves our role.
-        rival = sender != self._robot_id and self._holds(f)
+        # Ours, heard from another robot (our own frames never get here, `Node._accept`
+        # drops them as `own`): the one case below that moves our role.
+        rival = self._holds(f)
         if rival:
             self._refute_claim(f, sender, hb.epoch, 0, now)  # if it replaces us, rule 4
         ahead = self._forward(f, entry)
@@ -188,8 +189,7 @@ class Hearing(Episode):
                 self._back_off(sender)
             elif sender == state.wait.failed:
                 self._claim_refuted()
-        if sender != self._robot_id:
-            self._rejoin_superseded(f, self._known[f].epoch)
+        self._rejoin_superseded(f, self._known[f].epoch)
 
     # ------------------------------------------------------------------ LEAVE
     def _on_leave(self, sender: int, lv: wire.Leave, now: float, raw: bytes = b"") -> None:
