@@ -28,7 +28,7 @@ from typer.testing import CliRunner
 import sim.realtime.orchestrator as realtime
 import sim.realtime.robotfiles as robotfiles
 from sim.realtime.orchestrator import Orchestrator, RealtimeResult, run_realtime_async
-from sim.realtime.problems import errors_of
+from sim.realtime.problems import errors_of, robot_log
 from sim.realtime.summary import summarize_realtime
 from sim.shared.faults import parse_fault
 from sim.shared.summary import (
@@ -246,13 +246,22 @@ async def test_a_robot_that_hangs_before_ready_is_named_and_nothing_is_left(
     # Robot 3's process is stopped (SIGSTOP) as soon as it is spawned, before it can load
     # its file and say ready. (A FIFO as robot file no longer hangs a robot: it is
     # refused at once, swarmd.base.files.) The orchestrator's SIGKILL ends a stopped process.
+    # A forked robot runs at once: on a loaded machine it could say ready before the
+    # SIGSTOP lands. So its log is a FIFO with no reader when it is spawned: its first
+    # act, opening that log (`robot_proc.child_main`), waits until it is stopped; then
+    # a plain file stands in its place for the orchestrator to read the log's tail.
     spawn = Orchestrator._spawn
 
     def spawn_stopped(self: Orchestrator, robot: int, t0: float | None) -> Any:
+        log = robot_log(self.run_dir, robot)
+        if robot == 3:
+            os.mkfifo(log)
         proc = spawn(self, robot, t0)
         if robot == 3:
             assert proc.process.pid is not None
             os.kill(proc.process.pid, signal.SIGSTOP)
+            log.unlink()
+            log.touch()
         return proc
 
     monkeypatch.setattr(Orchestrator, "_spawn", spawn_stopped)
