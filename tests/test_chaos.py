@@ -320,7 +320,7 @@ def test_wide_small_seeds_run_clean_in_every_mode(auth: str) -> None:
     assert_clean(found)
 
 
-WIPED: tuple[int, ...] = (810005, 810087, 810135, 810373, 810463)
+WIPED: tuple[int, ...] = (810005, 810087, 810135, 810373, 810463, 830146, 831779)
 """Seeds of the `--wiped` draw (`python bench/bench_chaos.py --seed N --wiped --max-robots
 12 --verbose`) that broke an invariant per robot on the core before it, one a shape of
 a robot back without its state file as the plan's holder of a slot taken over meanwhile;
@@ -337,7 +337,18 @@ clean in every mode since (`test_wiped_seeds_run_clean_in_every_mode`):
 - 810135, 810463: it refuted the takeover's claim, which voided it where robots held
   only the warnings behind it, while robots that also held its old `LEAVE` judged the
   takeover by the `LEAVE` alone (not refuted): two executors to the end of the run (8 s,
-  9.2 s). The REFUTE of the claim now voids it whatever else backs it."""
+  9.2 s). The REFUTE of the claim now voids it whatever else backs it;
+- 830146: the takeover rested on its `LEAVE` and on warnings, and only one warning
+  reached it; its own `LEAVE` is no evidence at itself, so the claim did not verify
+  there, and it refuted only the `LEAVE`, which voids the takeover only where a robot's
+  certificate holds that `LEAVE`: two executors for 2.18 s (bound 1.71 s). A claim that
+  replaces a live hold is refuted whether or not it verifies at the holder;
+- 831779: others had moved to its reassertion before it learnt it, so it heartbeat below
+  the entry naming it; a standby's own ears did not count that as the holder heard, and
+  one liar's warning with the standby's own ears (rule 9) made a quorum that fenced it,
+  the claimant then giving the claim up (`fenced_without_takeover`). The heartbeat of the
+  robot an entry names, at whatever epoch, is heard by a standby's ears as by a
+  watchdog."""
 
 
 @pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])

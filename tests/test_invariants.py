@@ -256,6 +256,26 @@ def test_a_paused_holder_back_by_the_deadline_answers_its_own_failure(
     assert "no takeover by 5.40 s" in late.violations[0].detail
 
 
+def test_a_watcher_restarted_after_the_failure_restarts_the_clock_by_its_grace(
+        paper: tuple[SwarmPlan, Params]) -> None:
+    # Robot 2 crashes at 3.0 s; its watcher 1 restarts at 3.5 s. The new node never
+    # heard 2, so it warns only after its start-up grace (DESIGN rule 5): the clock
+    # starts again from the restart with that grace in place of T_max.
+    _, params = paper
+    checker = judge(paper, ["crash:2@3", "restart:1@3.5"], [])
+    restarted = checker.bounds.takeover_restarted
+    assert restarted == pytest.approx(
+        checker.bounds.takeover - params.t_max + params.startup_grace)
+    in_time = takeover(3.5 + restarted - 0.1, 6, "f2", 2)
+    assert kinds(judge(paper, ["crash:2@3", "restart:1@3.5"], [in_time])) == []
+    late = takeover(3.5 + restarted + 0.1, 6, "f2", 2)
+    assert kinds(judge(paper, ["crash:2@3", "restart:1@3.5"], [late])) == [
+        ("no_takeover_correlated", 2)]
+    # A crash of that watcher instead restarts it by the takeover bound alone.
+    assert kinds(judge(paper, ["crash:2@3", "crash:1@3.5"], [in_time])) == [
+        ("no_takeover_correlated", 2), ("no_takeover_correlated", 1)]
+
+
 def test_a_standby_restarted_just_before_the_failure_is_given_its_start_up_grace(
         paper: tuple[SwarmPlan, Params]) -> None:
     # Standby 6 restarted at 2.9 s (logged `started` again at 3.0 s); robot 2 crashes at

@@ -27,7 +27,9 @@ Invariants (each violation names the time, robot and what went wrong):
    - a partition overlaps the window, the failed robot is restarted in it, or the run
      ends before the deadline.
    Another failure of a robot of the slot's neighbourhood (its watchers and covering
-   standbys) within the window moves the deadline to one bound after it. A missed
+   standbys) within the window moves the deadline to one bound after it; a restart, to
+   `bounds.takeover_restarted` after it (its new node never heard the failed holder and
+   waits its start-up grace, DESIGN rule 5). A missed
    takeover is `no_takeover` when the failure came alone (a quorum of live watchers,
    no other failure in the neighbourhood) and `no_takeover_correlated` when other
    robots of the neighbourhood failed with it: the paper handles one failure at a time,
@@ -116,6 +118,11 @@ class Bounds:
     """The takeover bound for a failure after a link fault or a pause, or on links not
     measured yet: the watchers may have measured that silence as a fade of the link, or
     not measured the link enough to act on it, and wait up to `t_max_bursty`."""
+    takeover_restarted: float = 0.0
+    """The takeover bound counted from the restart of a robot of the failed slot's
+    neighbourhood, after the failure: its new node never heard the failed holder, so as
+    a watcher it warns after its start-up grace (DESIGN rule 5), and as a standby it
+    counts its own ears only after it (rule 9)."""
 
     @classmethod
     def of(cls, p: Params, loss: float) -> Bounds:
@@ -130,7 +137,8 @@ class Bounds:
         dual = p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
         converge = 2 * p.t_max + 2 * p.heartbeat_interval + (p.t_max if loss else 0.0)
         settle = faded + converge + RELAY_EVERY * p.t_max
-        return cls(takeover, dual, converge, settle, faded)
+        restarted = faded - p.t_max_bursty + max(p.t_max_bursty, p.startup_grace)
+        return cls(takeover, dual, converge, settle, faded, restarted)
 
 
 @dataclass(frozen=True, slots=True)
@@ -603,8 +611,10 @@ class Checker:
         while moved:  # each failure in the neighbourhood restarts the clock
             moved = False
             for x in mates:
-                if e.t < x.start <= deadline < x.start + bound:
-                    deadline = x.start + bound
+                again = max(bound, self.bounds.takeover_restarted) \
+                    if x.kind is FaultKind.RESTART else bound
+                if e.t < x.start <= deadline < x.start + again:
+                    deadline = x.start + again
                     moved = True
         # A covering standby that (re)started shortly before the failure still waits out
         # its start-up grace (DESIGN rule 5) before it may count silence: give it that.

@@ -249,6 +249,11 @@ class Episode(Proofs):
         f = self._slot(c.function)
         if f is None:
             return
+        if self._holds(f) and c.failed == self._robot_id and c.epoch > self._epoch:
+            # A claim that replaces our live hold (rule 4), answered whether or not its
+            # certificate verifies here (`_refute_claim`).
+            self._refute_claim(f, sender, c.failed, c.epoch, header_seq(raw), now)
+            self._answer_alive(f, now)
         if not self._claim_certified(f, sender, c, raw, now):
             return
         if not self._claims_seen.believed(f, sender, c.epoch, now):
@@ -262,9 +267,8 @@ class Episode(Proofs):
                 self._back_off(sender, Trigger.BACKOFF)
             return
         if self._holds(f):
-            if c.failed == self._robot_id and c.epoch > self._epoch:
-                self._refute_claim(f, sender, c.epoch, header_seq(raw), now)
-                self._answer_alive(f, now)
+            # Answered above if it replaces us. Another claim of the slot we hold moves
+            # nothing by itself: its claimant's heartbeat or relayed proof does (rule 2).
             return
         watch = self._watches.get(f)
         if watch is not None and c.epoch > self._known[f].epoch:

@@ -47,7 +47,9 @@ class Hearing(Episode):
         # drops them as `own`): the one case below that moves our role.
         rival = self._holds(f)
         if rival:
-            self._refute_claim(f, sender, hb.epoch, 0, now)  # if it replaces us, rule 4
+            # If its certified claim replaces us, rule 4.
+            self._refute_claim(f, sender, self._ev.replaced(f, sender, hb.epoch), hb.epoch,
+                               0, now)
         ahead = self._forward(f, entry)
         if ahead != entry:
             # A takeover that the robot it replaced refuted. Its holder is outranked by
@@ -98,7 +100,7 @@ class Hearing(Episode):
         """A heartbeat for f older than our view of it (`known`): its sender missed a
         takeover, or lost a race at the same epoch; show it what it missed. If it is the
         robot our view names, behind on its own entry, it is alive all the same: its
-        watchdog is fed."""
+        watchdog and our ears hear it."""
         # A stale holder (e.g. back from a pause): if it is our slot, answer at once
         # so it hears the newer epoch and fences itself (rule 2) within a frame.
         if self._holds(f):
@@ -114,19 +116,22 @@ class Hearing(Episode):
         # shows the stale holder the evidence against it (it fences itself, or refutes
         # and keeps its slot everywhere).
         else:
-            watch = self._watches.get(f)
-            if sender == known.robot and watch is not None \
-                    and watch.heard(now, self._ears.patience(sender)):
+            if sender == known.robot:
                 # Its own hold below the entry naming it here (its reassertion, made of
                 # its refutes, which reached us before it learnt it): it executes f and
-                # is alive, so the watchdog is fed as by a heartbeat at the entry (rule
-                # 4). A watchdog watches the robot the entry names, at whatever epoch it
-                # heartbeats; otherwise we would suspect a live holder T_max later, the
-                # very time our next relay below brings it forward. Nothing else moves:
-                # a claim against the entry already went out with its certificate, and
-                # a holder behind its entry refutes no warning about it. A suspicion it
+                # is alive. A watchdog, and a standby's own ears (rules 4 and 9), judge
+                # the robot the entry names, at whatever epoch it heartbeats: so the
+                # watchdog is fed as by a heartbeat at the entry, or we would suspect a
+                # live holder T_max later, the very time our next relay below brings it
+                # forward; and a standby neither counts itself a witness of its silence
+                # nor lets one warning outvote what it heard. Nothing else moves: a
+                # claim against the entry already went out with its certificate, and a
+                # holder behind its entry refutes no warning about it. A suspicion it
                 # ends is logged as refuted, as `_holder_heard` logs one.
-                self._emit(ev.Refute(subject=sender, function=f))
+                watch = self._watches.get(f)
+                if watch is not None and watch.heard(now, self._ears.patience(sender)):
+                    self._emit(ev.Refute(subject=sender, function=f))
+                self._ears.slot_beat(f, sender, known.epoch, now)
             if self._show(f, now) and sender == known.robot \
                     and self._ev.reasserted(f, sender, known.epoch) is not None:
                 # Its own hold, below the reassertion our view holds: it refuted a

@@ -60,14 +60,18 @@ class Proofs(Views):
             watch.heard(now)
             self._emit(ev.Refute(subject=new.robot, function=f))
 
-    def _refute_claim(self, f: str, claimant: int, epoch: int, seq: int, now: float) -> None:
-        """We hold f one epoch below a certified claim of it that replaces us, and we are
-        alive, not stalled (rule 4): say that we refute that claim, once. The REFUTE
-        names the claimant and the claim's epoch; with the claim's certificate it proves
-        our reassertion (`_forward`) to every robot alike."""
-        if not self._holds(f) or epoch != self._epoch + 1 \
+    def _refute_claim(self, f: str, claimant: int, failed: int | None, epoch: int, seq: int,
+                      now: float) -> None:
+        """We hold f one epoch below a claim of it that replaces us (`failed`: the robot
+        it replaces, as the claim itself or the certificate here says), and we are alive,
+        not stalled (rule 4): say that we refute that claim, once. The REFUTE names the
+        claimant and the claim's epoch; with the claim's certificate it proves our
+        reassertion (`_forward`) to every robot alike. Whether that certificate verifies
+        here does not matter: the robots that hold it judge the REFUTE with it, and
+        ours may lack a backer it rests on (our own `LEAVE` of the entry we hold is no
+        evidence here, `Episode._record_evidence`)."""
+        if not self._holds(f) or epoch != self._epoch + 1 or failed != self._robot_id \
                 or now - self._stalled_at <= self._params.t_max \
-                or self._ev.replaced(f, claimant, epoch) != self._robot_id \
                 or self._ev.refuted_up_to(f, self._robot_id, epoch, claimant) >= 0:
             return
         msg = wire.Refute(claimant, self._plan.slot(f), epoch, seq)
