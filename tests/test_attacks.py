@@ -382,6 +382,44 @@ def test_a_max_seq_heard_first_mutes_nobody(paper: Paper, mode: str, restart: bo
     assert node.snapshot().heard[2] == pytest.approx(12.0)
 
 
+def _claim_of(plan: SwarmPlan, mode: str, claimant: int, seq: int, c: wire.Claim) -> bytes:
+    """`claimant`'s CLAIM `c` as the swarm's mode makes it: per robot signed with the
+    claimant's own key (an insider's own claim), with a shared key tagged, unsigned bare."""
+    key = bytes(32) if mode != "none" else None
+    signer = fake_identities(plan.robots)[claimant].signer if mode == "per-robot" else None
+    return wire.encode(wire.Frame(plan.swarm_id, claimant, seq, c), key, signer)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_a_claim_replacing_a_live_hold_is_refuted_once_certified_here_or_not(
+        paper: Paper, mode: str) -> None:
+    """Robot 2 holds f2 at epoch 0, alive; 6 (which covers f2) claims f2 at epoch 1 with
+    no certificate that verifies at 2 (rule 4: the robots that hold one judge 2's REFUTE
+    with it, `Proofs._refute_claim`). 2 refutes it once, however often it comes; a claim
+    in the name of robot 4, which does not cover f2, gets no answer, so a stream of them
+    costs nothing."""
+    plan, params = paper
+    key = (bytes(32),) if mode != "none" else ()
+    verifier = fake_identities(plan.robots)[1].verifier if mode == "per-robot" else None
+    node = _mode_node(plan, params, mode, 2, 1.0)
+    slot = plan.slot("f2")
+
+    def refutes(data: bytes, now: float) -> list[wire.Refute]:
+        out = [wire.decode(a.frame, key, verifier).msg for a in node.receive(data, now)
+               if isinstance(a, Broadcast)]
+        return [m for m in out if isinstance(m, wire.Refute)]
+
+    claim = _claim_of(plan, mode, 6, NOW_SEQ + 10, wire.Claim(2, slot, 1))
+    first = refutes(claim, 1.1)
+    assert [(r.witness, r.epoch, r.seq) for r in first] == [(6, 1, NOW_SEQ + 10)]
+    again = _claim_of(plan, mode, 6, NOW_SEQ + 11, wire.Claim(2, slot, 1))
+    assert refutes(again, 1.2) == []
+    for i in range(5):
+        forged = _claim_of(plan, mode, 4, NOW_SEQ + 20 + i, wire.Claim(2, slot, 1))
+        assert refutes(forged, 1.3 + 0.01 * i) == []
+    assert (node.snapshot().function, node.snapshot().epoch) == ("f2", 0)
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_a_walk_at_any_rate_stops_at_the_receivers_clock(paper: Paper, mode: str) -> None:
     """Walking robot 2's seq up in big steps, 4,000 frames a second: the walk stops at

@@ -69,8 +69,11 @@ class Proofs(Views):
         reassertion (`_forward`) to every robot alike. Whether that certificate verifies
         here does not matter: the robots that hold it judge the REFUTE with it, and
         ours may lack a backer it rests on (our own `LEAVE` of the entry we hold is no
-        evidence here, `Episode._record_evidence`)."""
+        evidence here, `Episode._record_evidence`). Only a claimant that may claim f
+        (it covers f) is answered, once a claim: a stream of forged claims gets one
+        REFUTE per robot that covers f, no more."""
         if not self._holds(f) or epoch != self._epoch + 1 or failed != self._robot_id \
+                or claimant not in self._plan.covered_by(f) \
                 or now - self._stalled_at <= self._params.t_max \
                 or self._ev.refuted_up_to(f, self._robot_id, epoch, claimant) >= 0:
             return
