@@ -108,15 +108,17 @@ def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
     neighbours (clustered failures). `wide` (1, or True): the same draw, then one or two
     compound link faults (`WIDE_KINDS`, `_draw_compound`) on top; 2 (`--wider`): drawn
     from `WIDER_KINDS`; 3 (`--widest`): from `WIDEST_KINDS`; 4 (`--wiped`): a wiped
-    restart (`WIPED_KIND`) and up to one of `WIDEST_KINDS`. A seed drawn without it
-    replays exactly as it always did, and a wide (wider, widest) seed as it did before
-    the wider (widest, wiped) draw existed."""
+    restart (`WIPED_KIND`) and up to one of `WIDEST_KINDS`; 5 (`--wiped-all`): one of
+    `WIPED_KINDS` and up to one of `WIDEST_KINDS`. A seed drawn without it replays
+    exactly as it always did, and a wide (wider, widest, wiped) seed as it did before
+    the wider (widest, wiped, wiped-all) draw existed."""
     case = _draw_classic(seed, max_robots, dense)
     if not wide:
         return case
     kinds = (WIDE_KINDS, WIDER_KINDS, WIDEST_KINDS)[min(wide, 3) - 1]
-    return _widen(case, random.Random(f"wide-{seed}"), kinds,
-                  WIPED_KIND if wide >= 4 else None)
+    rng = random.Random(f"wide-{seed}")
+    always = rng.choice(WIPED_KINDS) if wide >= 5 else WIPED_KIND if wide == 4 else None
+    return _widen(case, rng, kinds, always)
 
 
 def _draw_classic(seed: int, max_robots: int, dense: bool) -> Case:
@@ -215,6 +217,17 @@ WIPED_KIND = "wiped-restart"
   (`restart:R@T:wiped`: a wiped or replaced companion computer, as at a first start);
   three times in ten it is restarted wiped once more 0.2-2 s after that."""
 
+WIPED_KINDS = (WIPED_KIND, "wiped-claimant", "wiped-new-holder")
+"""`--wiped-all`: every case holds one of these, with up to one of the widest kinds:
+- `wiped-restart` as `--wiped` draws it;
+- `wiped-claimant`: a holder crashes, and the first standby covering its slot is
+  restarted without its state file 0.3-1.4 s later: while it votes, claims or holds its
+  claim (a standby's claim lives in memory only, DESIGN "Persistence");
+- `wiped-new-holder`: a holder crashes or is paused for 2-4 s, and once that standby has
+  taken the slot over it crashes and comes back 0.2-3 s later without its state file (a
+  standby by the plan, at a first start, while the swarm knows it as the holder), or is
+  restarted so at once."""
+
 
 def _widen(case: Case, rng: random.Random, kinds: tuple[str, ...] = WIDE_KINDS,
            always: str | None = None) -> Case:
@@ -271,7 +284,8 @@ def _draw_compound(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: st
         return _flapping(rng, plan, ids, at)
     if kind in ("handover-while-cut", "pause-while-cut"):
         return _holder_inside_a_cut(rng, plan, ids, kind, at, length)
-    if kind in ("pause-claimant", "restart-new-holder"):
+    if kind in ("pause-claimant", "restart-new-holder", "wiped-claimant",
+                "wiped-new-holder"):
         return _standby_after_a_failure(rng, plan, ids, kind, at)
     if kind == WIPED_KIND:
         return _wiped_restart(rng, plan, ids, at)
@@ -354,10 +368,12 @@ def _holder_inside_a_cut(rng: random.Random, plan: SwarmPlan, ids: list[int], ki
 
 def _standby_after_a_failure(rng: random.Random, plan: SwarmPlan, ids: list[int], kind: str,
                              at: float) -> list[Fault]:
-    """A holder that a standby covers fails at `at` (`pause-claimant`: it crashes;
-    `restart-new-holder`: it crashes or is paused for 2-4 s), and the first standby
-    covering its slot is paused 0.3-1.2 s later for 0.3-2 s (around its claim), or
-    restarts 0-1.5 s after the takeover bound (once it holds the slot)."""
+    """A holder that a standby covers fails at `at` (`pause-claimant`, `wiped-claimant`:
+    it crashes; `restart-new-holder`, `wiped-new-holder`: it crashes or is paused for
+    2-4 s), and the first standby covering its slot is paused 0.3-1.2 s later for 0.3-2 s
+    (around its claim) or restarted wiped 0.3-1.4 s later, or restarts 0-1.5 s after
+    the takeover bound (once it holds the slot): from its state file, or wiped (crashed
+    first, half the time, and back 0.2-3 s later)."""
     # A holder whose slot a standby covers (every drawn swarm has one: each standby
     # covers at least one slot).
     covered = {r: by for r in ids if (g := plan.robots[r].function) is not None
@@ -368,10 +384,20 @@ def _standby_after_a_failure(rng: random.Random, plan: SwarmPlan, ids: list[int]
         return [Fault(FaultKind.CRASH, at, (holder,)),
                 Fault(FaultKind.PAUSE, round(at + rng.uniform(0.3, 1.2), 3), (standby,),
                       round(rng.uniform(0.3, 2.0), 2))]
+    if kind == "wiped-claimant":
+        return [Fault(FaultKind.CRASH, at, (holder,)),
+                Fault(FaultKind.RESTART, round(at + rng.uniform(0.3, 1.4), 3), (standby,),
+                      wiped=True)]
     fail = Fault(FaultKind.CRASH, at, (holder,)) if rng.random() < 0.5 else \
         Fault(FaultKind.PAUSE, at, (holder,), round(rng.uniform(2.0, 4.0), 2))
     back = round(at + udp().takeover_bound() + rng.uniform(0.0, 1.5), 3)
-    return [fail, Fault(FaultKind.RESTART, back, (standby,))]
+    if kind == "restart-new-holder":
+        return [fail, Fault(FaultKind.RESTART, back, (standby,))]
+    if rng.random() < 0.5:
+        return [fail, Fault(FaultKind.RESTART, back, (standby,), wiped=True)]
+    return [fail, Fault(FaultKind.CRASH, back, (standby,)),
+            Fault(FaultKind.RESTART, round(back + rng.uniform(0.2, 3.0), 3), (standby,),
+                  wiped=True)]
 
 
 def _wiped_restart(rng: random.Random, plan: SwarmPlan, ids: list[int],
@@ -454,7 +480,15 @@ def wide_kinds(case: Case) -> list[str]:
     if any(b.robots[0] in by and bound <= b.at - t <= bound + 1.5
            for b in restarts for by, t in failed):
         out.append("restart-new-holder")
-    if any(f.wiped for f in case.faults):
+    wiped = [b for b in restarts if b.wiped]
+    if any(b.robots[0] in by and 0 < b.at - t <= 1.4 for b in wiped for by, t in failed):
+        out.append("wiped-claimant")
+    crashed = {f.robots[0]: f.at for f in case.faults
+               if f.kind is FaultKind.CRASH and len(f.robots) == 1}
+    if any(b.robots[0] in by and bound <= crashed.get(b.robots[0], b.at) - t <= bound + 1.5
+           for b in wiped for by, t in failed):
+        out.append("wiped-new-holder")
+    if wiped:
         out.append(WIPED_KIND)
     return out
 
@@ -490,7 +524,7 @@ def run_case(case: Case, auth: str | None = None) -> VirtualResult:
                        loss_model=case.loss_model, burst_len=case.burst_len)
 
 
-WIDE_FLAGS = ("", " --wide", " --wider", " --widest", " --wiped")
+WIDE_FLAGS = ("", " --wide", " --wider", " --widest", " --wiped", " --wiped-all")
 """The flag of each `wide` level, for the replay command a violation prints."""
 
 DRAWN: collections.Counter[str] = collections.Counter()
@@ -630,6 +664,10 @@ def main() -> None:
                     help="a robot restarted without its state file in every case (after "
                          "a crash, a leave, a fault or a pause; at times twice), and up "
                          "to one of the --widest kinds beside it")
+    ap.add_argument("--wiped-all", action="store_const", const=5, dest="wide",
+                    help="--wiped, or a standby restarted without its state file around "
+                         "its claim or once it holds the slot it took over (a --wiped "
+                         "seed replays as before)")
     a = ap.parse_args()
     global AUTH
     AUTH = a.auth

@@ -246,6 +246,39 @@ def test_the_wiped_draw_restarts_a_robot_without_its_state_file() -> None:
     assert hows == {"crash", "leave", "unhealthy", "pause"} and twice >= 10
 
 
+def test_the_wiped_all_draw_also_wipes_a_standby_around_its_claim_or_its_new_hold() -> None:
+    """`--wiped-all`: every case holds one of the wiped kinds; a wiped claimant is the
+    first standby covering a crashed holder's slot, back without its state file within
+    1.4 s of the crash (around its claim); a wiped new holder is that standby, crashed
+    or restarted once the takeover bound has passed, back wiped; a `--wiped` seed
+    replays as before."""
+    bench = _bench()
+    drawn: set[str] = set()
+    for seed in range(120):
+        case = _wide_case(bench, seed, 5)
+        kind = case.compound[0]
+        assert kind in bench.WIPED_KINDS and len(case.compound) <= 2
+        drawn.add(kind)
+        assert _wide_case(bench, seed, 4) == bench.draw_case(seed, 12, wide=4)
+        if kind == bench.WIPED_KIND:
+            continue
+        n = len(bench.draw_case(seed, 12).faults)
+        fail, first = case.faults[n:n + 2]
+        then = case.faults[n + 1:n + (3 if first.kind == "crash" else 2)]
+        back, standby = then[-1], first.robots[0]
+        g = case.plan.robots[fail.robots[0]].function
+        assert g is not None and standby in case.plan.covered_by(g)
+        assert back.kind == "restart" and back.wiped
+        assert all(f.robots == (standby,) for f in then)
+        if kind == "wiped-claimant":
+            assert fail.kind == "crash" and 0.3 <= back.at - fail.at <= 1.4
+        else:
+            assert fail.kind in ("crash", "pause")
+            assert then[0].at - fail.at >= udp().takeover_bound()
+            assert then[0].kind in ("crash", "restart")
+    assert drawn == set(bench.WIPED_KINDS)
+
+
 WIDE_FIXED: tuple[int, ...] = (21,)
 """Wide seeds (`python bench/bench_chaos.py --seed N --wide --verbose`, 3-60 robots) that
 broke an invariant on the core before the slot table (swarmd/core/slots.py) and run
