@@ -19,7 +19,13 @@ the fault kinds drawn and the violations by kind, each with the command that rep
     python bench/bench_chaos.py --seeds 500 --wider       # and groups cut both ways
     python bench/bench_chaos.py --seeds 500 --widest      # and flapping links, handovers
                                                           # and pauses inside cuts
+    python bench/bench_chaos.py --seeds 500 --wiped-all --preset radio
+                                                          # at radio() timing
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
+
+`--preset radio`: every case runs at `radio()` timing (t_max 2 s, standbys heartbeating
+every 8 s), its fault times and length stretched by radio's t_max over udp's (x4), so a
+fault lasts as long against the timing as the udp draw made it.
 
 `--ring8`: configs/ring8.yaml (eight actives in a ring, three standbys covering all
 eight); every two adjacent robots crash at the same instant, at 20 phases of the
@@ -36,7 +42,7 @@ import random
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,7 +52,7 @@ from sim.shared.faults import Fault, FaultKind  # noqa: E402
 from sim.shared.invariants import Violation  # noqa: E402
 from sim.virtual.simulator import VirtualResult, run_virtual  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
-from swarmd.core.params import Params, udp  # noqa: E402
+from swarmd.core.params import Params, radio, udp  # noqa: E402
 from swarmd.core.plan import RobotPlan, SwarmPlan  # noqa: E402
 
 KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy", "collide",
@@ -54,6 +60,8 @@ KINDS = ("crash", "restart", "pause", "partition", "liar", "leave", "unhealthy",
 """What a schedule draws from; `oneway` is a one-way partition (`partition:A>B`)."""
 AUTH = "per-robot"
 """The authentication mode of every run (`--auth`): the shipped default unless told."""
+PRESETS: dict[str, Callable[[], Params]] = {"udp": udp, "radio": radio}
+"""The timing presets a case may run at (`--preset`); the draw is made for `udp`."""
 
 
 @dataclass(frozen=True)
@@ -68,11 +76,13 @@ class Case:
     compound: tuple[str, ...] = ()
     """`--wide` (`--wider`, `--widest`): the compound link faults (`WIDE_KINDS`,
     `WIDER_KINDS`, `WIDEST_KINDS`) drawn on top of the classic draw."""
+    preset: str = "udp"
+    """The timing it runs at (`PRESETS`); its times are the udp draw's, stretched."""
 
     def describe(self) -> str:
         model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
         lines = [f"seed {self.seed}: {len(self.plan.robots)} robots, loss {self.loss:.0%}"
-                 f"{model}, {self.duration:g} s"]
+                 f"{model}, {self.duration:g} s at {self.preset}()"]
         for r, p in sorted(self.plan.robots.items()):
             lines.append(f"  robot {r}: " + (f"active {p.function}, watched by "
                          f"{', '.join(self.plan.watched_by(p.function))}" if p.function
@@ -103,7 +113,21 @@ def draw_swarm(rng: random.Random, max_robots: int = 60) -> SwarmPlan:
 
 
 def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
-              wide: int = 0) -> Case:
+              wide: int = 0, preset: str = "udp") -> Case:
+    """`_draw` at `preset` timing: each fault's time and length, and the run's length,
+    stretched by the preset's t_max over udp's (the draw's timing), so that a fault is as
+    long against the timing (shorter or longer than a suspicion, a vote, a claim) as the
+    udp draw made it."""
+    case = _draw(seed, max_robots, dense, wide)
+    if preset == "udp":
+        return case
+    k = PRESETS[preset]().t_max / udp().t_max
+    faults = tuple(replace(f, at=round(f.at * k, 3), duration=None if f.duration is None
+                           else round(f.duration * k, 3)) for f in case.faults)
+    return replace(case, faults=faults, duration=round(case.duration * k, 3), preset=preset)
+
+
+def _draw(seed: int, max_robots: int, dense: bool, wide: int) -> Case:
     """The swarm and schedule of one seed. `dense`: 4-8 faults within 1.5 s, mostly on
     neighbours (clustered failures). `wide` (1, or True): the same draw, then one or two
     compound link faults (`WIDE_KINDS`, `_draw_compound`) on top; 2 (`--wider`): drawn
@@ -519,7 +543,8 @@ def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
 
 
 def run_case(case: Case, auth: str | None = None) -> VirtualResult:
-    return run_virtual(case.plan, udp(), duration=case.duration, faults=case.faults,
+    return run_virtual(case.plan, PRESETS[case.preset](), duration=case.duration,
+                       faults=case.faults,
                        loss=case.loss, seed=case.seed, auth=auth or AUTH,
                        loss_model=case.loss_model, burst_len=case.burst_len)
 
@@ -532,11 +557,11 @@ DRAWN: collections.Counter[str] = collections.Counter()
 
 
 def chaos(seeds: Sequence[int], max_robots: int, verbose: bool, dense: bool = False,
-          auth: str | None = None, wide: int = 0
+          auth: str | None = None, wide: int = 0, preset: str = "udp"
           ) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
-        case = draw_case(seed, max_robots, dense, wide)
+        case = draw_case(seed, max_robots, dense, wide, preset)
         DRAWN.update("oneway" if f.oneway else f.kind for f in case.faults)
         DRAWN.update(f"wide {k}" for k in case.compound)
         if case.loss_model == "burst":
@@ -607,19 +632,21 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
-def _chaos_chunk(args: tuple[int, int, int, bool, str, int]
+def _chaos_chunk(args: tuple[int, int, int, bool, str, int, str]
                  ) -> tuple[dict[str, list[tuple[int, Violation]]], collections.Counter[str]]:
-    first, last, max_robots, dense, auth, wide = args
+    first, last, max_robots, dense, auth, wide, preset = args
     DRAWN.clear()
-    return chaos(range(first, last), max_robots, False, dense, auth, wide), DRAWN.copy()
+    return (chaos(range(first, last), max_robots, False, dense, auth, wide, preset),
+            DRAWN.copy())
 
 
 def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
-                    auth: str, wide: int = 0) -> dict[str, list[tuple[int, Violation]]]:
+                    auth: str, wide: int = 0, preset: str = "udp"
+                    ) -> dict[str, list[tuple[int, Violation]]]:
     from concurrent.futures import ProcessPoolExecutor
 
     step = 50
-    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide)
+    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide, preset)
               for s in range(seeds.start, seeds.stop, step)]
     found: dict[str, list[tuple[int, Violation]]] = {}
     with ProcessPoolExecutor(jobs) as pool:
@@ -664,6 +691,9 @@ def main() -> None:
                     help="a robot restarted without its state file in every case (after "
                          "a crash, a leave, a fault or a pause; at times twice), and up "
                          "to one of the --widest kinds beside it")
+    ap.add_argument("--preset", choices=tuple(PRESETS), default="udp",
+                    help="the timing every case runs at (default udp); at radio the "
+                         "fault times and lengths are stretched by its t_max over udp's")
     ap.add_argument("--wiped-all", action="store_const", const=5, dest="wide",
                     help="--wiped, or a standby restarted without its state file around "
                          "its claim or once it holds the slot it took over (a --wiped "
@@ -677,14 +707,15 @@ def main() -> None:
     seeds = range(a.seed, a.seed + 1) if a.seed is not None else range(a.first, a.first + a.seeds)
     t0 = time.perf_counter()
     if a.jobs > 1 and len(seeds) > 1:
-        found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth, a.wide)
+        found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth, a.wide,
+                                a.preset)
     else:
-        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide)
+        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide, a.preset)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
     wide = f" ({WIDE_FLAGS[a.wide][3:]})" if a.wide else ""
     print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{wide}, "
-          f"auth {a.auth}, {total} violation(s) in {wall:.1f} s")
+          f"auth {a.auth}, {a.preset}(), {total} violation(s) in {wall:.1f} s")
     print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
     for kind, hits in sorted(found.items()):
         runs = sorted({s for s, _ in hits})
@@ -692,7 +723,8 @@ def main() -> None:
         for seed, v in hits[:5]:
             extra = ("" if a.max_robots == 60 else f" --max-robots {a.max_robots}") \
                 + (" --dense" if a.dense else "") + WIDE_FLAGS[a.wide] \
-                + ("" if a.auth == "per-robot" else f" --auth {a.auth}")
+                + ("" if a.auth == "per-robot" else f" --auth {a.auth}") \
+                + ("" if a.preset == "udp" else f" --preset {a.preset}")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")
     sys.exit(1 if total else 0)

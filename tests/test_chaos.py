@@ -19,7 +19,7 @@ import pytest
 
 from sim.shared.faults import parse_fault
 from sim.shared.invariants import Violation
-from swarmd.core.params import udp
+from swarmd.core.params import radio, udp
 
 ROOT = Path(__file__).resolve().parent.parent
 SEEDS = 50
@@ -469,3 +469,31 @@ def test_the_virtual_medium_holds_overlapping_one_way_partitions(auth: str) -> N
     assert 4.0 + params.t_max - hb <= heard[(3, "suspect")] <= 4.0 + params.t_max + hb
     assert 6.0 <= heard[(3, "refute")] < 6.1
     assert res.violations == []
+
+
+def test_a_case_at_radio_timing_is_the_udp_draw_stretched_by_its_t_max() -> None:
+    """`--preset radio`: the same swarm and faults as the udp draw, each time and length
+    (and the run) stretched by radio's t_max over udp's, and the case runs at radio()."""
+    bench = _bench()
+    k = radio().t_max / udp().t_max
+    for seed in range(20):
+        fast, slow = bench.draw_case(seed, 12, wide=5), bench.draw_case(seed, 12, wide=5,
+                                                                          preset="radio")
+        assert slow.plan == fast.plan and slow.preset == "radio" and len(slow.faults) > 0
+        assert slow.duration == pytest.approx(fast.duration * k, abs=1e-3)
+        for a, b in zip(fast.faults, slow.faults, strict=True):
+            assert (b.kind, b.robots, b.wiped) == (a.kind, a.robots, a.wiped)
+            assert b.at == pytest.approx(a.at * k, abs=1e-3)
+            assert (b.duration is None) == (a.duration is None)
+            if a.duration is not None:
+                assert b.duration == pytest.approx(a.duration * k, abs=1e-3)
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_wiped_all_seeds_at_radio_timing_run_clean(auth: str) -> None:
+    """A few `--wiped-all --preset radio` seeds, in every mode: the protocol holds at
+    radio() timing (a standby heartbeating every 8 s, a 10 s start-up grace) as at udp."""
+    bench = _bench()
+    found = bench.chaos(range(880000, 880006), max_robots=12, verbose=False, auth=auth,
+                        wide=5, preset="radio")
+    assert dict(found) == {}
