@@ -23,6 +23,11 @@ the fault kinds drawn and the violations by kind, each with the command that rep
                                                           # at radio() timing
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
+`--rough`: every case's channel also delays each delivery 2-30 ms, with a jitter of 2-120
+ms on top (frames a heartbeat period apart at udp swap places) and duplicates 0-20 % of
+deliveries (drawn per seed apart from the rest: the seed's swarm and faults stay the
+same).
+
 `--preset radio`: every case runs at `radio()` timing (t_max 2 s, standbys heartbeating
 every 8 s), its fault times and length stretched by radio's t_max over udp's (x4), so a
 fault lasts as long against the timing as the udp draw made it.
@@ -50,7 +55,7 @@ sys.path.insert(0, str(ROOT))
 
 from sim.shared.faults import Fault, FaultKind  # noqa: E402
 from sim.shared.invariants import Violation  # noqa: E402
-from sim.virtual.simulator import VirtualResult, run_virtual  # noqa: E402
+from sim.virtual.simulator import Channel, VirtualResult, run_virtual  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
 from swarmd.core.params import Params, radio, udp  # noqa: E402
 from swarmd.core.plan import RobotPlan, SwarmPlan  # noqa: E402
@@ -78,11 +83,17 @@ class Case:
     `WIDER_KINDS`, `WIDEST_KINDS`) drawn on top of the classic draw."""
     preset: str = "udp"
     """The timing it runs at (`PRESETS`); its times are the udp draw's, stretched."""
+    delay: float = 0.002
+    jitter: float = 0.002
+    duplicate: float = 0.0
+    """The channel's latency, jitter (reordering) and duplication (`Channel`; `--rough`)."""
 
     def describe(self) -> str:
         model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
         lines = [f"seed {self.seed}: {len(self.plan.robots)} robots, loss {self.loss:.0%}"
-                 f"{model}, {self.duration:g} s at {self.preset}()"]
+                 f"{model}, {self.duration:g} s at {self.preset}(), delay "
+                 f"{self.delay * 1000:.0f} ms + jitter {self.jitter * 1000:.0f} ms, "
+                 f"duplicates {self.duplicate:.0%}"]
         for r, p in sorted(self.plan.robots.items()):
             lines.append(f"  robot {r}: " + (f"active {p.function}, watched by "
                          f"{', '.join(self.plan.watched_by(p.function))}" if p.function
@@ -113,12 +124,18 @@ def draw_swarm(rng: random.Random, max_robots: int = 60) -> SwarmPlan:
 
 
 def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
-              wide: int = 0, preset: str = "udp") -> Case:
+              wide: int = 0, preset: str = "udp", rough: bool = False) -> Case:
     """`_draw` at `preset` timing: each fault's time and length, and the run's length,
     stretched by the preset's t_max over udp's (the draw's timing), so that a fault is as
     long against the timing (shorter or longer than a suspicion, a vote, a claim) as the
-    udp draw made it."""
+    udp draw made it. `rough`: a channel that delays, reorders and duplicates, drawn
+    apart from the rest (the same swarm and faults)."""
     case = _draw(seed, max_robots, dense, wide)
+    if rough:
+        rng = random.Random(f"rough-{seed}")
+        case = replace(case, delay=round(rng.uniform(0.002, 0.03), 4),
+                       jitter=round(rng.uniform(0.002, 0.12), 4),
+                       duplicate=round(rng.uniform(0.0, 0.2), 3))
     if preset == "udp":
         return case
     k = PRESETS[preset]().t_max / udp().t_max
@@ -543,10 +560,12 @@ def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
 
 
 def run_case(case: Case, auth: str | None = None) -> VirtualResult:
+    channel = Channel(loss=case.loss, delay=case.delay, jitter=case.jitter,
+                      duplicate=case.duplicate, loss_model=case.loss_model,
+                      burst_len=case.burst_len)
     return run_virtual(case.plan, PRESETS[case.preset](), duration=case.duration,
-                       faults=case.faults,
-                       loss=case.loss, seed=case.seed, auth=auth or AUTH,
-                       loss_model=case.loss_model, burst_len=case.burst_len)
+                       faults=case.faults, loss=case.loss, seed=case.seed,
+                       auth=auth or AUTH, channel=channel)
 
 
 WIDE_FLAGS = ("", " --wide", " --wider", " --widest", " --wiped", " --wiped-all")
@@ -557,11 +576,11 @@ DRAWN: collections.Counter[str] = collections.Counter()
 
 
 def chaos(seeds: Sequence[int], max_robots: int, verbose: bool, dense: bool = False,
-          auth: str | None = None, wide: int = 0, preset: str = "udp"
+          auth: str | None = None, wide: int = 0, preset: str = "udp", rough: bool = False
           ) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
-        case = draw_case(seed, max_robots, dense, wide, preset)
+        case = draw_case(seed, max_robots, dense, wide, preset, rough)
         DRAWN.update("oneway" if f.oneway else f.kind for f in case.faults)
         DRAWN.update(f"wide {k}" for k in case.compound)
         if case.loss_model == "burst":
@@ -632,21 +651,21 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
-def _chaos_chunk(args: tuple[int, int, int, bool, str, int, str]
+def _chaos_chunk(args: tuple[int, int, int, bool, str, int, str, bool]
                  ) -> tuple[dict[str, list[tuple[int, Violation]]], collections.Counter[str]]:
-    first, last, max_robots, dense, auth, wide, preset = args
+    first, last, max_robots, dense, auth, wide, preset, rough = args
     DRAWN.clear()
-    return (chaos(range(first, last), max_robots, False, dense, auth, wide, preset),
+    return (chaos(range(first, last), max_robots, False, dense, auth, wide, preset, rough),
             DRAWN.copy())
 
 
 def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
-                    auth: str, wide: int = 0, preset: str = "udp"
+                    auth: str, wide: int = 0, preset: str = "udp", rough: bool = False
                     ) -> dict[str, list[tuple[int, Violation]]]:
     from concurrent.futures import ProcessPoolExecutor
 
     step = 50
-    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide, preset)
+    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide, preset, rough)
               for s in range(seeds.start, seeds.stop, step)]
     found: dict[str, list[tuple[int, Violation]]] = {}
     with ProcessPoolExecutor(jobs) as pool:
@@ -691,6 +710,9 @@ def main() -> None:
                     help="a robot restarted without its state file in every case (after "
                          "a crash, a leave, a fault or a pause; at times twice), and up "
                          "to one of the --widest kinds beside it")
+    ap.add_argument("--rough", action="store_true",
+                    help="a channel that delays (2-30 ms), reorders (jitter 2-120 ms) and "
+                         "duplicates (0-20 %%), drawn per seed (its swarm and faults stay)")
     ap.add_argument("--preset", choices=tuple(PRESETS), default="udp",
                     help="the timing every case runs at (default udp); at radio the "
                          "fault times and lengths are stretched by its t_max over udp's")
@@ -708,14 +730,16 @@ def main() -> None:
     t0 = time.perf_counter()
     if a.jobs > 1 and len(seeds) > 1:
         found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth, a.wide,
-                                a.preset)
+                                a.preset, a.rough)
     else:
-        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide, a.preset)
+        found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide, a.preset,
+                      a.rough)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
     wide = f" ({WIDE_FLAGS[a.wide][3:]})" if a.wide else ""
     print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{wide}, "
-          f"auth {a.auth}, {a.preset}(), {total} violation(s) in {wall:.1f} s")
+          f"auth {a.auth}, {a.preset}(){', rough' if a.rough else ''}, "
+          f"{total} violation(s) in {wall:.1f} s")
     print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
     for kind, hits in sorted(found.items()):
         runs = sorted({s for s, _ in hits})
@@ -724,7 +748,8 @@ def main() -> None:
             extra = ("" if a.max_robots == 60 else f" --max-robots {a.max_robots}") \
                 + (" --dense" if a.dense else "") + WIDE_FLAGS[a.wide] \
                 + ("" if a.auth == "per-robot" else f" --auth {a.auth}") \
-                + ("" if a.preset == "udp" else f" --preset {a.preset}")
+                + ("" if a.preset == "udp" else f" --preset {a.preset}") \
+                + (" --rough" if a.rough else "")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")
     sys.exit(1 if total else 0)
