@@ -28,6 +28,14 @@ ms on top (frames a heartbeat period apart at udp swap places) and duplicates 0-
 deliveries (drawn per seed apart from the rest: the seed's swarm and faults stay the
 same).
 
+`--insider`: every case also holds a `forge:R@T:ATTACK` (sim/shared/forge.py) from a
+robot R drawn per seed, within 1 s before to 3 s after the first fault; per robot, ATTACK
+is any of `ATTACKS` (an insider with R's own key speaks in R's name only: DESIGN's
+threat table); with a shared key and unsigned, where an insider can forge any frame in
+any name and no invariant holds against it, `replay` and `ahead`: frames anyone can
+make or record (a recorder of the channel, heartbeats far ahead of R's counter), which
+those modes promise to withstand as well.
+
 `--preset radio`: every case runs at `radio()` timing (t_max 2 s, standbys heartbeating
 every 8 s), its fault times and length stretched by radio's t_max over udp's (x4), so a
 fault lasts as long against the timing as the udp draw made it.
@@ -53,7 +61,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from sim.shared.faults import Fault, FaultKind  # noqa: E402
+from sim.shared.faults import ATTACKS, Fault, FaultKind  # noqa: E402
 from sim.shared.invariants import Violation  # noqa: E402
 from sim.virtual.simulator import Channel, VirtualResult, run_virtual  # noqa: E402
 from swarmd.config import load_swarm  # noqa: E402
@@ -87,6 +95,9 @@ class Case:
     jitter: float = 0.002
     duplicate: float = 0.0
     """The channel's latency, jitter (reordering) and duplication (`Channel`; `--rough`)."""
+    insider: bool = False
+    """`--insider`: a forge fault drawn in (`_with_insider`); which attacks depends on the
+    mode the case runs in, so the fault is drawn when it runs (`run_case`)."""
 
     def describe(self) -> str:
         model = f" in bursts of {self.burst_len:g}" if self.loss_model == "burst" else ""
@@ -124,13 +135,15 @@ def draw_swarm(rng: random.Random, max_robots: int = 60) -> SwarmPlan:
 
 
 def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
-              wide: int = 0, preset: str = "udp", rough: bool = False) -> Case:
+              wide: int = 0, preset: str = "udp", rough: bool = False,
+              insider: bool = False) -> Case:
     """`_draw` at `preset` timing: each fault's time and length, and the run's length,
     stretched by the preset's t_max over udp's (the draw's timing), so that a fault is as
     long against the timing (shorter or longer than a suspicion, a vote, a claim) as the
     udp draw made it. `rough`: a channel that delays, reorders and duplicates, drawn
-    apart from the rest (the same swarm and faults)."""
-    case = _draw(seed, max_robots, dense, wide)
+    apart from the rest (the same swarm and faults). `insider`: a forge fault as well,
+    drawn for the mode the case runs in (`with_insider`)."""
+    case = replace(_draw(seed, max_robots, dense, wide), insider=insider)
     if rough:
         rng = random.Random(f"rough-{seed}")
         case = replace(case, delay=round(rng.uniform(0.002, 0.03), 4),
@@ -559,7 +572,30 @@ def _neighbours(plan: SwarmPlan, robot: int) -> list[int]:
     return sorted(out)
 
 
+INSIDER_ATTACKS = {"per-robot": ATTACKS, "shared": ("replay", "ahead"),
+                   "none": ("replay", "ahead")}
+"""What `--insider` draws from in each mode (module docstring)."""
+
+
+def with_insider(case: Case, auth: str) -> Case:
+    """`case` with its insider's forge fault (`--insider`) for mode `auth`, drawn apart
+    from the rest of the seed (the same swarm and faults), and drawn once (the case it
+    returns has it among its faults); `case` itself without one. The fault's time is
+    drawn at udp timing and stretched as the case's others."""
+    if not case.insider:
+        return case
+    rng = random.Random(f"insider-{case.seed}")
+    robot = rng.choice(sorted(case.plan.robots))
+    attack = rng.choice(INSIDER_ATTACKS[auth])
+    k = PRESETS[case.preset]().t_max / udp().t_max
+    first = min(f.at for f in case.faults) / k
+    at = round(max(0.5, first + rng.uniform(-1.0, 3.0)) * k, 3)
+    return replace(case, insider=False,
+                   faults=(*case.faults, Fault(FaultKind.FORGE, at, (robot,), attack=attack)))
+
+
 def run_case(case: Case, auth: str | None = None) -> VirtualResult:
+    case = with_insider(case, auth or AUTH)
     channel = Channel(loss=case.loss, delay=case.delay, jitter=case.jitter,
                       duplicate=case.duplicate, loss_model=case.loss_model,
                       burst_len=case.burst_len)
@@ -576,12 +612,14 @@ DRAWN: collections.Counter[str] = collections.Counter()
 
 
 def chaos(seeds: Sequence[int], max_robots: int, verbose: bool, dense: bool = False,
-          auth: str | None = None, wide: int = 0, preset: str = "udp", rough: bool = False
-          ) -> dict[str, list[tuple[int, Violation]]]:
+          auth: str | None = None, wide: int = 0, preset: str = "udp", rough: bool = False,
+          insider: bool = False) -> dict[str, list[tuple[int, Violation]]]:
     found: dict[str, list[tuple[int, Violation]]] = collections.defaultdict(list)
     for seed in seeds:
-        case = draw_case(seed, max_robots, dense, wide, preset, rough)
-        DRAWN.update("oneway" if f.oneway else f.kind for f in case.faults)
+        case = with_insider(draw_case(seed, max_robots, dense, wide, preset, rough, insider),
+                            auth or AUTH)
+        DRAWN.update(f"forge {f.attack}" if f.kind is FaultKind.FORGE
+                     else "oneway" if f.oneway else f.kind for f in case.faults)
         DRAWN.update(f"wide {k}" for k in case.compound)
         if case.loss_model == "burst":
             DRAWN["burst loss"] += 1
@@ -651,21 +689,22 @@ def print_ring8(phases: int) -> None:
               f"[{time.perf_counter() - t0:.1f} s]")
 
 
-def _chaos_chunk(args: tuple[int, int, int, bool, str, int, str, bool]
+def _chaos_chunk(args: tuple[int, int, int, bool, str, int, str, bool, bool]
                  ) -> tuple[dict[str, list[tuple[int, Violation]]], collections.Counter[str]]:
-    first, last, max_robots, dense, auth, wide, preset, rough = args
+    first, last, max_robots, dense, auth, wide, preset, rough, insider = args
     DRAWN.clear()
-    return (chaos(range(first, last), max_robots, False, dense, auth, wide, preset, rough),
-            DRAWN.copy())
+    return (chaos(range(first, last), max_robots, False, dense, auth, wide, preset, rough,
+                  insider), DRAWN.copy())
 
 
 def _chaos_parallel(seeds: range, max_robots: int, jobs: int, dense: bool,
-                    auth: str, wide: int = 0, preset: str = "udp", rough: bool = False
-                    ) -> dict[str, list[tuple[int, Violation]]]:
+                    auth: str, wide: int = 0, preset: str = "udp", rough: bool = False,
+                    insider: bool = False) -> dict[str, list[tuple[int, Violation]]]:
     from concurrent.futures import ProcessPoolExecutor
 
     step = 50
-    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide, preset, rough)
+    chunks = [(s, min(s + step, seeds.stop), max_robots, dense, auth, wide, preset, rough,
+               insider)
               for s in range(seeds.start, seeds.stop, step)]
     found: dict[str, list[tuple[int, Violation]]] = {}
     with ProcessPoolExecutor(jobs) as pool:
@@ -713,6 +752,10 @@ def main() -> None:
     ap.add_argument("--rough", action="store_true",
                     help="a channel that delays (2-30 ms), reorders (jitter 2-120 ms) and "
                          "duplicates (0-20 %%), drawn per seed (its swarm and faults stay)")
+    ap.add_argument("--insider", action="store_true",
+                    help="a forge fault too, from a robot drawn per seed: any attack per "
+                         "robot; with a shared key and unsigned, replay and ahead (what "
+                         "anyone can record or make)")
     ap.add_argument("--preset", choices=tuple(PRESETS), default="udp",
                     help="the timing every case runs at (default udp); at radio the "
                          "fault times and lengths are stretched by its t_max over udp's")
@@ -730,15 +773,16 @@ def main() -> None:
     t0 = time.perf_counter()
     if a.jobs > 1 and len(seeds) > 1:
         found = _chaos_parallel(seeds, a.max_robots, a.jobs, a.dense, a.auth, a.wide,
-                                a.preset, a.rough)
+                                a.preset, a.rough, a.insider)
     else:
         found = chaos(seeds, a.max_robots, a.verbose, a.dense, a.auth, a.wide, a.preset,
-                      a.rough)
+                      a.rough, a.insider)
     wall = time.perf_counter() - t0
     total = sum(len(v) for v in found.values())
     wide = f" ({WIDE_FLAGS[a.wide][3:]})" if a.wide else ""
     print(f"{len(seeds)} seeds{' (dense)' if a.dense else ''}{wide}, "
-          f"auth {a.auth}, {a.preset}(){', rough' if a.rough else ''}, "
+          f"auth {a.auth}, {a.preset}(){', rough' if a.rough else ''}"
+          f"{', insider' if a.insider else ''}, "
           f"{total} violation(s) in {wall:.1f} s")
     print("  drawn: " + ", ".join(f"{k} {n}" for k, n in sorted(DRAWN.items())))
     for kind, hits in sorted(found.items()):
@@ -749,7 +793,7 @@ def main() -> None:
                 + (" --dense" if a.dense else "") + WIDE_FLAGS[a.wide] \
                 + ("" if a.auth == "per-robot" else f" --auth {a.auth}") \
                 + ("" if a.preset == "udp" else f" --preset {a.preset}") \
-                + (" --rough" if a.rough else "")
+                + (" --rough" if a.rough else "") + (" --insider" if a.insider else "")
             print(f"    t={v.t:.2f} robot {v.robot}: {v.detail}\n"
                   f"      python bench/bench_chaos.py --seed {seed}{extra} --verbose")
     sys.exit(1 if total else 0)

@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from sim.shared.faults import parse_fault
+from sim.shared.faults import ATTACKS, parse_fault
 from sim.shared.invariants import Violation
 from swarmd.core.params import radio, udp
 
@@ -527,4 +527,36 @@ def test_widest_seeds_on_a_rough_channel_run_clean(auth: str) -> None:
     bench = _bench()
     found = bench.chaos(range(920000, 920006), max_robots=12, verbose=False, auth=auth,
                         wide=3, rough=True)
+    assert dict(found) == {}
+
+
+def test_an_insider_case_adds_one_forge_fault_of_what_its_mode_must_withstand() -> None:
+    """`--insider`: the seed's swarm and faults stay, and one `forge:R@T:ATTACK` joins
+    them, drawn once: per robot any attack (an insider speaks in its own name only); with
+    a shared key or unsigned only what anyone can record or make (`replay`, `ahead`)."""
+    bench = _bench()
+    seen: dict[str, set[str]] = {"per-robot": set(), "shared": set(), "none": set()}
+    for seed in range(60):
+        plain = bench.draw_case(seed, 12, wide=1)
+        case = bench.draw_case(seed, 12, wide=1, insider=True)
+        for auth, attacks in seen.items():
+            full = bench.with_insider(case, auth)
+            assert full == bench.with_insider(full, auth)  # drawn once
+            assert full.faults[:-1] == plain.faults and full.plan == plain.plan
+            forge = full.faults[-1]
+            assert forge.kind == "forge" and forge.robots[0] in case.plan.robots
+            assert forge.at >= 0.5
+            attacks.add(forge.attack)
+        assert bench.with_insider(plain, "per-robot") == plain
+    assert seen["per-robot"] == set(ATTACKS)
+    assert seen["shared"] == seen["none"] == {"replay", "ahead"}
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_wide_seeds_with_an_insider_run_clean(auth: str) -> None:
+    """A few `--wide --insider` seeds, in every mode: an insider's forged frames beside
+    the wide faults leave no violation (DESIGN's threat table: what each mode withstands)."""
+    bench = _bench()
+    found = bench.chaos(range(950000, 950008), max_robots=12, verbose=False, auth=auth,
+                        wide=1, insider=True)
     assert dict(found) == {}
