@@ -19,8 +19,14 @@ the fault kinds drawn and the violations by kind, each with the command that rep
     python bench/bench_chaos.py --seeds 500 --wider       # and groups cut both ways
     python bench/bench_chaos.py --seeds 500 --widest      # and flapping links, handovers
                                                           # and pauses inside cuts
-    python bench/bench_chaos.py --seeds 500 --wiped-all --preset radio
-                                                          # at radio() timing
+    python bench/bench_chaos.py --seeds 500 --wiped       # a robot back without its
+                                                          # state file in every case
+    python bench/bench_chaos.py --seeds 500 --wiped-all   # or a standby wiped around
+                                                          # its claim or its new hold
+    python bench/bench_chaos.py --seeds 500 --wide --preset radio   # at radio() timing
+    python bench/bench_chaos.py --seeds 500 --wide --rough          # delays, reordering,
+                                                                    # duplicates
+    python bench/bench_chaos.py --seeds 500 --wide --insider        # a forging insider
     python bench/bench_chaos.py --ring8                   # the correlated-failure figure
 
 `--rough`: every case's channel also delays each delivery 2-30 ms, with a jitter of 2-120
@@ -749,6 +755,10 @@ def main() -> None:
                     help="a robot restarted without its state file in every case (after "
                          "a crash, a leave, a fault or a pause; at times twice), and up "
                          "to one of the --widest kinds beside it")
+    ap.add_argument("--wiped-all", action="store_const", const=5, dest="wide",
+                    help="--wiped, or a standby restarted without its state file around "
+                         "its claim or once it holds the slot it took over (a --wiped "
+                         "seed replays as before)")
     ap.add_argument("--rough", action="store_true",
                     help="a channel that delays (2-30 ms), reorders (jitter 2-120 ms) and "
                          "duplicates (0-20 %%), drawn per seed (its swarm and faults stay)")
@@ -759,10 +769,6 @@ def main() -> None:
     ap.add_argument("--preset", choices=tuple(PRESETS), default="udp",
                     help="the timing every case runs at (default udp); at radio the "
                          "fault times and lengths are stretched by its t_max over udp's")
-    ap.add_argument("--wiped-all", action="store_const", const=5, dest="wide",
-                    help="--wiped, or a standby restarted without its state file around "
-                         "its claim or once it holds the slot it took over (a --wiped "
-                         "seed replays as before)")
     a = ap.parse_args()
     global AUTH
     AUTH = a.auth
