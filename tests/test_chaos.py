@@ -391,6 +391,28 @@ def test_wiped_seeds_run_clean_in_every_mode(auth: str) -> None:
     assert_clean(found)
 
 
+WIPED_ALL_40: tuple[int, ...] = (870473,)
+"""Seeds of `--wiped-all` on swarms of up to 40 robots (`python bench/bench_chaos.py --seed
+N --wiped-all --max-robots 40 --verbose`) that broke an invariant, clean since, in every
+mode:
+- 870473, per robot (seven robots, 19 % loss): robot 4, its slot falsely taken over,
+  reasserted it at epoch 2, turned faulty (its `LEAVE` lost in a fade), and was claimed
+  at epoch 3; restarted without its state file it refuted that claim, and the others
+  moved to its reassertion at epoch 4. Restarted so once more, it was shown the proof of
+  that entry: the claim with its certificate, then its own REFUTE, which it dropped as
+  its own frame relayed back. The claim fenced it at an epoch no takeover made
+  (`fenced_without_takeover`), the slot idle for 1 s until its watchers, who knew it at
+  epoch 4, had it taken over again. A robot keeps its own REFUTE from before its start as
+  any peer's: it reasserts at epoch 4 and is never fenced."""
+
+
+@pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])
+def test_wiped_all_seeds_run_clean_in_every_mode(auth: str) -> None:
+    bench = _bench()
+    found = bench.chaos(WIPED_ALL_40, max_robots=40, verbose=False, auth=auth, wide=5)
+    assert_clean(found)
+
+
 WIDE_DENSE: tuple[int, ...] = (200507, 201884)
 """Seeds of the wide draw made dense (`python bench/bench_chaos.py --seed N --wide --dense
 --max-robots 16 --verbose`) that the checker judged wrongly, the core being right:

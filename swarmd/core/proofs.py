@@ -139,9 +139,14 @@ class Proofs(Views):
         self._ev.add_refute(f, self._robot_id, msg, self._send(msg))
 
     def _on_refute(self, holder: int, r: wire.Refute, now: float, raw: bytes) -> None:
+        """A holder's REFUTE, heard or relayed (`_show`). Ours too: relayed back, it is
+        one we keep already and moves nothing (`add_refute`); one of ours from before
+        this start (restarted without a state file) is as much a fact of this run as a
+        peer's, and proves the reassertion the others moved to, which names us: without
+        it we would be fenced by the very claim it voids (DESIGN, "Convergence")."""
         f = self._slot(r.function)
-        if f is None or holder == self._robot_id:
-            return  # a bad slot (counted), or our own refute relayed back
+        if f is None:
+            return  # a bad slot (counted)
         if self._ev.add_refute(f, holder, r, raw):
             self._rejudge(f, now, Holder(holder, r.epoch))
 
