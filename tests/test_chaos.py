@@ -353,7 +353,8 @@ def test_wide_small_seeds_run_clean_in_every_mode(auth: str) -> None:
     assert_clean(found)
 
 
-WIPED: tuple[int, ...] = (810005, 810087, 810135, 810373, 810463, 830146, 831779)
+WIPED: tuple[int, ...] = (810005, 810087, 810135, 810373, 810463, 830146, 831779,
+                          832952)
 """Seeds of the `--wiped` draw (`python bench/bench_chaos.py --seed N --wiped --max-robots
 12 --verbose`) that broke an invariant per robot on the core before it, one a shape of
 a robot back without its state file as the plan's holder of a slot taken over meanwhile;
@@ -381,7 +382,14 @@ clean in every mode since (`test_wiped_seeds_run_clean_in_every_mode`):
   one liar's warning with the standby's own ears (rule 9) made a quorum that fenced it,
   the claimant then giving the claim up (`fenced_without_takeover`). The heartbeat of the
   robot an entry names, at whatever epoch, is heard by a standby's ears as by a
-  watchdog."""
+  watchdog;
+- 832952 (a robot wiped twice, 39 % loss in bursts; on the core that keeps a robot's own
+  REFUTE from before its start, `WIPED_ALL_40`): the standby's first claim at epoch 1
+  was refuted by the live holder and ended; its second claim, at the same epoch, was not
+  refuted again (a holder refutes a claimant once an epoch), and it took the slot over
+  although the REFUTE it held voids any takeover of it at that epoch: two executors for
+  1.59 s (bound 1.20 s). A claimant that holds such a REFUTE does not take over; its
+  view moves to the holder's reassertion."""
 
 
 @pytest.mark.parametrize("auth", ["per-robot", "shared", "none"])

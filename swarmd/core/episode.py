@@ -346,6 +346,15 @@ class Episode(Proofs):
             # slot, after a takeover of its own, is not such a watcher).
             self._claim_refuted()
             return
+        ahead = self._forward(c.function, Holder(self._robot_id, c.epoch))
+        if ahead.robot != self._robot_id:
+            # The robot we would replace refuted a claim of ours at this epoch (an
+            # earlier one, during a burst of loss, say): a takeover at this epoch is void
+            # wherever that REFUTE goes (`EvidenceStore.voided_by`), outranked by its
+            # reassertion, which our view takes instead (DESIGN, "Convergence").
+            self._claim_refuted()
+            self._learn_reassertion(c.function, ahead, now)
+            return
         if greater(self._known[c.function], Holder(self._robot_id, c.epoch)):
             # The slot moved past our claim during the hold: a greater entry is never
             # lowered (`slots.py`), so ours would be fenced at once.
