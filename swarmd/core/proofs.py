@@ -143,7 +143,8 @@ class Proofs(Views):
         one we keep already and moves nothing (`add_refute`); one of ours from before
         this start (restarted without a state file) is as much a fact of this run as a
         peer's, and proves the reassertion the others moved to, which names us: without
-        it we would be fenced by the very claim it voids (DESIGN, "Convergence")."""
+        it we would be fenced by the very claim it voids (DESIGN, "Every proof is bound
+        to its run")."""
         f = self._slot(r.function)
         if f is None:
             return  # a bad slot (counted)
