@@ -83,6 +83,12 @@ PRESETS: dict[str, Callable[[], Params]] = {"udp": udp, "radio": radio}
 """The timing presets a case may run at (`--preset`); the draw is made for `udp`."""
 
 
+def _stretch(preset: str) -> float:
+    """How much longer the draw's times are at `preset` than at udp, the timing it is
+    made for: the ratio of their t_max."""
+    return PRESETS[preset]().t_max / udp().t_max
+
+
 @dataclass(frozen=True)
 class Case:
     seed: int
@@ -102,7 +108,7 @@ class Case:
     duplicate: float = 0.0
     """The channel's latency, jitter (reordering) and duplication (`Channel`; `--rough`)."""
     insider: bool = False
-    """`--insider`: a forge fault drawn in (`_with_insider`); which attacks depends on the
+    """`--insider`: a forge fault drawn in (`with_insider`); which attacks depends on the
     mode the case runs in, so the fault is drawn when it runs (`run_case`)."""
 
     def describe(self) -> str:
@@ -157,7 +163,7 @@ def draw_case(seed: int, max_robots: int = 60, dense: bool = False,
                        duplicate=round(rng.uniform(0.0, 0.2), 3))
     if preset == "udp":
         return case
-    k = PRESETS[preset]().t_max / udp().t_max
+    k = _stretch(preset)
     faults = tuple(replace(f, at=round(f.at * k, 3), duration=None if f.duration is None
                            else round(f.duration * k, 3)) for f in case.faults)
     return replace(case, faults=faults, duration=round(case.duration * k, 3), preset=preset)
@@ -593,7 +599,7 @@ def with_insider(case: Case, auth: str) -> Case:
     rng = random.Random(f"insider-{case.seed}")
     robot = rng.choice(sorted(case.plan.robots))
     attack = rng.choice(INSIDER_ATTACKS[auth])
-    k = PRESETS[case.preset]().t_max / udp().t_max
+    k = _stretch(case.preset)
     first = min(f.at for f in case.faults) / k
     at = round(max(0.5, first + rng.uniform(-1.0, 3.0)) * k, 3)
     return replace(case, insider=False,
